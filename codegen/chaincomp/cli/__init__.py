@@ -1,0 +1,1 @@
+"""The ``chaincomp`` command line: one module per verb."""

@@ -1,0 +1,124 @@
+"""``chaincomp derive``: nominal pose, error model, error gain matrix and Jacobians."""
+
+from __future__ import annotations
+
+import json
+
+import sympy as sp
+
+from ..derive import COMPONENTS, Derivation, derive
+from ..machine import Rotation
+from .common import add_machine_argument, check_order, load
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("derive", help="derive the nominal pose and the order-k error model",
+                       description="Derive, by multiplying truncated series in the error symbols, the "
+                                   "nominal tool point and direction, the error model to the given order, "
+                                   "the first-order error gain matrix and the Jacobian of the tool point "
+                                   "with respect to the axes.")
+    add_machine_argument(p)
+    p.add_argument("--order", type=int, default=1, help="highest total degree in the errors (default 1)")
+    p.add_argument("--format", choices=("text", "latex", "json"), default="text", help="output format")
+    p.set_defaults(run=run)
+
+
+def chain_text(machine) -> str:
+    parts = []
+    for el in machine.chain:
+        if isinstance(el, Rotation):
+            parts.append(f"R{el.axis}({el.angle})")
+        else:
+            parts.append("T(" + ", ".join(str(v) for v in el.vector) + ")")
+    return " · ".join(parts)
+
+
+def _collect(expr: sp.Expr, small: list[sp.Symbol]) -> sp.Expr:
+    return sp.collect(sp.expand(expr), small) if small else expr
+
+
+def report(d: Derivation) -> dict:
+    """Every derived formula, as sympy expressions, keyed like the JSON output."""
+    m = d.machine
+    names = [s.name for s in m.errors]
+    out: dict = {"nominal": {}, "direction": {}, "error": {}, "direction_error": {}, "gain": {},
+                 "jacobian": {}}
+    for i, c in enumerate(COMPONENTS):
+        out["nominal"][c] = d.nominal(d.point[i])
+        for k in range(1, d.order + 1):
+            out["error"].setdefault(f"order{k}", {})[f"d{c}"] = _collect(d.degree_part(d.point[i], k), d.small)
+        out["jacobian"][c] = {a.name: sp.diff(out["nominal"][c], a.sym) for a in m.axes}
+        if d.direction is not None:
+            out["direction"][f"k{c}"] = d.nominal(d.direction[i])
+            for k in range(1, d.order + 1):
+                out["direction_error"].setdefault(f"order{k}", {})[f"dk{c}"] = _collect(
+                    d.degree_part(d.direction[i], k), d.small)
+    for comp, row in d.gain_matrix().items():
+        out["gain"][comp] = dict(zip(names, row))
+    return {k: v for k, v in out.items() if v}
+
+
+def _walk(obj, fn):
+    if isinstance(obj, dict):
+        return {k: _walk(v, fn) for k, v in obj.items()}
+    return fn(obj)
+
+
+def run(args) -> int:
+    machine = load(args.machine)
+    d = derive(machine, check_order(args.order), progress=True)
+    rep = report(d)
+    if args.format == "json":
+        doc = {"machine": machine.name, "file": machine.file, "order": d.order,
+               "symbols": [{"name": s.name, "role": s.role, "unit": s.unit.name, "meaning": s.meaning}
+                           for s in machine.symbols],
+               "chain": chain_text(machine),
+               "units": {"internal": "mm and rad: every symbol enters the formulas in internal units"}}
+        doc.update(_walk(rep, str))
+        print(json.dumps(doc, indent=2))
+    elif args.format == "latex":
+        print(_latex(machine, rep))
+    else:
+        print(_text(machine, d, rep))
+    return 0
+
+
+_TITLES = {"nominal": "Nominal tool point", "direction": "Nominal tool direction",
+           "gain": "Error gain matrix (first order): coefficient of each error in each component",
+           "jacobian": "Jacobian of the nominal tool point with respect to the axes"}
+
+
+def _text(machine, d: Derivation, rep: dict) -> str:
+    lines = [f"Machine {machine.name} ({machine.file}): {len(machine.axes)} axes, "
+             f"{len(machine.constants)} constants, {len(machine.errors)} errors; order {d.order}",
+             "Formulas take every symbol in internal units (mm, rad).", "",
+             "Chain (rotations right-handed, senses applied):", "  X = " + chain_text(machine) + " · X0", ""]
+    for key, value in rep.items():
+        if key in ("error", "direction_error"):
+            for order, comps in value.items():
+                what = "tool point" if key == "error" else "tool direction"
+                lines.append(f"{what.capitalize()} error, terms of degree {order[5:]} in the errors")
+                lines += [f"  {c} = {e}" for c, e in comps.items()] + [""]
+            continue
+        lines.append(_TITLES[key])
+        for comp, v in value.items():
+            if isinstance(v, dict):
+                lines += [f"  {comp} / {n}: {e}" for n, e in v.items() if e != 0]
+            else:
+                lines.append(f"  {comp} = {v}")
+        lines.append("")
+    return "\n".join(lines).rstrip()
+
+
+def _latex(machine, rep: dict) -> str:
+    out = [f"% chaincomp derive {machine.file}", r"\begin{align*}"]
+    for key, value in rep.items():
+        for comp, v in value.items():
+            if isinstance(v, dict):
+                for n, e in v.items():
+                    if e != 0:
+                        out.append(rf"\text{{{key} {comp}}}/{sp.latex(sp.Symbol(n))} &= {sp.latex(e)} \\")
+            else:
+                out.append(rf"\text{{{key}}}\ {comp} &= {sp.latex(v)} \\")
+    out.append(r"\end{align*}")
+    return "\n".join(out)

@@ -1,0 +1,55 @@
+"""``chaincomp eval``: tool point, direction and error at one set of axis values."""
+
+from __future__ import annotations
+
+import json
+
+from ..derive import derive
+from ..numeric import ExactModel, TruncatedModel
+from ..units import UNITS
+from .common import add_machine_argument, add_values_arguments, load, values_for
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("eval", help="evaluate the tool point and its error at given axis values",
+                       description="Evaluate the nominal tool point (and tool direction) at given axis "
+                                   "values and, when error values are given, the tool-point error of "
+                                   "the first-order, second-order and exact models.")
+    add_machine_argument(p)
+    add_values_arguments(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object (the only format for now)")
+    p.set_defaults(run=run)
+
+
+def evaluate(machine, values: dict, with_errors: bool) -> dict:
+    scale = 1.0 / UNITS[machine.length_unit].to_internal
+    exact = ExactModel(machine)
+    nominal_values = {k: (0.0 if machine.symbol(k).role == "error" else v) for k, v in values.items()}
+    point, direction = exact.pose(nominal_values)
+    out = {
+        "machine": machine.name,
+        "units": {"length": machine.length_unit},
+        "axes": {s.name: float(f"{s.from_internal(values[s.name]):.15g}") for s in machine.axes},
+        "position": [float(v) * scale for v in point],
+    }
+    if direction is not None:
+        out["direction"] = [float(v) for v in direction]
+    if with_errors:
+        model = TruncatedModel(derive(machine, 2))
+        err, derr = {}, {}
+        for name, (dp, dd) in (("first", model.error(values, 1)), ("second", model.error(values, 2)),
+                               ("exact", exact.error(values))):
+            err[name] = [float(v) * scale for v in dp]
+            if dd is not None:
+                derr[name] = [float(v) for v in dd]
+        out["error"] = err
+        if derr:
+            out["direction_error"] = derr
+    return out
+
+
+def run(args) -> int:
+    machine = load(args.machine)
+    values, with_errors = values_for(machine, args.params, args.sets)
+    print(json.dumps(evaluate(machine, values, with_errors), indent=2))
+    return 0

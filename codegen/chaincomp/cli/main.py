@@ -1,0 +1,41 @@
+"""Entry point: dispatches to the verb modules; user errors exit 2 with one clear line."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..errors import ChaincompError
+from . import derive, eval as eval_
+
+VERBS = (derive, eval_)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="chaincomp",
+        description="Geometric error models of machine tools: derive, evaluate and generate "
+                    "compensation code from a machine description.")
+    sub = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
+    for verb in VERBS:
+        verb.add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.run(args) or 0
+    except ChaincompError as exc:
+        print(f"chaincomp {args.verb}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"chaincomp {args.verb}: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

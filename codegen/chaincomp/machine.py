@@ -1,0 +1,410 @@
+"""The machine description: loading, validation, and the elementary chain it defines."""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Union
+
+import sympy as sp
+
+from . import units
+from .errors import ChaincompError
+from .expressions import RESERVED, ExpressionError, parse
+from .yamlsource import LineDict, LineList, load_yaml
+
+ROLES = ("axis", "constant", "error")
+SENSES = {"right_hand": 1, "left_hand": -1}
+AXES = ("x", "y", "z")
+_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+
+
+@dataclass(frozen=True)
+class Symbol:
+    name: str
+    role: str                  # "axis" | "constant" | "error"
+    unit: units.Unit
+    meaning: str
+    nominal: float | None = None               # in the declared unit
+    limits: tuple[float, float] | None = None  # in the declared unit
+    line: int = 0
+
+    @property
+    def sym(self) -> sp.Symbol:
+        return sp.Symbol(self.name, real=True)
+
+    @property
+    def small(self) -> bool:
+        return self.role == "error"
+
+    def to_internal(self, value: float) -> float:
+        return value * self.unit.to_internal
+
+    def from_internal(self, value: float) -> float:
+        return value / self.unit.to_internal
+
+
+@dataclass(frozen=True)
+class Rotation:
+    """Rotation about a coordinate axis by ``angle`` (rad), right-handed after ``sense``."""
+    axis: str
+    angle: sp.Expr
+    line: int = 0
+
+    def inverse(self) -> "Rotation":
+        return Rotation(self.axis, -self.angle, self.line)
+
+
+@dataclass(frozen=True)
+class Translation:
+    vector: tuple[sp.Expr, sp.Expr, sp.Expr]
+    line: int = 0
+
+    def inverse(self) -> "Translation":
+        return Translation(tuple(-v for v in self.vector), self.line)
+
+
+Elementary = Union[Rotation, Translation]
+
+
+@dataclass(frozen=True)
+class Machine:
+    name: str
+    description: str
+    file: str
+    length_unit: str
+    symbols: tuple[Symbol, ...]
+    tool_chain: tuple[Elementary, ...]       # reference -> tool, leftmost first
+    workpiece_chain: tuple[Elementary, ...]  # reference -> workpiece (empty: no loop)
+    tool_point: tuple[sp.Expr, sp.Expr, sp.Expr]
+    tool_direction: tuple[sp.Expr, sp.Expr, sp.Expr] | None
+    source_text: str = field(repr=False, default="")
+
+    def by_role(self, role: str) -> list[Symbol]:
+        return [s for s in self.symbols if s.role == role]
+
+    @property
+    def axes(self) -> list[Symbol]:
+        return self.by_role("axis")
+
+    @property
+    def constants(self) -> list[Symbol]:
+        return self.by_role("constant")
+
+    @property
+    def errors(self) -> list[Symbol]:
+        return self.by_role("error")
+
+    def symbol(self, name: str) -> Symbol:
+        for s in self.symbols:
+            if s.name == name:
+                return s
+        raise KeyError(name)
+
+    @property
+    def chain(self) -> tuple[Elementary, ...]:
+        """Elementary transforms giving the tool relative to the workpiece.
+
+        With a structural loop that is inv(reference->workpiece) * (reference->tool); the
+        inverse of a product of elementary transforms is the reversed product of their
+        inverses, so no matrix is ever inverted.
+        """
+        return tuple(e.inverse() for e in reversed(self.workpiece_chain)) + self.tool_chain
+
+    def nominal_values(self) -> dict[str, float]:
+        """Internal values (mm, rad) of the large symbols at their nominals; errors at zero."""
+        out = {}
+        for s in self.symbols:
+            out[s.name] = 0.0 if s.role == "error" or s.nominal is None else s.to_internal(s.nominal)
+        return out
+
+
+# ----------------------------------------------------------------------------- loading
+
+class _Ctx:
+    """Where we are in the file, for messages."""
+
+    def __init__(self, path: str):
+        self.path = path
+
+    def fail(self, message: str, line: int | None, fld: str) -> ChaincompError:
+        return ChaincompError(message, self.path, line, fld)
+
+
+def _line_of(node, key=None) -> int | None:
+    if key is not None and isinstance(node, (LineDict, LineList)):
+        try:
+            return node.lines[key]
+        except (KeyError, IndexError):
+            pass
+    return getattr(node, "line", None)
+
+
+def _require_map(ctx: _Ctx, node, fld: str, line, allowed: set[str], required: set[str] = frozenset()):
+    if not isinstance(node, dict):
+        raise ctx.fail(f"expected a mapping, got {_describe(node)}", line, fld)
+    for key in node:
+        if key not in allowed:
+            raise ctx.fail(f"unknown field {key!r} (expected one of: {', '.join(sorted(allowed))})",
+                           _line_of(node, key), f"{fld}.{key}")
+    for key in sorted(required):
+        if key not in node:
+            raise ctx.fail(f"missing required field {key!r}", _line_of(node), fld)
+    return node
+
+
+def _describe(value) -> str:
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list):
+        return "a list"
+    if value is None:
+        return "nothing"
+    return f"{type(value).__name__} {value!r}"
+
+
+def _number(ctx: _Ctx, value, fld: str, line) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ctx.fail(f"expected a number, got {_describe(value)}", line, fld)
+    if not math.isfinite(value):
+        raise ctx.fail(f"expected a finite number, got {value!r}", line, fld)
+    return float(value)
+
+
+def _parse_symbol(ctx: _Ctx, node, i: int, line) -> Symbol:
+    fld = f"symbols[{i}]"
+    _require_map(ctx, node, fld, line, {"name", "role", "unit", "meaning", "nominal", "limits"},
+                 {"name", "role", "unit"})
+    name = node["name"]
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise ctx.fail(f"invalid symbol name {name!r} (letters, digits and '_', starting with a letter)",
+                       _line_of(node, "name"), f"{fld}.name")
+    if name in RESERVED:
+        raise ctx.fail(f"symbol name {name!r} is reserved", _line_of(node, "name"), f"{fld}.name")
+    fld = f"symbols.{name}"
+    role = node["role"]
+    if role not in ROLES:
+        raise ctx.fail(f"unknown role {role!r} (expected one of: {', '.join(ROLES)})",
+                       _line_of(node, "role"), f"{fld}.role")
+    try:
+        unit = units.unit(str(node["unit"]))
+    except KeyError as exc:
+        raise ctx.fail(exc.args[0], _line_of(node, "unit"), f"{fld}.unit") from None
+    meaning = node.get("meaning", "")
+    if not isinstance(meaning, str):
+        raise ctx.fail(f"expected text, got {_describe(meaning)}", _line_of(node, "meaning"), f"{fld}.meaning")
+    nominal = None
+    if "nominal" in node:
+        nominal = _number(ctx, node["nominal"], f"{fld}.nominal", _line_of(node, "nominal"))
+        if role == "error":
+            raise ctx.fail("an error symbol has no nominal value (its value comes from a params file)",
+                           _line_of(node, "nominal"), f"{fld}.nominal")
+    elif role == "constant":
+        raise ctx.fail("a constant needs a 'nominal' value", _line_of(node), fld)
+    limits = None
+    if "limits" in node:
+        lim = node["limits"]
+        lline = _line_of(node, "limits")
+        if not isinstance(lim, list) or len(lim) != 2:
+            raise ctx.fail(f"expected [low, high], got {_describe(lim)}", lline, f"{fld}.limits")
+        lo, hi = (_number(ctx, v, f"{fld}.limits", lline) for v in lim)
+        if not lo < hi:
+            raise ctx.fail(f"low limit {lo:g} must be below high limit {hi:g}", lline, f"{fld}.limits")
+        limits = (lo, hi)
+    elif role == "axis":
+        raise ctx.fail("an axis needs 'limits: [low, high]'", _line_of(node), fld)
+    if nominal is not None and limits is not None and not limits[0] <= nominal <= limits[1]:
+        raise ctx.fail(f"nominal {nominal:g} lies outside limits {list(limits)}", _line_of(node, "nominal"),
+                       f"{fld}.nominal")
+    if role == "axis" and unit.kind == "ratio":
+        raise ctx.fail(f"an axis must have a length or angle unit, not {unit.name!r}",
+                       _line_of(node, "unit"), f"{fld}.unit")
+    return Symbol(name, role, unit, meaning, nominal, limits, line or 0)
+
+
+def _expr(ctx: _Ctx, value, symbols, fld: str, line) -> sp.Expr:
+    try:
+        expr = parse(value, symbols)
+    except ExpressionError as exc:
+        raise ctx.fail(str(exc), line, fld) from None
+    return expr
+
+
+def _vector(ctx: _Ctx, value, symbols, fld: str, line) -> tuple[sp.Expr, sp.Expr, sp.Expr]:
+    if not isinstance(value, list) or len(value) != 3:
+        raise ctx.fail(f"expected a list of three expressions [x, y, z], got {_describe(value)}", line, fld)
+    return tuple(_expr(ctx, v, symbols, f"{fld}[{i}]", line) for i, v in enumerate(value))
+
+
+_BLOCK_KEYS = ("dx", "dy", "dz", "ex", "ey", "ez")
+
+
+def _parse_element(ctx: _Ctx, node, fld: str, line, symbols, default_sense: int | None,
+                   default_order: str | None) -> list[Elementary]:
+    if not isinstance(node, dict):
+        raise ctx.fail(f"expected a chain element (rotate / translate / errors), got {_describe(node)}",
+                       line, fld)
+    kinds = [k for k in ("rotate", "translate", "errors") if k in node]
+    if len(kinds) != 1:
+        raise ctx.fail("each chain element has exactly one of 'rotate', 'translate' or 'errors'"
+                       + (f" (found {', '.join(kinds)})" if kinds else
+                          f" (found fields: {', '.join(map(str, node)) or 'none'})"), line, fld)
+    kind = kinds[0]
+    common = {"label"}
+    if kind == "rotate":
+        _require_map(ctx, node, fld, line, common | {"rotate", "angle", "sense"}, {"angle"})
+        axis = node["rotate"]
+        if axis not in AXES:
+            raise ctx.fail(f"rotation axis must be x, y or z, got {axis!r}", _line_of(node, "rotate"),
+                           f"{fld}.rotate")
+        sense = _sense(ctx, node, fld, default_sense)
+        angle = _expr(ctx, node["angle"], symbols, f"{fld}.angle", _line_of(node, "angle"))
+        return [Rotation(axis, sense * angle, line or 0)]
+    if kind == "translate":
+        _require_map(ctx, node, fld, line, common | {"translate"})
+        return [Translation(_vector(ctx, node["translate"], symbols, f"{fld}.translate",
+                                    _line_of(node, "translate")), line or 0)]
+    _require_map(ctx, node, fld, line, common | {"errors", "order", "sense"})
+    block = node["errors"]
+    bline = _line_of(node, "errors")
+    _require_map(ctx, block, f"{fld}.errors", bline, set(_BLOCK_KEYS))
+    if not block:
+        raise ctx.fail(f"an error block needs at least one of {', '.join(_BLOCK_KEYS)}", bline, f"{fld}.errors")
+    vals = {k: _expr(ctx, block[k], symbols, f"{fld}.errors.{k}", _line_of(block, k)) if k in block
+            else sp.Integer(0) for k in _BLOCK_KEYS}
+    order = node.get("order", default_order)
+    if order is None:
+        raise ctx.fail("state the order of the error block's factors, e.g. 'order: txyz' "
+                       "(T(dx,dy,dz)·Rx(ex)·Ry(ey)·Rz(ez)), here or as 'error_block_order' at the top",
+                       line, f"{fld}.order")
+    order = _block_order(ctx, order, f"{fld}.order", _line_of(node, "order") or line)
+    sense = _sense(ctx, node, fld, default_sense)
+    out: list[Elementary] = []
+    for factor in order:
+        if factor == "t":
+            out.append(Translation((vals["dx"], vals["dy"], vals["dz"]), line or 0))
+        else:
+            out.append(Rotation(factor, sense * vals["e" + factor], line or 0))
+    return out
+
+
+def _block_order(ctx: _Ctx, order, fld: str, line) -> str:
+    if not isinstance(order, str) or sorted(order) != sorted("txyz"):
+        raise ctx.fail(f"order must be a permutation of the letters t, x, y, z (e.g. 'txyz'), got {order!r}",
+                       line, fld)
+    return order
+
+
+def _sense(ctx: _Ctx, node, fld: str, default: int | None) -> int:
+    if "sense" in node:
+        if node["sense"] not in SENSES:
+            raise ctx.fail(f"sense must be one of {', '.join(SENSES)}, got {node['sense']!r}",
+                           _line_of(node, "sense"), f"{fld}.sense")
+        return SENSES[node["sense"]]
+    if default is None:
+        raise ctx.fail("no rotation sense: set 'rotation_sense' at the top of the file or 'sense' here",
+                       _line_of(node), fld)
+    return default
+
+
+def _parse_chain(ctx, node, fld, line, symbols, sense, order) -> tuple[Elementary, ...]:
+    if not isinstance(node, list) or not node:
+        raise ctx.fail(f"expected a non-empty list of chain elements, got {_describe(node)}", line, fld)
+    out: list[Elementary] = []
+    for i, el in enumerate(node):
+        out.extend(_parse_element(ctx, el, f"{fld}[{i}]", _line_of(node, i), symbols, sense, order))
+    return tuple(out)
+
+
+_TOP = {"name", "description", "length_unit", "rotation_sense", "error_block_order", "symbols",
+        "chain", "loop", "tool"}
+
+
+def load_machine(path: str) -> Machine:
+    """Load and validate a machine description; every problem names file, line and field."""
+    ctx = _Ctx(path)
+    doc = load_yaml(path)
+    _require_map(ctx, doc, "(top level)", 1, _TOP, {"name", "symbols", "tool"})
+    name = doc["name"]
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise ctx.fail(f"machine name must be an identifier (letters, digits, '_'), got {name!r}",
+                       _line_of(doc, "name"), "name")
+    length_unit = doc.get("length_unit", "mm")
+    if length_unit not in units.UNITS or units.UNITS[length_unit].kind != "length":
+        raise ctx.fail(f"length_unit must be a length unit, got {length_unit!r}",
+                       _line_of(doc, "length_unit"), "length_unit")
+    sense = None
+    if "rotation_sense" in doc:
+        if doc["rotation_sense"] not in SENSES:
+            raise ctx.fail(f"rotation_sense must be one of {', '.join(SENSES)}, got {doc['rotation_sense']!r}",
+                           _line_of(doc, "rotation_sense"), "rotation_sense")
+        sense = SENSES[doc["rotation_sense"]]
+    order = None
+    if "error_block_order" in doc:
+        order = _block_order(ctx, doc["error_block_order"], "error_block_order",
+                             _line_of(doc, "error_block_order"))
+
+    raw_symbols = doc["symbols"]
+    if not isinstance(raw_symbols, list) or not raw_symbols:
+        raise ctx.fail(f"expected a non-empty list of symbols, got {_describe(raw_symbols)}",
+                       _line_of(doc, "symbols"), "symbols")
+    symbols: list[Symbol] = []
+    seen: dict[str, int] = {}
+    for i, node in enumerate(raw_symbols):
+        s = _parse_symbol(ctx, node, i, _line_of(raw_symbols, i))
+        if s.name in seen:
+            raise ctx.fail(f"duplicate symbol name {s.name!r} (first declared on line {seen[s.name]})",
+                           s.line, f"symbols[{i}].name")
+        seen[s.name] = s.line
+        symbols.append(s)
+    table = {s.name: s.sym for s in symbols}
+
+    if ("chain" in doc) == ("loop" in doc):
+        raise ctx.fail("give exactly one of 'chain' (a serial chain) or 'loop' (tool and workpiece branches)",
+                       1, "chain")
+    if "chain" in doc:
+        tool_chain = _parse_chain(ctx, doc["chain"], "chain", _line_of(doc, "chain"), table, sense, order)
+        work_chain: tuple[Elementary, ...] = ()
+    else:
+        loop = _require_map(ctx, doc["loop"], "loop", _line_of(doc, "loop"), {"tool", "workpiece"},
+                            {"tool", "workpiece"})
+        tool_chain = _parse_chain(ctx, loop["tool"], "loop.tool", _line_of(loop, "tool"), table, sense, order)
+        work_chain = _parse_chain(ctx, loop["workpiece"], "loop.workpiece", _line_of(loop, "workpiece"),
+                                  table, sense, order)
+
+    tool = _require_map(ctx, doc["tool"], "tool", _line_of(doc, "tool"), {"point", "direction"}, {"point"})
+    point = _vector(ctx, tool["point"], table, "tool.point", _line_of(tool, "point"))
+    direction = None
+    if "direction" in tool:
+        direction = _vector(ctx, tool["direction"], table, "tool.direction", _line_of(tool, "direction"))
+        if any(d.free_symbols for d in direction):
+            raise ctx.fail("the tool direction must be a constant vector", _line_of(tool, "direction"),
+                           "tool.direction")
+        norm = sp.sqrt(sum(d**2 for d in direction))
+        if norm == 0:
+            raise ctx.fail("the tool direction must not be zero", _line_of(tool, "direction"), "tool.direction")
+        direction = tuple(sp.nsimplify(d / norm) for d in direction)
+    machine = Machine(name, str(doc.get("description", "")), path, length_unit, tuple(symbols),
+                      tool_chain, work_chain, point, direction, _read_text(path))
+    _check_usage(ctx, machine)
+    return machine
+
+
+def _read_text(path: str) -> str:
+    with open(path, encoding="utf-8") as f:
+        return f.read()
+
+
+def _check_usage(ctx: _Ctx, machine: Machine) -> None:
+    used: set[sp.Symbol] = set()
+    for el in machine.chain:
+        exprs = (el.angle,) if isinstance(el, Rotation) else el.vector
+        for e in exprs:
+            used |= e.free_symbols
+    for e in machine.tool_point:
+        used |= e.free_symbols
+    for s in machine.symbols:
+        if s.sym not in used:
+            raise ctx.fail(f"symbol {s.name!r} is declared but never used in the chain or tool", s.line,
+                           f"symbols.{s.name}")

@@ -1,0 +1,98 @@
+"""Numeric evaluation: the exact model (the chain multiplied without truncation) and
+the truncated models, with numpy (arrays broadcast) or mpmath (high precision)."""
+
+from __future__ import annotations
+
+import sympy as sp
+
+from .derive import _ROT_PLANE, Derivation
+from .machine import Machine, Rotation
+
+BACKENDS = ("numpy", "mpmath")
+
+
+def _lib(backend: str):
+    if backend == "numpy":
+        import numpy as lib
+    elif backend == "mpmath":
+        import mpmath as lib
+    else:
+        raise ValueError(f"unknown backend {backend!r}")
+    return lib
+
+
+class ExactModel:
+    """Tool point and direction from the chain, multiplied numerically, no truncation."""
+
+    def __init__(self, machine: Machine):
+        self.machine = machine
+        self.symbols = [s.sym for s in machine.symbols]
+        self._cache: dict[str, tuple] = {}
+
+    def _compiled(self, backend: str):
+        if backend not in self._cache:
+            f = lambda e: sp.lambdify(self.symbols, e, modules=backend)  # noqa: E731
+            steps = []
+            for el in reversed(self.machine.chain):
+                if isinstance(el, Rotation):
+                    steps.append(("rot", _ROT_PLANE[el.axis], f(el.angle)))
+                else:
+                    steps.append(("trans", [f(v) for v in el.vector]))
+            point = [f(v) for v in self.machine.tool_point]
+            direction = [f(v) for v in self.machine.tool_direction] if self.machine.tool_direction else None
+            self._cache[backend] = (steps, point, direction)
+        return self._cache[backend]
+
+    def pose(self, values: dict, backend: str = "numpy"):
+        """(point, direction or None) for ``values`` (internal units, every symbol by name)."""
+        lib = _lib(backend)
+        steps, point_f, dir_f = self._compiled(backend)
+        args = [values[s.name] for s in self.machine.symbols]
+        p = [f(*args) for f in point_f]
+        d = [f(*args) for f in dir_f] if dir_f else None
+        for step in steps:
+            if step[0] == "rot":
+                (i, j), angle = step[1], step[2](*args)
+                c, s = lib.cos(angle), lib.sin(angle)
+                for v in (p, d) if d else (p,):
+                    v[i], v[j] = c * v[i] - s * v[j], s * v[i] + c * v[j]
+            else:
+                for c_, t in enumerate(step[1]):
+                    p[c_] = p[c_] + t(*args)
+        return p, d
+
+    def error(self, values: dict, backend: str = "numpy"):
+        """Exact tool error: pose with the errors minus pose with every error at zero."""
+        nominal_values = dict(values)
+        for s in self.machine.errors:
+            nominal_values[s.name] = 0 * values[s.name]
+        p1, d1 = self.pose(values, backend)
+        p0, d0 = self.pose(nominal_values, backend)
+        dp = [a - b for a, b in zip(p1, p0)]
+        dd = [a - b for a, b in zip(d1, d0)] if d1 else None
+        return dp, dd
+
+
+class TruncatedModel:
+    """Order-k error of a derivation as compiled functions of every symbol."""
+
+    def __init__(self, derivation: Derivation):
+        self.d = derivation
+        self.machine = derivation.machine
+        self.symbols = [s.sym for s in self.machine.symbols]
+        self._cache: dict = {}
+
+    def _fn(self, which: str, order: int, backend: str):
+        key = (which, order, backend)
+        if key not in self._cache:
+            vec = self.d.point if which == "point" else self.d.direction
+            exprs = [self.d.error(s, order) for s in vec]
+            self._cache[key] = [sp.lambdify(self.symbols, e, modules=backend) for e in exprs]
+        return self._cache[key]
+
+    def error(self, values: dict, order: int, backend: str = "numpy"):
+        args = [values[s.name] for s in self.machine.symbols]
+        dp = [f(*args) for f in self._fn("point", order, backend)]
+        dd = [f(*args) for f in self._fn("direction", order, backend)] if self.d.direction else None
+        return dp, dd
+

@@ -1,0 +1,95 @@
+"""Error values (and constant overrides) for a machine, from a params file or the command line."""
+
+from __future__ import annotations
+
+import math
+import re
+
+from . import units
+from .errors import ChaincompError
+from .machine import Machine, Symbol
+from .yamlsource import load_yaml
+
+_VALUE = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([^\s\d].*)?$")
+
+
+def parse_value(sym: Symbol, raw) -> float:
+    """A value in the symbol's declared unit, or text 'VALUE UNIT'; returned in internal units.
+
+    Raises ValueError with a message naming what was expected.
+    """
+    if isinstance(raw, bool):
+        raise ValueError(f"expected a number, got {raw!r}")
+    if isinstance(raw, (int, float)):
+        value, unit = float(raw), sym.unit
+    elif isinstance(raw, str):
+        m = _VALUE.match(raw)
+        if not m:
+            raise ValueError(f"expected a number optionally followed by a unit, got {raw!r}")
+        value = float(m.group(1))
+        try:
+            unit = units.unit(m.group(2).strip()) if m.group(2) else sym.unit
+        except KeyError as exc:
+            raise ValueError(exc.args[0]) from None
+    else:
+        raise ValueError(f"expected a number, got {type(raw).__name__}")
+    if not math.isfinite(value):
+        raise ValueError(f"expected a finite number, got {raw!r}")
+    if unit.kind != sym.unit.kind:
+        raise ValueError(f"unit {unit.name!r} is a {unit.kind} unit but {sym.name} is declared in "
+                         f"{sym.unit.name!r} ({sym.unit.kind})")
+    return value * unit.to_internal
+
+
+def load_params(path: str, machine: Machine) -> dict[str, float]:
+    """Values from a params file, by symbol name, in internal units (mm, rad)."""
+    doc = load_yaml(path)
+    if not isinstance(doc, dict):
+        raise ChaincompError("expected a mapping with 'values'", path, 1)
+    for key in doc:
+        if key not in ("machine", "values", "description"):
+            raise ChaincompError(f"unknown field {key!r} (expected machine, values, description)",
+                                 path, doc.lines[key], key)
+    if "machine" in doc and doc["machine"] != machine.name:
+        raise ChaincompError(f"params are for machine {doc['machine']!r}, not {machine.name!r}",
+                             path, doc.lines["machine"], "machine")
+    values = doc.get("values")
+    if not isinstance(values, dict):
+        raise ChaincompError("expected a mapping of symbol names to values", path,
+                             doc.lines.get("values", 1), "values")
+    out = {}
+    for name, raw in values.items():
+        line = values.lines[name]
+        try:
+            sym = machine.symbol(name)
+        except KeyError:
+            raise ChaincompError(f"unknown symbol {name!r} for machine {machine.name!r}", path, line,
+                                 f"values.{name}") from None
+        if sym.role == "axis":
+            raise ChaincompError(f"{name!r} is an axis: axis values are commands, not parameters",
+                                 path, line, f"values.{name}")
+        try:
+            out[name] = parse_value(sym, raw)
+        except ValueError as exc:
+            raise ChaincompError(str(exc), path, line, f"values.{name}") from None
+    return out
+
+
+def parse_sets(items: list[str], machine: Machine) -> dict[str, float]:
+    """``NAME=VALUE`` items from the command line, in internal units."""
+    out = {}
+    for item in items:
+        name, sep, raw = item.partition("=")
+        name = name.strip()
+        if not sep:
+            raise ChaincompError(f"--set expects NAME=VALUE, got {item!r}")
+        try:
+            sym = machine.symbol(name)
+        except KeyError:
+            raise ChaincompError(f"--set: unknown symbol {name!r} for machine {machine.name!r} "
+                                 f"(known: {', '.join(s.name for s in machine.symbols)})") from None
+        try:
+            out[name] = parse_value(sym, raw)
+        except ValueError as exc:
+            raise ChaincompError(f"--set {name}: {exc}") from None
+    return out
