@@ -1,0 +1,33 @@
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
+MACHINES = os.path.join(ROOT, "configs", "machines")
+PARAMS = os.path.join(ROOT, "configs", "params")
+BUNDLED = ["angle_head", "me220_xz", "mori_seiki_nv1500", "five_axis_ac"]
+
+
+def machine_path(name: str) -> str:
+    return os.path.join(MACHINES, name + ".yaml")
+
+
+def run_cli(*args: str, check: bool = True) -> subprocess.CompletedProcess:
+    proc = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", *args], capture_output=True,
+                          text=True, cwd=ROOT)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"chaincomp {' '.join(args)} exited {proc.returncode}:\n{proc.stderr}")
+    return proc
+
+
+def eval_json(*args: str) -> dict:
+    return json.loads(run_cli("eval", *args, "--json").stdout)
+
+
+@pytest.fixture(params=BUNDLED)
+def bundled(request):
+    from chaincomp import load_machine
+    return load_machine(machine_path(request.param))
