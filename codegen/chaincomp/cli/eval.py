@@ -17,7 +17,7 @@ def add_parser(sub) -> None:
                                    "the first-order, second-order and exact models.")
     add_machine_argument(p)
     add_values_arguments(p)
-    p.add_argument("--json", action="store_true", help="print one JSON object (the only format for now)")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.set_defaults(run=run)
 
 
@@ -51,5 +51,21 @@ def evaluate(machine, values: dict, with_errors: bool) -> dict:
 def run(args) -> int:
     machine = load(args.machine)
     values, with_errors = values_for(machine, args.params, args.sets)
-    print(json.dumps(evaluate(machine, values, with_errors), indent=2))
+    out = evaluate(machine, values, with_errors)
+    print(json.dumps(out, indent=2) if args.json else _text(out))
     return 0
+
+
+def _text(out: dict) -> str:
+    unit = out["units"]["length"]
+    axes = ", ".join(f"{k} = {v:g}" for k, v in out["axes"].items())
+    fmt = lambda v: "[" + ", ".join(f"{x:14.9f}" for x in v) + "]"  # noqa: E731
+    lines = [f"{out['machine']} at {axes}", f"  tool point       {fmt(out['position'])} {unit}"]
+    if "direction" in out:
+        lines.append(f"  tool direction   {fmt(out['direction'])}")
+    for key, title, u in (("error", "tool point error", unit), ("direction_error", "direction error", "")):
+        if key in out:
+            lines.append(f"  {title} ({u or 'unit vector'}):")
+            for name, v in out[key].items():
+                lines.append(f"    {name:<12} {fmt(v)}")
+    return "\n".join(lines)
