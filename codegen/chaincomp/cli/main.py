@@ -6,9 +6,9 @@ import argparse
 import sys
 
 from ..errors import ChaincompError
-from . import derive, eval as eval_
+from . import derive, eval as eval_, generate, testvectors
 
-VERBS = (derive, eval_)
+VERBS = (derive, eval_, generate, testvectors)
 
 
 def build_parser() -> argparse.ArgumentParser:

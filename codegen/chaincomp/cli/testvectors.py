@@ -1,0 +1,55 @@
+"""``chaincomp testvectors``: reference values of a machine's model for the C++ tests."""
+
+from __future__ import annotations
+
+import random
+
+import mpmath
+
+from ..derive import derive
+from ..numeric import ExactModel, TruncatedModel
+from .common import add_machine_argument, load
+
+# Realistic error sizes: lengths of a few µm, angles of a few arcsec (internal units).
+_ERROR_SCALE = {"length": 5e-3, "angle": 20 * 4.8481368110953599e-06, "ratio": 20e-6}
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("testvectors", help="write reference values of the exact and truncated models",
+                       description="Random axes within limits and random errors of realistic size "
+                                   "(µm, arcsec); for each, the exact pose and the order-1 and order-2 "
+                                   "errors computed with 40-digit arithmetic. Plain text, one number per "
+                                   "field, internal units (mm, rad).")
+    add_machine_argument(p)
+    p.add_argument("--count", type=int, default=50, help="number of vectors (default 50)")
+    p.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    p.add_argument("-o", "--output", required=True, metavar="FILE")
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    machine = load(args.machine)
+    mpmath.mp.dps = 40
+    rng = random.Random(args.seed)
+    exact = ExactModel(machine)
+    model = TruncatedModel(derive(machine, 2))
+    params = [s for s in machine.symbols if s.role != "axis"]
+    lines = [f"# chaincomp testvectors {machine.name}: count axes params pose_size; then per vector:",
+             "# axes, params (kParams order), pose_exact, pose_nominal, error_order1, error_order2",
+             f"{args.count} {len(machine.axes)} {len(params)} {6 if machine.tool_direction else 3}"]
+    for _ in range(args.count):
+        values = machine.nominal_values()
+        for a in machine.axes:
+            values[a.name] = a.to_internal(rng.uniform(*a.limits))
+        for e in machine.errors:
+            values[e.name] = rng.uniform(-1, 1) * _ERROR_SCALE[e.unit.kind]
+        mp = {k: mpmath.mpf(v) for k, v in values.items()}
+        zero = dict(mp, **{e.name: mpmath.mpf(0) for e in machine.errors})
+        rows = [[values[a.name] for a in machine.axes], [values[s.name] for s in params]]
+        for pose in (exact.pose(mp, "mpmath"), exact.pose(zero, "mpmath"),
+                     model.error(mp, 1, "mpmath"), model.error(mp, 2, "mpmath")):
+            rows.append(list(pose[0]) + list(pose[1] or []))
+        lines.append(" ".join(" ".join(repr(float(v)) for v in row) for row in rows))
+    with open(args.output, "w", encoding="utf-8") as f:
+        f.write("\n".join(lines) + "\n")
+    return 0

@@ -1,0 +1,316 @@
+"""Emission of allocation-free C++17 for one machine (design §6).
+
+Deterministic: the same machine file and sympy version give byte-identical files. Each
+function's expressions share one common-subexpression elimination; trigonometric and other
+non-polynomial functions of parameters alone are hoisted into ``prepare`` so the hot
+functions only evaluate what depends on the axes.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import sympy as sp
+from sympy.printing.cxx import CXX17CodePrinter
+
+from .derive import derive
+from .machine import Machine, Rotation
+from .units import UNITS
+
+GENERATOR = "chaincomp generate"
+
+
+def fnv1a64(data: bytes) -> int:
+    h = 0xCBF29CE484222325
+    for b in data:
+        h ^= b
+        h = (h * 0x100000001B3) & 0xFFFFFFFFFFFFFFFF
+    return h
+
+
+class _Printer(CXX17CodePrinter):
+    """C++17 printer: small integer powers as products, doubles with full precision."""
+
+    def _print_Pow(self, expr):
+        if expr.exp.is_Integer and 2 <= int(expr.exp) <= 4:
+            base = self.parenthesize(expr.base, 100)
+            return "(" + "*".join([base] * int(expr.exp)) + ")"
+        if expr.exp.is_Integer and -4 <= int(expr.exp) <= -1:
+            return "(1.0/" + self._print(sp.Pow(expr.base, -expr.exp)) + ")"
+        return super()._print_Pow(expr)
+
+    def _print_Rational(self, expr):
+        return f"({float(expr.p)!r}/{float(expr.q)!r})"
+
+    def _print_Integer(self, expr):
+        return f"{float(expr.p)!r}"
+
+
+_PRINTER = _Printer()
+
+
+def ccode(expr: sp.Expr) -> str:
+    return _PRINTER.doprint(expr)
+
+
+def exact_pose(machine: Machine, with_errors: bool = True) -> list[sp.Expr]:
+    """The tool point (and direction) by the chain, symbolic and untruncated."""
+    zero = {s.sym: 0 for s in machine.errors} if not with_errors else {}
+    p = [v.xreplace(zero) for v in machine.tool_point]
+    d = list(machine.tool_direction) if machine.tool_direction else None
+    for el in reversed(machine.chain):
+        if isinstance(el, Rotation):
+            angle = el.angle.xreplace(zero)
+            c, s = sp.cos(angle), sp.sin(angle)
+            i, j = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}[el.axis]
+            for v in (p, d) if d else (p,):
+                v[i], v[j] = c * v[i] - s * v[j], s * v[i] + c * v[j]
+        else:
+            for k in range(3):
+                p[k] = p[k] + el.vector[k].xreplace(zero)
+    return p + (d or [])
+
+
+def corrects_direction(machine: Machine) -> bool:
+    """The direction is corrected when the machine has a tool axis and two rotary axes."""
+    return machine.tool_direction is not None and sum(a.unit.kind == "angle" for a in machine.axes) >= 2
+
+
+@dataclass
+class _Function:
+    name: str
+    signature: str
+    outputs: list[tuple[str, sp.Expr]]
+    comment: str
+
+
+class _Hoister:
+    """Replaces non-polynomial subexpressions of parameters alone by precomputed k[i]."""
+
+    def __init__(self, params: set[sp.Symbol]):
+        self.params = params
+        self.table: dict[sp.Expr, sp.Symbol] = {}
+
+    def __call__(self, e: sp.Expr) -> sp.Expr:
+        if e.is_Atom:
+            return e
+        non_poly = isinstance(e, sp.Function) or (e.is_Pow and not (e.exp.is_Integer and e.exp > 0))
+        if non_poly and e.free_symbols and e.free_symbols <= self.params:
+            if e not in self.table:
+                self.table[e] = sp.Symbol(f"k{len(self.table)}")
+            return self.table[e]
+        return e.func(*[self(a) for a in e.args])
+
+
+def _c_name(sym: sp.Symbol, machine: Machine) -> str:
+    s = machine.symbol(sym.name)
+    return ("q_" if s.role == "axis" else "p_") + s.name
+
+
+def _body(machine: Machine, outputs: list[tuple[str, sp.Expr]], hoisted: bool) -> list[str]:
+    """Statements computing ``outputs`` with one joint CSE; inputs bound to locals first."""
+    exprs = [e for _, e in outputs]
+    repl, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("t"), order="canonical")
+    used = set().union(*(e.free_symbols for e in exprs)) if exprs else set()
+    axes = {a.sym: i for i, a in enumerate(machine.axes)}
+    params = {p.sym: p for p in machine.symbols if p.role != "axis"}
+    lines = [f"// {sp.count_ops(sp.Tuple(*[r for _, r in repl], *reduced))} operations after CSE"]
+    rename = {}
+    for sym in sorted(used, key=lambda s: (0 if s in axes else 1 if s in params else 2, str(s))):
+        if sym in axes:
+            rename[sym] = sp.Symbol(_c_name(sym, machine))
+            lines.append(f"const double {rename[sym]} = q[{axes[sym]}];")
+        elif sym in params:
+            rename[sym] = sp.Symbol(_c_name(sym, machine))
+            lines.append(f"const double {rename[sym]} = m.params.{sym.name};")
+        elif hoisted and str(sym).startswith("k"):
+            lines.append(f"const double {sym} = m.k[{str(sym)[1:]}];")
+    for lhs, rhs in repl:
+        lines.append(f"const double {lhs} = {ccode(rhs.xreplace(rename))};")
+    for (target, _), e in zip(outputs, reduced):
+        lines.append(f"{target} = {ccode(e.xreplace(rename))};")
+    return lines
+
+
+def generate(machine: Machine, order: int = 2) -> dict[str, str]:
+    """C++ sources for ``machine``: {'NAME.hpp': text, 'NAME.cpp': text}."""
+    name = machine.name
+    axes = [a.sym for a in machine.axes]
+    n = len(axes)
+    param_syms = [s for s in machine.symbols if s.role != "axis"]
+    hoist = _Hoister({s.sym for s in param_syms})
+    pose_size = 6 if machine.tool_direction else 3
+    corr_dir = corrects_direction(machine)
+
+    exact = exact_pose(machine, True)
+    nominal = exact_pose(machine, False)
+    jac = [[sp.diff(e, a) for a in axes] for e in exact]
+    d = derive(machine, order)
+    vecs = d.point + (d.direction or [])
+    functions = [
+        _Function("pose_exact", "const Model& m, const Axes& q, Pose& out",
+                  [(f"out[{i}]", hoist(e)) for i, e in enumerate(exact)],
+                  "Actual tool point (and direction) with every error: the exact chain."),
+        _Function("pose_nominal", "const Model& m, const Axes& q, Pose& out",
+                  [(f"out[{i}]", hoist(e)) for i, e in enumerate(nominal)],
+                  "Nominal tool point (and direction): every error at zero."),
+        _Function("pose_jacobian", "const Model& m, const Axes& q, Pose& out, Jacobian& J",
+                  [(f"out[{i}]", hoist(e)) for i, e in enumerate(exact)]
+                  + [(f"J({i}, {j})", hoist(jac[i][j])) for i in range(pose_size) for j in range(n)],
+                  "Actual pose and its exact Jacobian with respect to the axes (one shared CSE)."),
+    ]
+    for k in range(1, order + 1):
+        functions.append(_Function(
+            f"error_order{k}", "const Model& m, const Axes& q, Pose& out",
+            [(f"out[{i}]", hoist(d.error(s, k))) for i, s in enumerate(vecs)],
+            f"Tool error (actual - nominal) of the order-{k} truncated series in the errors."))
+
+    src_hash = fnv1a64(machine.source_text.encode("utf-8"))
+    src_file = os.path.basename(machine.file)
+    banner = (f"// Generated by {GENERATOR} from {src_file} (FNV-1a 64: {src_hash:016x}). Do not edit.\n"
+              f"// sympy {sp.__version__}; internal units: mm and rad.\n")
+    pre = list(hoist.table.items())
+    hpp = _header(machine, banner, n, pose_size, corr_dir, order, len(pre), src_hash, src_file, functions)
+    cpp = _source(machine, banner, n, pre, functions, order)
+    return {f"{name}.hpp": hpp, f"{name}.cpp": cpp}
+
+
+def _kind(unit) -> str:
+    return {"length": "kLength", "angle": "kAngle", "ratio": "kRatio"}[unit.kind]
+
+
+def _header(machine, banner, n, pose_size, corr_dir, order, n_pre, src_hash, src_file, functions) -> str:
+    name = machine.name
+    params = [s for s in machine.symbols if s.role != "axis"]
+    L = [banner, "#pragma once", "", "#include <Eigen/Core>", "", "#include \"chaincomp/compensate.hpp\"",
+         "#include \"chaincomp/model_info.hpp\"", "", f"namespace chaincomp::models::{name} {{", "",
+         f"constexpr const char* kName = \"{name}\";",
+         f"constexpr std::uint64_t kSourceHash = 0x{src_hash:016x}ull;",
+         f"constexpr int kNumAxes = {n};",
+         f"constexpr int kNumParams = {len(params)};",
+         f"constexpr int kPoseSize = {pose_size};  // tool point{', tool direction' if pose_size == 6 else ''}",
+         f"constexpr bool kCorrectsDirection = {'true' if corr_dir else 'false'};",
+         f"constexpr int kOrder = {order};",
+         f"constexpr int kNumPrecomputed = {n_pre};", "",
+         "using Axes = Eigen::Matrix<double, kNumAxes, 1>;      // "
+         + ", ".join(f"{a.name} [{'mm' if a.unit.kind == 'length' else 'rad'}]" for a in machine.axes),
+         "using Pose = Eigen::Matrix<double, kPoseSize, 1>;",
+         "using Jacobian = Eigen::Matrix<double, kPoseSize, kNumAxes>;", "",
+         "// Every constant and error by name, in internal units (mm, rad); defaults: nominal, errors 0.",
+         "struct Params {"]
+    for s in params:
+        default = s.to_internal(s.nominal) if s.nominal is not None else 0.0
+        L.append(f"  double {s.name} = {default!r};  // {s.role}, declared in {s.unit.name}: {s.meaning}")
+    L += ["};", "", "// Immutable after prepare(): the parameters and what depends on them alone.",
+          "struct Model {", "  Params params;", f"  double k[{max(n_pre, 1)}] = {{}};", "};", "",
+          "inline constexpr AxisInfo kAxes[kNumAxes] = {"]
+    for a in machine.axes:
+        L.append(f"    {{\"{a.name}\", \"{a.unit.name}\", UnitKind::{_kind(a.unit)}, {a.unit.to_internal!r}, "
+                 f"{a.limits[0]!r}, {a.limits[1]!r}}},")
+    L += ["};", "inline constexpr ParamInfo kParams[kNumParams] = {"]
+    for s in params:
+        role = "kConstant" if s.role == "constant" else "kError"
+        nominal = s.to_internal(s.nominal) if s.nominal is not None else 0.0
+        L.append(f"    {{\"{s.name}\", ParamRole::{role}, \"{s.unit.name}\", UnitKind::{_kind(s.unit)}, "
+                 f"{s.unit.to_internal!r}, {nominal!r}}},")
+    L += ["};",
+          f"inline constexpr MachineInfo kInfo = {{kName, kSourceHash, \"{src_file}\", kNumAxes, kAxes, "
+          "kNumParams, kParams, kPoseSize, kCorrectsDirection};", "",
+          "// Parameters from / to an array in kParams order.",
+          "Params params_from_array(const double* v) noexcept;",
+          "void params_to_array(const Params& p, double* v) noexcept;",
+          "// Fills m from p (computes the parameter-only subexpressions once).",
+          "void prepare(const Params& p, Model& m) noexcept;", ""]
+    for f in functions:
+        L += [f"// {f.comment}", f"void {f.name}({f.signature}) noexcept;"]
+    L += ["", "// The sizes and functions the generic compensation needs.", "struct Kinematics {",
+          "  static constexpr int kNumAxes = models::" + name + "::kNumAxes;",
+          "  static constexpr bool kCorrectsDirection = models::" + name + "::kCorrectsDirection;",
+          "  using Model = models::" + name + "::Model;", "  using Axes = models::" + name + "::Axes;",
+          "  using Pose = models::" + name + "::Pose;", "  using Jacobian = models::" + name + "::Jacobian;",
+          "  static void pose_nominal(const Model& m, const Axes& q, Pose& out) noexcept { "
+          "models::" + name + "::pose_nominal(m, q, out); }",
+          "  static void pose_jacobian(const Model& m, const Axes& q, Pose& out, Jacobian& J) noexcept { "
+          "models::" + name + "::pose_jacobian(m, q, out, J); }",
+          "};", "using Workspace = chaincomp::Workspace<Kinematics>;",
+          "using Result = chaincomp::Result<Kinematics>;", "",
+          "// Corrected axes such that the actual tool pose equals the nominal one at `command`.",
+          "inline Status compensate(const Model& m, Workspace& ws, const Axes& command, Result& out) noexcept {",
+          "  return chaincomp::compensate<Kinematics>(m, ws, command, out);", "}", "",
+          "extern const ModelEntry kEntry;", "", f"}}  // namespace chaincomp::models::{name}", ""]
+    return "\n".join(L)
+
+
+def _source(machine, banner, n, pre, functions, order) -> str:
+    name = machine.name
+    params = [s for s in machine.symbols if s.role != "axis"]
+    L = [banner, f"#include \"{name}.hpp\"", "", "#include <cmath>", "",
+         f"namespace chaincomp::models::{name} {{", "",
+         "Params params_from_array(const double* v) noexcept {", "  Params p;"]
+    L += [f"  p.{s.name} = v[{i}];" for i, s in enumerate(params)]
+    L += ["  return p;", "}", "", "void params_to_array(const Params& p, double* v) noexcept {"]
+    L += [f"  v[{i}] = p.{s.name};" for i, s in enumerate(params)]
+    L += ["}", "", "void prepare(const Params& p, Model& m) noexcept {", "  m.params = p;"]
+    if pre:
+        outputs = [(f"m.k[{i}]", e) for i, (e, _) in enumerate(pre)]
+        body = _body(machine, outputs, hoisted=False)
+        L += ["  " + line.replace("m.params.", "p.") for line in body]
+    L += ["}", ""]
+    for f in functions:
+        L += [f"void {f.name}({f.signature}) noexcept {{"]
+        L += ["  " + line for line in _body(machine, f.outputs, hoisted=True)]
+        L += ["}", ""]
+    L += ["namespace {", "",
+          "void erased_prepare(const double* params, void* model) noexcept {",
+          "  prepare(params_from_array(params), *static_cast<Model*>(model));", "}",
+          "void erased_pose_exact(const void* model, const double* axes, double* pose) noexcept {",
+          "  Pose out;", "  pose_exact(*static_cast<const Model*>(model), Eigen::Map<const Axes>(axes), out);",
+          "  Eigen::Map<Pose> pose_out(pose);", "  pose_out = out;", "}",
+          "void erased_pose_nominal(const void* model, const double* axes, double* pose) noexcept {",
+          "  Pose out;", "  pose_nominal(*static_cast<const Model*>(model), Eigen::Map<const Axes>(axes), out);",
+          "  Eigen::Map<Pose> pose_out(pose);", "  pose_out = out;", "}",
+          "void erased_pose_jacobian(const void* model, const double* axes, double* pose, double* jac) noexcept {",
+          "  Pose out;", "  Jacobian J;",
+          "  pose_jacobian(*static_cast<const Model*>(model), Eigen::Map<const Axes>(axes), out, J);",
+          "  Eigen::Map<Pose> pose_out(pose);", "  pose_out = out;", "  Eigen::Map<Jacobian> jac_out(jac);", "  jac_out = J;", "}",
+          "bool erased_error(const void* model, const double* axes, int order, double* pose) noexcept {",
+          "  const Model& m = *static_cast<const Model*>(model);", "  Pose out;", "  switch (order) {"]
+    L += [f"    case {k}: error_order{k}(m, Eigen::Map<const Axes>(axes), out); break;" for k in range(1, order + 1)]
+    L += ["    default: return false;", "  }", "  Eigen::Map<Pose> pose_out(pose);", "  pose_out = out;", "  return true;", "}",
+          "int erased_compensate(const void* model, const double* command, double* corrected,",
+          "                      double* residual) noexcept {",
+          "  Workspace ws;", "  Result r;",
+          "  const Status s = compensate(*static_cast<const Model*>(model), ws, Eigen::Map<const Axes>(command), r);",
+          "  Eigen::Map<Axes> corrected_out(corrected);", "  corrected_out = r.corrected;",
+          "  residual[0] = r.residual_point;", "  residual[1] = r.residual_direction;",
+          "  return static_cast<int>(s);", "}", "", "}  // namespace", "",
+          "const ModelEntry kEntry = {&kInfo, sizeof(Model), alignof(Model), erased_prepare, erased_pose_exact,",
+          "                           erased_pose_nominal, erased_pose_jacobian, erased_error, kOrder,",
+          "                           erased_compensate};", "",
+          f"}}  // namespace chaincomp::models::{name}", ""]
+    return "\n".join(L)
+
+
+def registry(names: list[str]) -> str:
+    """registry.cpp: every compiled model by name."""
+    names = sorted(names)
+    L = [f"// Generated by {GENERATOR}: the models compiled into chaincomp_models. Do not edit.", "",
+         "#include <cstring>", "", "#include \"chaincomp/model_info.hpp\"", ""]
+    L += [f"#include \"{n}.hpp\"" for n in names]
+    L += ["", "namespace chaincomp {", "", "namespace {", "const ModelEntry* const kModels[] = {"]
+    L += [f"    &models::{n}::kEntry," for n in names]
+    L += ["};", "}  // namespace", "",
+          "namespace {", "const UnitInfo kUnits[] = {"]
+    L += [f"    {{\"{u.name}\", UnitKind::{_kind(u)}, {u.to_internal!r}}}," for u in UNITS.values()]
+    L += ["};", "}  // namespace", "",
+          "const UnitInfo* find_unit(const char* name) noexcept {",
+          "  for (const UnitInfo& u : kUnits) {", "    if (std::strcmp(u.name, name) == 0) return &u;", "  }",
+          "  return nullptr;", "}", "",
+          "std::size_t model_count() noexcept { return sizeof(kModels) / sizeof(kModels[0]); }", "",
+          "const ModelEntry* model_at(std::size_t i) noexcept { return i < model_count() ? kModels[i] : nullptr; }",
+          "", "const ModelEntry* find_model(const char* name) noexcept {",
+          "  for (const ModelEntry* e : kModels) {",
+          "    if (std::strcmp(e->info->name, name) == 0) return e;", "  }", "  return nullptr;", "}", "",
+          "}  // namespace chaincomp", ""]
+    return "\n".join(L)

@@ -1,0 +1,73 @@
+// Machine-independent description of a generated model: names, units and limits of its
+// axes and parameters, and type-erased entry points, so the runtime can pick a compiled
+// model by machine name and fill its parameters by name.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+namespace chaincomp {
+
+enum class UnitKind : int { kLength = 0, kAngle = 1, kRatio = 2 };
+enum class ParamRole : int { kConstant = 0, kError = 1 };
+
+struct AxisInfo {
+  const char* name;
+  const char* unit;      // declared unit (mm, deg, ...): the unit on the wire
+  UnitKind kind;
+  double to_internal;    // declared unit -> mm or rad
+  double lower, upper;   // limits in the declared unit
+};
+
+struct ParamInfo {
+  const char* name;
+  ParamRole role;
+  const char* unit;      // declared unit
+  UnitKind kind;
+  double to_internal;    // declared unit -> mm, rad or 1
+  double nominal;        // internal units (errors: 0)
+};
+
+struct MachineInfo {
+  const char* name;
+  std::uint64_t source_hash;  // FNV-1a 64 of the machine file the model was generated from
+  const char* source_file;
+  int num_axes;
+  const AxisInfo* axes;
+  int num_params;
+  const ParamInfo* params;
+  int pose_size;              // 3 (tool point) or 6 (tool point, tool direction)
+  bool corrects_direction;    // compensation also corrects the tool direction
+};
+
+// Type-erased entry points of one generated model; buffers are in internal units.
+struct ModelEntry {
+  const MachineInfo* info;
+  std::size_t model_size;   // bytes of the model object prepare() fills
+  std::size_t model_align;
+  void (*prepare)(const double* params, void* model) noexcept;
+  void (*pose_exact)(const void* model, const double* axes, double* pose) noexcept;
+  void (*pose_nominal)(const void* model, const double* axes, double* pose) noexcept;
+  // pose and its Jacobian (pose_size x num_axes, column-major) with respect to the axes.
+  void (*pose_jacobian)(const void* model, const double* axes, double* pose, double* jacobian) noexcept;
+  // Tool error of the order-k truncated model, k = 1 .. max_order; false for another k.
+  bool (*error)(const void* model, const double* axes, int order, double* pose) noexcept;
+  int max_order;
+  // Returns a chaincomp::Status code; residual[0] point (mm), residual[1] direction (rad).
+  int (*compensate)(const void* model, const double* command, double* corrected, double* residual) noexcept;
+};
+
+struct UnitInfo {
+  const char* name;
+  UnitKind kind;
+  double to_internal;
+};
+// The units a machine or params file may use (the same table as the Python package's).
+const UnitInfo* find_unit(const char* name) noexcept;
+
+// The registry of every model compiled into chaincomp_models (generated registry.cpp).
+const ModelEntry* find_model(const char* name) noexcept;
+std::size_t model_count() noexcept;
+const ModelEntry* model_at(std::size_t i) noexcept;
+
+}  // namespace chaincomp

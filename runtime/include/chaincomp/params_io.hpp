@@ -1,0 +1,23 @@
+// Loading a machine's compiled model and its parameter values from files (start-up only:
+// uses yaml-cpp and the heap; never included by real-time code).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "chaincomp/model_info.hpp"
+
+namespace chaincomp {
+
+// The compiled model for the machine file at `path`: reads its `name`, finds the model in
+// the registry and checks the file's content hash against the one it was generated from.
+// On failure returns nullptr and sets `error` to a message naming the file.
+const ModelEntry* open_machine(const std::string& path, std::string& error);
+
+// Parameter values (internal units, kParams order) from a params file: nominal values for
+// constants and 0 for errors the file does not list. Unknown names, axes, null or non-finite
+// values, unparsable text and units of the wrong kind are errors naming file, line and key.
+bool load_params(const MachineInfo& info, const std::string& path, std::vector<double>& values,
+                 std::string& error);
+
+}  // namespace chaincomp

@@ -1,0 +1,180 @@
+// Every compiled model against the Python exact model's reference values, its Jacobian
+// against central differences, and compensation against the exact pose.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "chaincomp/compensate.hpp"
+#include "chaincomp/model_info.hpp"
+
+namespace {
+
+struct Vector {
+  std::vector<double> axes, params, exact, nominal, order1, order2;
+};
+
+std::vector<Vector> read_vectors(const std::string& name, int num_axes, int num_params, int pose_size) {
+  std::ifstream in(std::string(CHAINCOMP_VECTOR_DIR) + "/" + name + ".txt");
+  REQUIRE(in.good());
+  std::string line;
+  std::vector<Vector> out;
+  int count = 0, na = 0, np = 0, ps = 0;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ss(line);
+    if (count == 0 && out.empty() && na == 0) {
+      ss >> count >> na >> np >> ps;
+      REQUIRE(na == num_axes);
+      REQUIRE(np == num_params);
+      REQUIRE(ps == pose_size);
+      continue;
+    }
+    Vector v;
+    auto take = [&ss](std::vector<double>& dst, int n) {
+      dst.resize(n);
+      for (double& x : dst) ss >> x;
+    };
+    take(v.axes, na);
+    take(v.params, np);
+    take(v.exact, ps);
+    take(v.nominal, ps);
+    take(v.order1, ps);
+    take(v.order2, ps);
+    REQUIRE(!ss.fail());
+    out.push_back(v);
+  }
+  REQUIRE(static_cast<int>(out.size()) == count);
+  return out;
+}
+
+// Storage for a type-erased model, aligned for any generated Model.
+struct ModelBuffer {
+  alignas(64) unsigned char bytes[1 << 14];
+};
+
+double norm(const std::vector<double>& v, int from, int n) {
+  double s = 0;
+  for (int i = from; i < from + n; ++i) s += v[i] * v[i];
+  return std::sqrt(s);
+}
+
+}  // namespace
+
+TEST_CASE("every bundled machine is compiled into the registry", "[registry]") {
+  REQUIRE(chaincomp::model_count() >= 4);
+  for (const char* name : {"angle_head", "me220_xz", "mori_seiki_nv1500", "five_axis_ac"}) {
+    INFO(name);
+    REQUIRE(chaincomp::find_model(name) != nullptr);
+  }
+  REQUIRE(chaincomp::find_model("no_such_machine") == nullptr);
+}
+
+TEST_CASE("generated models match the Python exact and truncated models", "[models]") {
+  for (std::size_t m = 0; m < chaincomp::model_count(); ++m) {
+    const chaincomp::ModelEntry& e = *chaincomp::model_at(m);
+    const auto& info = *e.info;
+    const int ps = info.pose_size, na = info.num_axes;
+    INFO("machine " << info.name);
+    REQUIRE(e.model_size <= sizeof(ModelBuffer));
+    ModelBuffer buf;
+    for (const Vector& v : read_vectors(info.name, na, info.num_params, ps)) {
+      e.prepare(v.params.data(), buf.bytes);
+      std::vector<double> pose(ps), nominal(ps), err(ps), jac(ps * na);
+      e.pose_exact(buf.bytes, v.axes.data(), pose.data());
+      e.pose_nominal(buf.bytes, v.axes.data(), nominal.data());
+      for (int i = 0; i < ps; ++i) {
+        CHECK(std::abs(pose[i] - v.exact[i]) < 1e-9);
+        CHECK(std::abs(nominal[i] - v.nominal[i]) < 1e-9);
+      }
+      for (int order = 1; order <= 2; ++order) {
+        const auto& want = order == 1 ? v.order1 : v.order2;
+        REQUIRE(e.error(buf.bytes, v.axes.data(), order, err.data()));
+        // relative to the size of the error vector (point and direction separately)
+        for (int part = 0; part < ps; part += 3) {
+          const double scale = norm(want, part, 3);
+          for (int i = part; i < part + 3; ++i) CHECK(std::abs(err[i] - want[i]) <= 1e-12 * scale + 1e-300);
+        }
+      }
+      REQUIRE_FALSE(e.error(buf.bytes, v.axes.data(), e.max_order + 1, err.data()));
+
+      // Jacobian against central differences of pose_exact: error ~ h^2 + eps/h.
+      e.pose_jacobian(buf.bytes, v.axes.data(), pose.data(), jac.data());
+      const double h = 1e-5;
+      for (int j = 0; j < na; ++j) {
+        std::vector<double> qp = v.axes, qm = v.axes, pp(ps), pm(ps);
+        qp[j] += h;
+        qm[j] -= h;
+        e.pose_exact(buf.bytes, qp.data(), pp.data());
+        e.pose_exact(buf.bytes, qm.data(), pm.data());
+        for (int i = 0; i < ps; ++i) {
+          const double fd = (pp[i] - pm[i]) / (2 * h);
+          CHECK(std::abs(jac[i + ps * j] - fd) < 1e-6 * (1 + std::abs(fd)));
+        }
+      }
+    }
+  }
+}
+
+TEST_CASE("compensation puts the actual tool point on the nominal one", "[compensate]") {
+  for (std::size_t m = 0; m < chaincomp::model_count(); ++m) {
+    const chaincomp::ModelEntry& e = *chaincomp::model_at(m);
+    const auto& info = *e.info;
+    const int ps = info.pose_size, na = info.num_axes;
+    INFO("machine " << info.name);
+    ModelBuffer buf;
+    for (const Vector& v : read_vectors(info.name, na, info.num_params, ps)) {
+      e.prepare(v.params.data(), buf.bytes);
+      std::vector<double> corrected(na), target(ps), actual(ps), before(ps);
+      double residual[2];
+      const auto status = static_cast<chaincomp::Status>(
+          e.compensate(buf.bytes, v.axes.data(), corrected.data(), residual));
+      e.pose_nominal(buf.bytes, v.axes.data(), target.data());
+      e.pose_exact(buf.bytes, corrected.data(), actual.data());
+      e.pose_exact(buf.bytes, v.axes.data(), before.data());
+      double point_after = 0, dir_after = 0, dir_before = 0, point_before = 0;
+      for (int i = 0; i < 3; ++i) {
+        point_after += (actual[i] - target[i]) * (actual[i] - target[i]);
+        point_before += (before[i] - target[i]) * (before[i] - target[i]);
+      }
+      for (int i = 3; i < ps; ++i) {
+        dir_after += (actual[i] - target[i]) * (actual[i] - target[i]);
+        dir_before += (before[i] - target[i]) * (before[i] - target[i]);
+      }
+      // the weighted least-squares objective compensate() minimises
+      const double w2 = info.corrects_direction ? chaincomp::kDirectionWeight * chaincomp::kDirectionWeight : 0.0;
+      const double objective_after = point_after + w2 * dir_after;
+      const double objective_before = point_before + w2 * dir_before;
+      point_after = std::sqrt(point_after);
+      dir_after = std::sqrt(dir_after);
+      // the reported residual is the true one
+      CHECK(std::abs(residual[0] - point_after) < 1e-9);
+      if (status == chaincomp::Status::kOk) {
+        CHECK(point_after < 1e-6);  // 1 nm
+        if (info.corrects_direction) CHECK(dir_after < 1e-9);
+      } else {
+        REQUIRE(status == chaincomp::Status::kResidual);
+        CHECK(objective_after < objective_before);
+      }
+      // machines with as many correctable DOF as pose components are corrected fully
+      const int dof = info.corrects_direction ? 5 : 3;
+      if (na >= dof) CHECK(status == chaincomp::Status::kOk);
+    }
+  }
+}
+
+TEST_CASE("compensation rejects a non-finite command without computing", "[compensate]") {
+  const chaincomp::ModelEntry& e = *chaincomp::find_model("five_axis_ac");
+  ModelBuffer buf;
+  std::vector<double> params(e.info->num_params);
+  for (int i = 0; i < e.info->num_params; ++i) params[i] = e.info->params[i].nominal;
+  e.prepare(params.data(), buf.bytes);
+  std::vector<double> cmd(e.info->num_axes, 0.1), out(e.info->num_axes);
+  cmd[2] = std::nan("");
+  double residual[2];
+  CHECK(e.compensate(buf.bytes, cmd.data(), out.data(), residual) ==
+        static_cast<int>(chaincomp::Status::kNonFiniteInput));
+}

@@ -1,0 +1,77 @@
+// Zero heap allocations in 10^5 calls of every generated function and of compensate.
+#include <catch2/catch.hpp>
+
+#include <cstddef>
+#include <cstdlib>
+#include <new>
+#include <vector>
+
+#include "chaincomp/model_info.hpp"
+
+extern "C" {
+void* __real_malloc(std::size_t);
+void* __real_calloc(std::size_t, std::size_t);
+void* __real_realloc(void*, std::size_t);
+void* __real_aligned_alloc(std::size_t, std::size_t);
+int __real_posix_memalign(void**, std::size_t, std::size_t);
+}
+
+namespace {
+std::size_t g_allocations = 0;
+}
+
+// operator new lives in the shared libstdc++, out of reach of --wrap: replace it here.
+void* operator new(std::size_t n) {
+  ++g_allocations;
+  if (void* p = __real_malloc(n ? n : 1)) return p;
+  throw std::bad_alloc();
+}
+void* operator new[](std::size_t n) { return operator new(n); }
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete[](void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+
+extern "C" {
+void* __wrap_malloc(std::size_t n) { ++g_allocations; return __real_malloc(n); }
+void* __wrap_calloc(std::size_t a, std::size_t b) { ++g_allocations; return __real_calloc(a, b); }
+void* __wrap_realloc(void* p, std::size_t n) { ++g_allocations; return __real_realloc(p, n); }
+void* __wrap_aligned_alloc(std::size_t a, std::size_t n) { ++g_allocations; return __real_aligned_alloc(a, n); }
+int __wrap_posix_memalign(void** p, std::size_t a, std::size_t n) { ++g_allocations; return __real_posix_memalign(p, a, n); }
+}
+
+TEST_CASE("the allocation counter sees operator new", "[alloc]") {
+  const std::size_t before = g_allocations;
+  auto* p = new std::vector<double>(100);
+  delete p;
+  CHECK(g_allocations - before >= 1);
+}
+
+TEST_CASE("generated functions and compensate never allocate", "[alloc]") {
+  constexpr int kCalls = 100000;
+  alignas(64) static unsigned char model[1 << 14];
+  for (std::size_t m = 0; m < chaincomp::model_count(); ++m) {
+    const chaincomp::ModelEntry& e = *chaincomp::model_at(m);
+    INFO("machine " << e.info->name);
+    double params[256], axes[16], out[16], jac[6 * 16], residual[2];
+    REQUIRE(e.info->num_params <= 256);
+    for (int i = 0; i < e.info->num_params; ++i) params[i] = e.info->params[i].nominal + 1e-5;
+    for (int i = 0; i < e.info->num_axes; ++i) axes[i] = 0.5 * (e.info->axes[i].lower + e.info->axes[i].upper) *
+                                                       e.info->axes[i].to_internal + 0.1;
+    e.prepare(params, model);
+    const std::size_t before = g_allocations;
+    double sink = 0;
+    for (int k = 0; k < kCalls; ++k) {
+      axes[0] += 1e-9;
+      e.pose_exact(model, axes, out);
+      sink += out[0];
+      e.pose_nominal(model, axes, out);
+      e.pose_jacobian(model, axes, out, jac);
+      for (int order = 1; order <= e.max_order; ++order) e.error(model, axes, order, out);
+      e.compensate(model, axes, out, residual);
+      sink += out[0] + jac[0];
+    }
+    CHECK(g_allocations - before == 0);
+    CHECK(sink == sink);
+  }
+}
