@@ -1,0 +1,103 @@
+// The daemon's per-message logic, free of LCM and I/O: validates a command, compensates it,
+// ramps the correction in and out (bumpless switching), enforces per-axis limits on the
+// size and the per-cycle change of the correction, and counts every rejection by reason.
+// Allocation-free after construction; deterministic (time comes from the command's utime).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "chaincomp/model_info.hpp"
+
+namespace chaincomp {
+
+constexpr int kMaxAxes = 8;
+
+enum class Reject : int {
+  kUndecodable = 0,
+  kWrongMachine = 1,
+  kWrongAxisCount = 2,
+  kNonFinite = 3,
+  kOutOfLimits = 4,
+  kStepTooLarge = 5,
+  kDuplicateSeq = 6,
+  kOutOfOrderSeq = 7,
+  kCompensationFailed = 8,
+};
+constexpr int kNumReasons = 9;
+const char* reject_name(Reject r) noexcept;
+
+// Flags of a corrected target (the same bits as lcmt_corrected_target.FLAG_*).
+enum : int {
+  kFlagCompensating = 1,
+  kFlagRamping = 2,
+  kFlagClamped = 4,
+  kFlagResidual = 8,
+  kFlagClampedInput = 16,
+};
+
+struct AxisLimits {
+  double lower = 0, upper = 0;        // command limits, axis unit (mm or deg)
+  double max_step = 0;                // largest accepted change between consecutive commands
+  double max_correction = 0;          // largest |correction|
+  double max_correction_step = 0;     // largest change of the correction per command
+};
+
+struct CompensatorConfig {
+  std::array<AxisLimits, kMaxAxes> axes{};
+  double ramp_time_s = 0.5;           // 0 -> 1 (and back) over this much command time
+  bool clamp_out_of_limits = false;   // clamp commands into limits instead of rejecting them
+  bool start_enabled = true;
+};
+
+struct Command {
+  std::int64_t utime = 0, seq = 0;
+  const char* machine = "";           // empty: not checked
+  int num_axes = 0;
+  std::array<double, kMaxAxes> axes{};  // axis units (mm, deg)
+};
+
+struct Target {
+  std::int64_t utime = 0, seq = 0;
+  int num_axes = 0;
+  std::array<double, kMaxAxes> axes{}, correction{};
+  double residual_point = 0, residual_direction = 0;
+  int flags = 0, status = 0;
+};
+
+struct Counters {
+  std::int64_t received = 0, published = 0, clamped = 0, clamped_input = 0;
+  std::array<std::int64_t, kNumReasons> rejected{};
+};
+
+class Compensator {
+ public:
+  // `model` must have been filled by entry.prepare(); both must outlive the compensator.
+  Compensator(const ModelEntry& entry, const void* model, const CompensatorConfig& config);
+
+  // true: `out` holds a target to publish; false: rejected (counted, reason in *why).
+  bool process(const Command& in, Target& out, Reject* why = nullptr) noexcept;
+  void count_undecodable() noexcept { reject(Reject::kUndecodable, nullptr); }
+  void set_enabled(bool on) noexcept { enabled_ = on; }
+  bool enabled() const noexcept { return enabled_; }
+  double ramp() const noexcept { return ramp_; }
+  const Counters& counters() const noexcept { return counters_; }
+  void count_published() noexcept { ++counters_.published; }
+
+ private:
+  bool reject(Reject r, Reject* why) noexcept;
+
+  const ModelEntry& entry_;
+  const void* model_;
+  CompensatorConfig config_;
+  int n_;
+  bool enabled_;
+  double ramp_;
+  bool have_last_ = false;
+  std::int64_t last_seq_ = 0, last_utime_ = 0;
+  std::array<double, kMaxAxes> last_axes_{}, last_correction_{};
+  Counters counters_;
+};
+
+}  // namespace chaincomp

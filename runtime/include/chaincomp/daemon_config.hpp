@@ -1,0 +1,30 @@
+// chaincompd's runtime configuration (configs/runtime/*.yaml). Start-up only.
+#pragma once
+
+#include <string>
+
+#include "chaincomp/compensator.hpp"
+#include "chaincomp/model_info.hpp"
+
+namespace chaincomp {
+
+struct DaemonConfig {
+  std::string lcm_url = "udpm://239.255.76.67:7667?ttl=0";
+  std::string command_channel = "CHAINCOMP_COMMAND";
+  std::string corrected_channel = "CHAINCOMP_CORRECTED";
+  std::string status_channel = "CHAINCOMP_STATUS";
+  std::string control_channel = "CHAINCOMP_CONTROL";
+  double status_period_s = 1.0;
+  int latency_window = 1000;
+  bool mlockall = false;
+  int sched_fifo_priority = 0;  // 0: leave the scheduler alone
+  int cpu = -1;                 // -1: no pinning
+  CompensatorConfig compensator;
+};
+
+// Defaults for `info`'s axes (limits from the machine file), then the file at `path` (may
+// be empty: defaults only). Errors name file, line and key.
+bool load_daemon_config(const MachineInfo& info, const std::string& path, DaemonConfig& out,
+                        std::string& error);
+
+}  // namespace chaincomp

@@ -1,0 +1,121 @@
+#include "chaincomp/compensator.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include "chaincomp/compensate.hpp"
+
+namespace chaincomp {
+
+const char* reject_name(Reject r) noexcept {
+  static const char* const kNames[kNumReasons] = {
+      "undecodable", "wrong_machine", "wrong_axis_count", "non_finite", "out_of_limits",
+      "step_too_large", "duplicate_seq", "out_of_order_seq", "compensation_failed"};
+  const int i = static_cast<int>(r);
+  return i >= 0 && i < kNumReasons ? kNames[i] : "unknown";
+}
+
+Compensator::Compensator(const ModelEntry& entry, const void* model, const CompensatorConfig& config)
+    : entry_(entry),
+      model_(model),
+      config_(config),
+      n_(entry.info->num_axes),
+      enabled_(config.start_enabled),
+      ramp_(config.start_enabled ? 1.0 : 0.0) {}
+
+bool Compensator::reject(Reject r, Reject* why) noexcept {
+  ++counters_.rejected[static_cast<int>(r)];
+  if (why != nullptr) *why = r;
+  return false;
+}
+
+bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept {
+  ++counters_.received;
+  const AxisInfo* info = entry_.info->axes;
+  if (in.machine != nullptr && in.machine[0] != '\0' && std::strcmp(in.machine, entry_.info->name) != 0) {
+    return reject(Reject::kWrongMachine, why);
+  }
+  if (in.num_axes != n_) return reject(Reject::kWrongAxisCount, why);
+  std::array<double, kMaxAxes> cmd = in.axes;
+  for (int i = 0; i < n_; ++i) {
+    if (!std::isfinite(cmd[i])) return reject(Reject::kNonFinite, why);
+  }
+  int flags = 0;
+  for (int i = 0; i < n_; ++i) {
+    const AxisLimits& lim = config_.axes[i];
+    if (cmd[i] < lim.lower || cmd[i] > lim.upper) {
+      if (!config_.clamp_out_of_limits) return reject(Reject::kOutOfLimits, why);
+      cmd[i] = std::clamp(cmd[i], lim.lower, lim.upper);
+      flags |= kFlagClampedInput;
+    }
+  }
+  if (have_last_) {
+    if (in.seq == last_seq_) return reject(Reject::kDuplicateSeq, why);
+    if (in.seq < last_seq_) return reject(Reject::kOutOfOrderSeq, why);
+    for (int i = 0; i < n_; ++i) {
+      if (std::abs(cmd[i] - last_axes_[i]) > config_.axes[i].max_step) return reject(Reject::kStepTooLarge, why);
+    }
+  }
+
+  // Full correction at this command, in axis units.
+  double q[kMaxAxes], corrected[kMaxAxes], residual[2] = {0, 0};
+  for (int i = 0; i < n_; ++i) q[i] = cmd[i] * info[i].to_internal;
+  const auto status = static_cast<Status>(entry_.compensate(model_, q, corrected, residual));
+  if (status != Status::kOk && status != Status::kResidual) return reject(Reject::kCompensationFailed, why);
+
+  // Ramp towards on (1) or off (0) over ramp_time of command time: bumpless switching.
+  const double goal = enabled_ ? 1.0 : 0.0;
+  if (ramp_ != goal) {
+    const double dt = have_last_ ? std::clamp((in.utime - last_utime_) * 1e-6, 0.0, config_.ramp_time_s) : 0.0;
+    const double step = config_.ramp_time_s > 0 ? dt / config_.ramp_time_s : 1.0;
+    ramp_ = goal > ramp_ ? std::min(goal, ramp_ + step) : std::max(goal, ramp_ - step);
+  }
+  if (enabled_ || ramp_ > 0) flags |= kFlagCompensating;
+  if (ramp_ != goal) flags |= kFlagRamping;
+  if (status == Status::kResidual) flags |= kFlagResidual;
+
+  bool clamped = false;
+  std::array<double, kMaxAxes> correction{};
+  for (int i = 0; i < n_; ++i) {
+    const AxisLimits& lim = config_.axes[i];
+    const double full = (corrected[i] - q[i]) / info[i].to_internal;
+    const double wanted = ramp_ * full;
+    const double sized = std::clamp(wanted, -lim.max_correction, lim.max_correction);
+    const double prev = have_last_ ? last_correction_[i] : 0.0;
+    const double rated = std::clamp(sized, prev - lim.max_correction_step, prev + lim.max_correction_step);
+    // the target itself stays within the command limits
+    const double target = std::clamp(cmd[i] + rated, lim.lower, lim.upper);
+    clamped = clamped || sized != wanted || rated != sized || target != cmd[i] + rated;
+    correction[i] = target - cmd[i];
+  }
+  if (clamped) {
+    flags |= kFlagClamped;
+    ++counters_.clamped;
+  }
+  if (flags & kFlagClampedInput) ++counters_.clamped_input;
+
+  out.utime = in.utime;
+  out.seq = in.seq;
+  out.num_axes = n_;
+  for (int i = 0; i < kMaxAxes; ++i) {
+    out.axes[i] = i < n_ ? cmd[i] + correction[i] : 0.0;
+    out.correction[i] = i < n_ ? correction[i] : 0.0;
+  }
+  out.residual_point = residual[0];
+  out.residual_direction = residual[1];
+  out.flags = flags;
+  out.status = static_cast<int>(status);
+  for (int i = 0; i < n_; ++i) {
+    if (!std::isfinite(out.axes[i])) return reject(Reject::kCompensationFailed, why);
+  }
+
+  have_last_ = true;
+  last_seq_ = in.seq;
+  last_utime_ = in.utime;
+  last_axes_ = cmd;
+  last_correction_ = correction;
+  return true;
+}
+
+}  // namespace chaincomp

@@ -1,0 +1,180 @@
+#include "chaincomp/daemon_config.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <set>
+
+namespace chaincomp {
+
+namespace {
+
+// Defaults per axis kind, in the axis's unit: mm for linear axes, deg for rotary ones.
+constexpr AxisLimits kLinearDefaults{0, 0, 10.0, 0.5, 0.001};
+constexpr AxisLimits kRotaryDefaults{0, 0, 5.0, 0.5, 0.001};
+
+struct Reader {
+  const std::string& path;
+  std::string& error;
+
+  bool fail(const YAML::Node& node, const std::string& key, const std::string& what) {
+    error = path + ":" + std::to_string(node.Mark().line + 1) + ": " + key + ": " + what;
+    return false;
+  }
+  bool number(const YAML::Node& node, const std::string& key, double& out, double min = -INFINITY) {
+    try {
+      out = node.as<double>();
+    } catch (const YAML::Exception&) {
+      return fail(node, key, "expected a number");
+    }
+    if (!std::isfinite(out)) return fail(node, key, "expected a finite number");
+    if (out < min) return fail(node, key, "must be at least " + std::to_string(min));
+    return true;
+  }
+  bool integer(const YAML::Node& node, const std::string& key, int& out) {
+    try {
+      out = node.as<int>();
+    } catch (const YAML::Exception&) {
+      return fail(node, key, "expected an integer");
+    }
+    return true;
+  }
+  bool boolean(const YAML::Node& node, const std::string& key, bool& out) {
+    try {
+      out = node.as<bool>();
+    } catch (const YAML::Exception&) {
+      return fail(node, key, "expected true or false");
+    }
+    return true;
+  }
+  bool text(const YAML::Node& node, const std::string& key, std::string& out) {
+    if (!node.IsScalar() || node.Scalar().empty()) return fail(node, key, "expected text");
+    out = node.Scalar();
+    return true;
+  }
+  bool keys(const YAML::Node& node, const std::string& where, const std::set<std::string>& allowed) {
+    if (!node.IsMap()) return fail(node, where, "expected a mapping");
+    for (const auto& kv : node) {
+      const std::string k = kv.first.as<std::string>();
+      if (!allowed.count(k)) {
+        std::string list;
+        for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+        return fail(kv.first, where.empty() ? k : where + "." + k, "unknown key (expected one of: " + list + ")");
+      }
+    }
+    return true;
+  }
+  bool axis_limits(const YAML::Node& node, const std::string& where, AxisLimits& lim) {
+    if (!keys(node, where, {"max_step", "max_correction", "max_correction_step", "limits"})) return false;
+    if (node["max_step"] && !number(node["max_step"], where + ".max_step", lim.max_step, 0)) return false;
+    if (node["max_correction"] && !number(node["max_correction"], where + ".max_correction", lim.max_correction, 0))
+      return false;
+    if (node["max_correction_step"] &&
+        !number(node["max_correction_step"], where + ".max_correction_step", lim.max_correction_step, 0))
+      return false;
+    return true;
+  }
+};
+
+}  // namespace
+
+bool load_daemon_config(const MachineInfo& info, const std::string& path, DaemonConfig& out,
+                        std::string& error) {
+  if (info.num_axes > kMaxAxes) {
+    error = std::string("machine ") + info.name + " has more than " + std::to_string(kMaxAxes) + " axes";
+    return false;
+  }
+  for (int i = 0; i < info.num_axes; ++i) {
+    AxisLimits lim = info.axes[i].kind == UnitKind::kAngle ? kRotaryDefaults : kLinearDefaults;
+    lim.lower = info.axes[i].lower;
+    lim.upper = info.axes[i].upper;
+    out.compensator.axes[i] = lim;
+  }
+  if (path.empty()) return true;
+  YAML::Node doc;
+  try {
+    doc = YAML::LoadFile(path);
+  } catch (const YAML::BadFile&) {
+    error = path + ": cannot read file";
+    return false;
+  } catch (const YAML::Exception& e) {
+    error = path + ":" + std::to_string(e.mark.line + 1) + ": YAML syntax error: " + e.msg;
+    return false;
+  }
+  Reader r{path, error};
+  if (!r.keys(doc, "", {"lcm_url", "channels", "status_period", "latency_window", "start_enabled", "ramp_time",
+                        "out_of_limits", "linear_axes", "rotary_axes", "axes", "realtime"}))
+    return false;
+  if (doc["lcm_url"] && !r.text(doc["lcm_url"], "lcm_url", out.lcm_url)) return false;
+  if (const YAML::Node ch = doc["channels"]) {
+    if (!r.keys(ch, "channels", {"command", "corrected", "status", "control"})) return false;
+    if (ch["command"] && !r.text(ch["command"], "channels.command", out.command_channel)) return false;
+    if (ch["corrected"] && !r.text(ch["corrected"], "channels.corrected", out.corrected_channel)) return false;
+    if (ch["status"] && !r.text(ch["status"], "channels.status", out.status_channel)) return false;
+    if (ch["control"] && !r.text(ch["control"], "channels.control", out.control_channel)) return false;
+  }
+  if (doc["status_period"] && !r.number(doc["status_period"], "status_period", out.status_period_s, 0.001))
+    return false;
+  if (doc["latency_window"]) {
+    if (!r.integer(doc["latency_window"], "latency_window", out.latency_window)) return false;
+    if (out.latency_window < 1 || out.latency_window > 1000000)
+      return r.fail(doc["latency_window"], "latency_window", "must be between 1 and 1000000");
+  }
+  if (doc["start_enabled"] && !r.boolean(doc["start_enabled"], "start_enabled", out.compensator.start_enabled))
+    return false;
+  if (doc["ramp_time"] && !r.number(doc["ramp_time"], "ramp_time", out.compensator.ramp_time_s, 0)) return false;
+  if (const YAML::Node pol = doc["out_of_limits"]) {
+    std::string v;
+    if (!r.text(pol, "out_of_limits", v)) return false;
+    if (v != "reject" && v != "clamp") return r.fail(pol, "out_of_limits", "expected 'reject' or 'clamp'");
+    out.compensator.clamp_out_of_limits = v == "clamp";
+  }
+  for (const char* kind : {"linear_axes", "rotary_axes"}) {
+    if (const YAML::Node k = doc[kind]) {
+      const bool rotary = std::string(kind) == "rotary_axes";
+      for (int i = 0; i < info.num_axes; ++i) {
+        if ((info.axes[i].kind == UnitKind::kAngle) != rotary) continue;
+        if (!r.axis_limits(k, kind, out.compensator.axes[i])) return false;
+      }
+      if (!r.keys(k, kind, {"max_step", "max_correction", "max_correction_step"})) return false;
+    }
+  }
+  if (const YAML::Node axes = doc["axes"]) {
+    if (!axes.IsMap()) return r.fail(axes, "axes", "expected a mapping of axis names");
+    for (const auto& kv : axes) {
+      const std::string name = kv.first.as<std::string>();
+      int index = -1;
+      for (int i = 0; i < info.num_axes; ++i) {
+        if (name == info.axes[i].name) index = i;
+      }
+      if (index < 0) return r.fail(kv.first, "axes." + name, std::string("no such axis on machine ") + info.name);
+      AxisLimits& lim = out.compensator.axes[index];
+      if (!r.axis_limits(kv.second, "axes." + name, lim)) return false;
+      if (const YAML::Node l = kv.second["limits"]) {
+        double lo, hi;
+        if (!l.IsSequence() || l.size() != 2) return r.fail(l, "axes." + name + ".limits", "expected [low, high]");
+        if (!r.number(l[0], "axes." + name + ".limits", lo) || !r.number(l[1], "axes." + name + ".limits", hi))
+          return false;
+        if (!(lo < hi) || lo < info.axes[index].lower || hi > info.axes[index].upper)
+          return r.fail(l, "axes." + name + ".limits",
+                        "must satisfy low < high within the machine's limits [" +
+                            std::to_string(info.axes[index].lower) + ", " + std::to_string(info.axes[index].upper) + "]");
+        lim.lower = lo;
+        lim.upper = hi;
+      }
+    }
+  }
+  if (const YAML::Node rt = doc["realtime"]) {
+    if (!r.keys(rt, "realtime", {"mlockall", "sched_fifo_priority", "cpu"})) return false;
+    if (rt["mlockall"] && !r.boolean(rt["mlockall"], "realtime.mlockall", out.mlockall)) return false;
+    if (rt["sched_fifo_priority"]) {
+      if (!r.integer(rt["sched_fifo_priority"], "realtime.sched_fifo_priority", out.sched_fifo_priority)) return false;
+      if (out.sched_fifo_priority < 0 || out.sched_fifo_priority > 99)
+        return r.fail(rt["sched_fifo_priority"], "realtime.sched_fifo_priority", "must be 0 (off) .. 99");
+    }
+    if (rt["cpu"] && !r.integer(rt["cpu"], "realtime.cpu", out.cpu)) return false;
+  }
+  return true;
+}
+
+}  // namespace chaincomp

@@ -1,0 +1,46 @@
+// lcm_echo: republishes every message of one channel untouched on another, with the same
+// LCM setup as chaincompd: the transport floor of the latency benchmark.
+#include <lcm/lcm.h>
+#include <poll.h>
+
+#include <csignal>
+#include <cstdio>
+#include <string>
+
+namespace {
+volatile std::sig_atomic_t g_stop = 0;
+void on_signal(int) { g_stop = 1; }
+struct Echo {
+  lcm_t* lcm;
+  std::string out;
+};
+void on_message(const lcm_recv_buf_t* rbuf, const char*, void* user) {
+  auto* e = static_cast<Echo*>(user);
+  lcm_publish(e->lcm, e->out.c_str(), rbuf->data, rbuf->data_size);
+}
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc != 4) {
+    std::fprintf(stderr, "usage: lcm_echo LCM_URL IN_CHANNEL OUT_CHANNEL\n");
+    return 2;
+  }
+  Echo e{lcm_create(argv[1]), argv[3]};
+  if (!e.lcm) {
+    std::fprintf(stderr, "lcm_echo: error: cannot open LCM at '%s'\n", argv[1]);
+    return 2;
+  }
+  lcm_subscribe(e.lcm, argv[2], on_message, &e);
+  struct sigaction sa {};
+  sa.sa_handler = on_signal;
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+  std::fprintf(stderr, "lcm_echo: %s -> %s; ready\n", argv[2], argv[3]);
+  const int fd = lcm_get_fileno(e.lcm);
+  while (!g_stop) {
+    pollfd pfd{fd, POLLIN, 0};
+    if (poll(&pfd, 1, 100) > 0 && (pfd.revents & POLLIN)) lcm_handle(e.lcm);
+  }
+  lcm_destroy(e.lcm);
+  return 0;
+}
