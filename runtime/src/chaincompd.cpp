@@ -79,12 +79,25 @@ struct Daemon {
   Clock::time_point started;
   long long (*alloc_count)() = nullptr;
   long long alloc_baseline = 0;
+  bool steady = false;  // the first command has been handled
 };
+
+// lcm-gen's decoder trusts the string length it reads (a length of 0 or below makes it throw
+// or allocate): check it first, and keep it within the capacity reserved at start-up.
+constexpr int kMaxMachineName = 255;
+bool machine_name_fits(const lcm_recv_buf_t* rbuf) {
+  constexpr std::size_t kAt = 8 + 8 + 8;  // fingerprint, utime, seq
+  if (rbuf->data_size < kAt + 4) return false;
+  const auto* b = static_cast<const unsigned char*>(rbuf->data) + kAt;
+  const std::int64_t len = static_cast<std::int32_t>((std::uint32_t(b[0]) << 24) | (std::uint32_t(b[1]) << 16) |
+                                                     (std::uint32_t(b[2]) << 8) | std::uint32_t(b[3]));
+  return len >= 1 && len <= kMaxMachineName + 1 && len <= static_cast<std::int64_t>(rbuf->data_size - kAt - 4);
+}
 
 void on_command(const lcm_recv_buf_t* rbuf, const char*, void* user) {
   Daemon& d = *static_cast<Daemon*>(user);
   const auto t0 = Clock::now();
-  if (d.cmd_msg.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) < 0 ||
+  if (!machine_name_fits(rbuf) || d.cmd_msg.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) < 0 ||
       d.cmd_msg.num_axes < 0 || d.cmd_msg.num_axes > chaincomp::kMaxAxes) {
     d.comp->count_undecodable();
     return;
@@ -114,6 +127,10 @@ void on_command(const lcm_recv_buf_t* rbuf, const char*, void* user) {
     d.comp->count_published();
   }
   d.latency.record(ns_since(t0));
+  // LCM allocates per channel on the first message received and the first one published:
+  // start-up ends with the first command handled.
+  if (!d.steady && d.alloc_count) d.alloc_baseline = d.alloc_count();
+  d.steady = true;
 }
 
 void on_control(const lcm_recv_buf_t* rbuf, const char*, void* user) {
@@ -217,7 +234,7 @@ int main(int argc, char** argv) {
   if (!d->lcm) return fail("cannot open LCM at '" + d->config.lcm_url + "'");
   d->comp = std::make_unique<chaincomp::Compensator>(*entry, model, d->config.compensator);
   d->latency = chaincomp::LatencyWindow(d->config.latency_window);
-  d->cmd_msg.machine.reserve(256);
+  d->cmd_msg.machine.reserve(kMaxMachineName + 1);  // machine_name_fits() keeps names within it
   d->out_buf.resize(d->out_msg.getEncodedSize() + 64);
   auto& s = d->status_msg;
   s.machine = entry->info->name;
@@ -239,7 +256,8 @@ int main(int argc, char** argv) {
                s.model_hash.c_str(), params_path.c_str(), d->config.lcm_url.c_str(),
                d->config.command_channel.c_str(), d->config.corrected_channel.c_str());
   d->started = Clock::now();
-  if (d->alloc_count) d->alloc_baseline = d->alloc_count();
+  // A first status announces the daemon and makes LCM's lazy allocations for publishing.
+  publish_status(*d, false);
 
   const int fd = lcm_get_fileno(d->lcm);
   const auto period_ns = static_cast<std::int64_t>(d->config.status_period_s * 1e9);

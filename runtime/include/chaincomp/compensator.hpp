@@ -78,7 +78,10 @@ class Compensator {
 
   // true: `out` holds a target to publish; false: rejected (counted, reason in *why).
   bool process(const Command& in, Target& out, Reject* why = nullptr) noexcept;
-  void count_undecodable() noexcept { reject(Reject::kUndecodable, nullptr); }
+  void count_undecodable() noexcept {
+    ++counters_.received;
+    reject(Reject::kUndecodable, nullptr);
+  }
   void set_enabled(bool on) noexcept { enabled_ = on; }
   bool enabled() const noexcept { return enabled_; }
   double ramp() const noexcept { return ramp_; }

@@ -9,7 +9,7 @@
 namespace chaincomp {
 
 struct DaemonConfig {
-  std::string lcm_url = "udpm://239.255.76.67:7667?ttl=0";
+  std::string lcm_url = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=2097152";
   std::string command_channel = "CHAINCOMP_COMMAND";
   std::string corrected_channel = "CHAINCOMP_CORRECTED";
   std::string status_channel = "CHAINCOMP_STATUS";
