@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import keyword
 import tokenize
 
 import sympy as sp
@@ -13,8 +14,10 @@ FUNCTIONS = {
     "sin": sp.sin, "cos": sp.cos, "tan": sp.tan, "asin": sp.asin, "acos": sp.acos,
     "atan": sp.atan, "atan2": sp.atan2, "sqrt": sp.sqrt, "pi": sp.pi,
 }
-# Names a symbol may not take: the functions above and words the generated C++ needs.
-RESERVED = set(FUNCTIONS) | {
+# Names a symbol may not take: the functions above, Python keywords and the names the parser
+# itself calls (a symbol called 'Integer' would break every number), and words the generated C++ needs.
+RESERVED = set(FUNCTIONS) | set(keyword.kwlist) | {
+    "Integer", "Float", "Rational", "Symbol", "Function", "factorial",
     "E", "I", "oo", "nan", "zoo", "S", "N", "O", "Q", "lambda", "and", "or", "not", "if",
     "else", "for", "while", "do", "int", "double", "float", "char", "long", "short", "void",
     "auto", "const", "static", "struct", "class", "namespace", "return", "switch", "case",

@@ -150,7 +150,7 @@ def _require_map(ctx: _Ctx, node, fld: str, line, allowed: set[str], required: s
                            _line_of(node, key), f"{fld}.{key}")
     for key in sorted(required):
         if key not in node:
-            raise ctx.fail(f"missing required field {key!r}", _line_of(node), fld)
+            raise ctx.fail(f"missing required field {key!r}", _line_of(node) if line is None else line, fld)
     return node
 
 
@@ -158,7 +158,7 @@ def _describe(value) -> str:
     if isinstance(value, dict):
         return "a mapping"
     if isinstance(value, list):
-        return "a list"
+        return f"a list of {len(value)} item" + ("" if len(value) == 1 else "s")
     if value is None:
         return "nothing"
     return f"{type(value).__name__} {value!r}"
@@ -298,7 +298,7 @@ def _block_order(ctx: _Ctx, order, fld: str, line) -> str:
 
 def _sense(ctx: _Ctx, node, fld: str, default: int | None) -> int:
     if "sense" in node:
-        if node["sense"] not in SENSES:
+        if not isinstance(node["sense"], str) or node["sense"] not in SENSES:
             raise ctx.fail(f"sense must be one of {', '.join(SENSES)}, got {node['sense']!r}",
                            _line_of(node, "sense"), f"{fld}.sense")
         return SENSES[node["sense"]]
@@ -325,18 +325,20 @@ def load_machine(path: str) -> Machine:
     """Load and validate a machine description; every problem names file, line and field."""
     ctx = _Ctx(path)
     doc = load_yaml(path)
-    _require_map(ctx, doc, "(top level)", 1, _TOP, {"name", "symbols", "tool"})
+    top_line = getattr(doc, "line", 1)
+    _require_map(ctx, doc, "(top level)", top_line, _TOP, {"name", "symbols", "tool"})
     name = doc["name"]
     if not isinstance(name, str) or not _NAME.match(name):
         raise ctx.fail(f"machine name must be an identifier (letters, digits, '_'), got {name!r}",
                        _line_of(doc, "name"), "name")
     length_unit = doc.get("length_unit", "mm")
-    if length_unit not in units.UNITS or units.UNITS[length_unit].kind != "length":
+    if not isinstance(length_unit, str) or length_unit not in units.UNITS or \
+            units.UNITS[length_unit].kind != "length":
         raise ctx.fail(f"length_unit must be a length unit, got {length_unit!r}",
                        _line_of(doc, "length_unit"), "length_unit")
     sense = None
     if "rotation_sense" in doc:
-        if doc["rotation_sense"] not in SENSES:
+        if not isinstance(doc["rotation_sense"], str) or doc["rotation_sense"] not in SENSES:
             raise ctx.fail(f"rotation_sense must be one of {', '.join(SENSES)}, got {doc['rotation_sense']!r}",
                            _line_of(doc, "rotation_sense"), "rotation_sense")
         sense = SENSES[doc["rotation_sense"]]
@@ -361,8 +363,9 @@ def load_machine(path: str) -> Machine:
     table = {s.name: s.sym for s in symbols}
 
     if ("chain" in doc) == ("loop" in doc):
+        both = "loop" in doc
         raise ctx.fail("give exactly one of 'chain' (a serial chain) or 'loop' (tool and workpiece branches)",
-                       1, "chain")
+                       _line_of(doc, "loop") if both else top_line, "loop" if both else "chain")
     if "chain" in doc:
         tool_chain = _parse_chain(ctx, doc["chain"], "chain", _line_of(doc, "chain"), table, sense, order)
         work_chain: tuple[Elementary, ...] = ()

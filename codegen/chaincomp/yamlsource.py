@@ -37,6 +37,11 @@ def _construct_mapping(loader: _Loader, node: yaml.MappingNode) -> LineDict:
     out.lines = {}
     for key_node, value_node in node.value:
         key = loader.construct_object(key_node, deep=True)
+        try:
+            hash(key)
+        except TypeError:
+            raise ChaincompError(f"a mapping key must be text or a number, not a list or mapping: {key!r}",
+                                 loader.name, key_node.start_mark.line + 1) from None
         if key in out:
             raise ChaincompError(f"duplicate key {key!r}", loader.name, key_node.start_mark.line + 1,
                                  str(key))
@@ -63,7 +68,15 @@ def load_yaml(path: str) -> Any:
             text = f.read()
     except OSError as exc:
         raise ChaincompError(f"cannot read file: {exc.strerror}", path) from None
-    loader = _Loader(text)
+    except UnicodeDecodeError as exc:
+        line = exc.object[:exc.start].count(b"\n") + 1
+        raise ChaincompError(f"not UTF-8 text (byte {exc.object[exc.start]:#04x})", path, line) from None
+    try:
+        loader = _Loader(text)
+    except yaml.reader.ReaderError as exc:
+        line = text[:exc.position].count("\n") + 1
+        raise ChaincompError(f"YAML syntax error: unacceptable character #x{exc.character:04x}: {exc.reason}",
+                             path, line) from None
     loader.name = path
     try:
         return loader.get_single_data()
