@@ -281,10 +281,11 @@ def _parse_element(ctx: _Ctx, node, fld: str, line, symbols, default_sense: int 
     order = _block_order(ctx, order, f"{fld}.order", _line_of(node, "order") or line)
     sense = _sense(ctx, node, fld, default_sense)
     out: list[Elementary] = []
-    for factor in order:
+    for factor in order:  # factors the block leaves at zero are identities: left out
         if factor == "t":
-            out.append(Translation((vals["dx"], vals["dy"], vals["dz"]), line or 0))
-        else:
+            if any(vals[k] != 0 for k in ("dx", "dy", "dz")):
+                out.append(Translation((vals["dx"], vals["dy"], vals["dz"]), line or 0))
+        elif vals["e" + factor] != 0:
             out.append(Rotation(factor, sense * vals["e" + factor], line or 0))
     return out
 

@@ -48,8 +48,9 @@ class Listener:
         self.lc = lcm.LCM(URL)
         self.targets: list[tuple[float, lcmt_corrected_target]] = []
         self.status: list[lcmt_chaincomp_status] = []
-        self.lc.subscribe("CHAINCOMP_CORRECTED", self._on_target)
-        self.lc.subscribe("CHAINCOMP_STATUS", self._on_status)
+        # LCM drops beyond a subscription's queue capacity (default 30)
+        self.lc.subscribe("CHAINCOMP_CORRECTED", self._on_target).set_queue_capacity(100000)
+        self.lc.subscribe("CHAINCOMP_STATUS", self._on_status).set_queue_capacity(1000)
         self._stop = False
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()

@@ -1,0 +1,67 @@
+// chaincompd's LCM side: subscribes to commands and control, publishes corrected targets and
+// status. Start-up allocates; handling messages does not. Built for one lcm_t per node.
+#pragma once
+
+#include <lcm/lcm.h>
+
+#include <chrono>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "chaincomp/compensator.hpp"
+#include "chaincomp/daemon_config.hpp"
+#include "chaincomp/latency.hpp"
+#include "chaincomp_lcm/lcmt_axis_command.hpp"
+#include "chaincomp_lcm/lcmt_chaincomp_control.hpp"
+#include "chaincomp_lcm/lcmt_chaincomp_status.hpp"
+#include "chaincomp_lcm/lcmt_corrected_target.hpp"
+
+namespace chaincomp {
+
+struct RealtimeObtained {
+  bool mlockall = false, sched_fifo = false, cpu_pinned = false;
+};
+
+class LcmNode {
+ public:
+  // `model` filled by entry.prepare(); `lcm`, `entry` and `model` outlive the node.
+  LcmNode(lcm_t* lcm, const ModelEntry& entry, const void* model, const DaemonConfig& config,
+          const std::string& params_file, const std::string& params_hash, RealtimeObtained rt);
+  ~LcmNode();
+  LcmNode(const LcmNode&) = delete;
+  LcmNode& operator=(const LcmNode&) = delete;
+
+  void publish_status(bool final);
+  const Counters& counters() const { return comp_.counters(); }
+
+  // The longest machine name a command may carry (lcm-gen's decoder trusts the length).
+  static constexpr int kMaxMachineName = 255;
+  // Commands LCM may queue while the loop is busy.
+  static constexpr int kQueueCapacity = 10000;
+
+ private:
+  static void on_command(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
+  static void on_control(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
+  void handle_command(const lcm_recv_buf_t* rbuf);
+
+  lcm_t* lcm_;
+  DaemonConfig config_;
+  Compensator comp_;
+  LatencyWindow latency_;
+  chaincomp_lcm::lcmt_axis_command cmd_msg_;
+  chaincomp_lcm::lcmt_corrected_target out_msg_;
+  chaincomp_lcm::lcmt_chaincomp_control control_msg_;
+  chaincomp_lcm::lcmt_chaincomp_status status_msg_;
+  std::vector<unsigned char> out_buf_, status_buf_;
+  Command command_;
+  Target target_;
+  std::chrono::steady_clock::time_point started_;
+  long long (*alloc_count_)() = nullptr;
+  long long alloc_baseline_ = 0;
+  bool steady_ = false;  // the first command has been handled
+  lcm_subscription_t* command_sub_ = nullptr;
+  lcm_subscription_t* control_sub_ = nullptr;
+};
+
+}  // namespace chaincomp

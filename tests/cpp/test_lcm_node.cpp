@@ -1,0 +1,111 @@
+// The LCM layer on LCM's in-process memq:// provider: commands in, targets and status out.
+#include <catch2/catch.hpp>
+
+#include <lcm/lcm.h>
+
+#include <cmath>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "chaincomp/lcm_node.hpp"
+
+namespace {
+
+struct Inbox {
+  std::vector<chaincomp_lcm::lcmt_corrected_target> targets;
+  std::vector<chaincomp_lcm::lcmt_chaincomp_status> status;
+};
+
+void on_target(const lcm_recv_buf_t* rbuf, const char*, void* user) {
+  chaincomp_lcm::lcmt_corrected_target t;
+  REQUIRE(t.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) >= 0);
+  static_cast<Inbox*>(user)->targets.push_back(t);
+}
+
+void on_status(const lcm_recv_buf_t* rbuf, const char*, void* user) {
+  chaincomp_lcm::lcmt_chaincomp_status s;
+  REQUIRE(s.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) >= 0);
+  static_cast<Inbox*>(user)->status.push_back(s);
+}
+
+void drain(lcm_t* lcm) {
+  while (lcm_handle_timeout(lcm, 0) > 0) {
+  }
+}
+
+std::vector<unsigned char> encode(const chaincomp_lcm::lcmt_axis_command& c) {
+  std::vector<unsigned char> buf(c.getEncodedSize());
+  REQUIRE(c.encode(buf.data(), 0, static_cast<int>(buf.size())) > 0);
+  return buf;
+}
+
+}  // namespace
+
+TEST_CASE("commands over memq:// come back corrected, bad payloads are counted", "[lcm]") {
+  const chaincomp::ModelEntry& entry = *chaincomp::find_model("five_axis_ac");
+  alignas(64) static unsigned char model[1 << 14];
+  std::vector<double> params(entry.info->num_params);
+  for (int i = 0; i < entry.info->num_params; ++i) {
+    params[i] = entry.info->params[i].role == chaincomp::ParamRole::kError ? 2e-5 : entry.info->params[i].nominal;
+  }
+  entry.prepare(params.data(), model);
+  chaincomp::DaemonConfig config;
+  std::string error;
+  REQUIRE(chaincomp::load_daemon_config(*entry.info, "", config, error));
+  for (auto& a : config.compensator.axes) a.max_correction_step = 1.0;
+
+  lcm_t* lcm = lcm_create("memq://");
+  REQUIRE(lcm != nullptr);
+  Inbox inbox;
+  lcm_subscribe(lcm, "CHAINCOMP_CORRECTED", on_target, &inbox);
+  lcm_subscribe(lcm, "CHAINCOMP_STATUS", on_status, &inbox);
+  {
+    chaincomp::LcmNode node(lcm, entry, model, config, "p.yaml", "0", {});
+    chaincomp_lcm::lcmt_axis_command c;
+    c.utime = 1000;
+    c.seq = 1;
+    c.machine = "five_axis_ac";
+    c.num_axes = 5;
+    const double axes[8] = {10, -20, -100, 30, -45, 0, 0, 0};
+    std::memcpy(c.axes, axes, sizeof axes);
+    auto good = encode(c);
+    lcm_publish(lcm, "CHAINCOMP_COMMAND", good.data(), static_cast<unsigned>(good.size()));
+    drain(lcm);
+    REQUIRE(inbox.targets.size() == 1);
+    const auto& t = inbox.targets[0];
+    CHECK(t.seq == 1);
+    CHECK(t.utime == 1000);
+    // the same correction as the model's own compensate (converted to mm / deg)
+    double q[5], corrected[5], residual[2];
+    for (int i = 0; i < 5; ++i) q[i] = axes[i] * entry.info->axes[i].to_internal;
+    entry.compensate(model, q, corrected, residual);
+    for (int i = 0; i < 5; ++i) {
+      CHECK(t.correction[i] == Approx((corrected[i] - q[i]) / entry.info->axes[i].to_internal).margin(1e-15));
+      CHECK(t.axes[i] == Approx(axes[i] + t.correction[i]).margin(1e-12));
+    }
+
+    // undecodable: empty, too short, a string length of zero or of -1, random bytes
+    std::vector<std::vector<unsigned char>> bad = {{}, {1, 2, 3}};
+    for (std::int32_t len : {0, -1, 1 << 20}) {
+      auto b = good;
+      const unsigned char be[4] = {static_cast<unsigned char>(len >> 24), static_cast<unsigned char>(len >> 16),
+                                   static_cast<unsigned char>(len >> 8), static_cast<unsigned char>(len)};
+      std::memcpy(b.data() + 24, be, 4);
+      bad.push_back(b);
+    }
+    for (const auto& b : bad) lcm_publish(lcm, "CHAINCOMP_COMMAND", b.data(), static_cast<unsigned>(b.size()));
+    drain(lcm);
+    node.publish_status(true);
+    drain(lcm);
+    REQUIRE(!inbox.status.empty());
+    const auto& s = inbox.status.back();
+    CHECK(s.received == 6);
+    CHECK(s.published == 1);
+    CHECK(s.rejected[static_cast<int>(chaincomp::Reject::kUndecodable)] == 5);
+    CHECK(s.machine == "five_axis_ac");
+    CHECK(s.final);
+    CHECK(inbox.targets.size() == 1);
+  }
+  lcm_destroy(lcm);
+}
