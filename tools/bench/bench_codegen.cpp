@@ -1,0 +1,594 @@
+// bench_codegen: ns per call of the generated models (chaincomp_models, called through the
+// type-erased registry exactly as chaincompd calls them) against a run-time baseline that
+// multiplies one Eigen::Matrix4d per elementary transform of the chain.
+//
+// The baseline knows no machine: tools/bench_codegen exports, for the chosen params, each
+// elementary transform's angle or translation as an affine function of the axes
+// (constant + one coefficient per axis) for the actual chain (every error) and the nominal
+// chain (errors at zero), plus the tool point and direction. This program reads that file,
+// checks the baseline pose against the generated pose_exact (and the Python/numpy exact
+// model's poses) to 1e-9 before timing anything, and prints one JSON object on stdout.
+// The baseline is an interpreter: the number of axes is a run-time value (Eigen matrices
+// of fixed maximum size, so no heap); only the pose size is a template parameter.
+//
+// Usage: bench_codegen CHAINS.txt [--samples N] [--batches N] [--batch-ms MS] [--seed N]
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "chaincomp/compensate.hpp"
+#include "chaincomp/model_info.hpp"
+
+namespace {
+
+constexpr int kMaxAxes = 8;
+constexpr double kCheckTolerance = 1e-9;
+#if defined(__clang__)
+const std::string kCompiler = std::string("clang ") + __clang_version__;
+#elif defined(__GNUC__)
+const std::string kCompiler = std::string("gcc ") + __VERSION__;
+#else
+const std::string kCompiler = "unknown";
+#endif
+
+[[noreturn]] void die(const std::string& msg) {
+  std::fprintf(stderr, "bench_codegen: %s\n", msg.c_str());
+  std::exit(2);
+}
+
+// ----------------------------------------------------------------------------- the exported chain
+
+struct Affine {  // c + k . q
+  double c = 0;
+  double k[kMaxAxes] = {};
+  double eval(const double* q, int n) const noexcept {
+    double v = c;
+    for (int i = 0; i < n; ++i) v += k[i] * q[i];
+    return v;
+  }
+};
+
+struct Elem {
+  enum Kind { kRx, kRy, kRz, kT } kind;
+  Affine a[3];  // rotation: a[0] is the angle (rad, right-handed); translation: x, y, z (mm)
+};
+
+struct Chain {
+  int n = 0;                // number of axes
+  std::vector<Elem> elems;  // leftmost first
+  Affine point[3];
+  bool has_direction = false;
+  double direction[3] = {0, 0, 0};
+};
+
+struct MachineSpec {
+  std::string name;
+  std::vector<std::string> axis_names;
+  std::vector<std::pair<std::string, double>> params;  // internal units, by name
+  Chain actual, nominal;
+  std::vector<std::vector<double>> check_axes, check_pose;  // poses of the numpy exact model
+};
+
+class Reader {
+ public:
+  explicit Reader(const std::string& path) : in_(path), path_(path) {
+    if (!in_) die("cannot open " + path);
+  }
+  std::string word() {
+    std::string w;
+    if (!(in_ >> w)) die(path_ + ": unexpected end of file");
+    return w;
+  }
+  void expect(const std::string& want) {
+    const std::string w = word();
+    if (w != want) die(path_ + ": expected '" + want + "', got '" + w + "'");
+  }
+  double number() {
+    const std::string w = word();
+    char* end = nullptr;
+    const double v = std::strtod(w.c_str(), &end);
+    if (end == w.c_str() || *end != '\0' || !std::isfinite(v)) die(path_ + ": expected a number, got '" + w + "'");
+    return v;
+  }
+  int integer() { return static_cast<int>(number()); }
+  bool at_end() {
+    in_ >> std::ws;
+    return in_.peek() == std::char_traits<char>::eof();
+  }
+
+ private:
+  std::ifstream in_;
+  std::string path_;
+};
+
+Affine read_affine(Reader& r, int n) {
+  Affine a;
+  a.c = r.number();
+  for (int i = 0; i < n; ++i) a.k[i] = r.number();
+  return a;
+}
+
+Chain read_chain(Reader& r, const char* which, int n) {
+  r.expect("chain");
+  r.expect(which);
+  Chain ch;
+  ch.n = n;
+  const int count = r.integer();
+  for (int i = 0; i < count; ++i) {
+    const std::string kind = r.word();
+    Elem e{};
+    if (kind == "R") {
+      const std::string axis = r.word();
+      e.kind = axis == "x" ? Elem::kRx : axis == "y" ? Elem::kRy : axis == "z" ? Elem::kRz : Elem::kT;
+      if (e.kind == Elem::kT) die("rotation axis must be x, y or z, got " + axis);
+      e.a[0] = read_affine(r, n);
+    } else if (kind == "T") {
+      e.kind = Elem::kT;
+      for (auto& a : e.a) a = read_affine(r, n);
+    } else {
+      die("chain element must be R or T, got " + kind);
+    }
+    ch.elems.push_back(e);
+  }
+  r.expect("point");
+  for (auto& a : ch.point) a = read_affine(r, n);
+  r.expect("direction");
+  const std::string d = r.word();
+  if (d == "yes") {
+    ch.has_direction = true;
+    for (double& v : ch.direction) v = r.number();
+  } else if (d != "no") {
+    die("direction must be 'yes x y z' or 'no', got " + d);
+  }
+  return ch;
+}
+
+std::vector<MachineSpec> read_specs(const std::string& path) {
+  Reader r(path);
+  r.expect("chaincomp-bench-chains");
+  r.expect("v1");
+  std::vector<MachineSpec> out;
+  while (!r.at_end()) {
+    MachineSpec m;
+    r.expect("machine");
+    m.name = r.word();
+    r.expect("axes");
+    const int n = r.integer();
+    if (n < 1 || n > kMaxAxes) die(m.name + ": unsupported number of axes (at most " + std::to_string(kMaxAxes) + ")");
+    for (int i = 0; i < n; ++i) m.axis_names.push_back(r.word());
+    r.expect("params");
+    const int np = r.integer();
+    for (int i = 0; i < np; ++i) {
+      std::string name = r.word();
+      m.params.emplace_back(name, r.number());
+    }
+    m.actual = read_chain(r, "actual", n);
+    m.nominal = read_chain(r, "nominal", n);
+    r.expect("checks");
+    const int nc = r.integer();
+    const int ps = r.integer();
+    for (int c = 0; c < nc; ++c) {
+      std::vector<double> q(n), p(ps);
+      for (double& v : q) v = r.number();
+      for (double& v : p) v = r.number();
+      m.check_axes.push_back(q);
+      m.check_pose.push_back(p);
+    }
+    r.expect("end");
+    out.push_back(std::move(m));
+  }
+  return out;
+}
+
+// ----------------------------------------------------------------------------- the baseline
+
+inline Eigen::Matrix4d elem_matrix(const Elem& e, const double* q, int n) noexcept {
+  Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
+  if (e.kind == Elem::kT) {
+    m(0, 3) = e.a[0].eval(q, n);
+    m(1, 3) = e.a[1].eval(q, n);
+    m(2, 3) = e.a[2].eval(q, n);
+    return m;
+  }
+  const double angle = e.a[0].eval(q, n);
+  const double c = std::cos(angle), s = std::sin(angle);
+  switch (e.kind) {
+    case Elem::kRx: m(1, 1) = c; m(1, 2) = -s; m(2, 1) = s; m(2, 2) = c; break;
+    case Elem::kRy: m(0, 0) = c; m(0, 2) = s; m(2, 0) = -s; m(2, 2) = c; break;
+    default: m(0, 0) = c; m(0, 1) = -s; m(1, 0) = s; m(1, 1) = c; break;
+  }
+  return m;
+}
+
+// Tool point (and direction) relative to the workpiece: E1 * E2 * ... * En applied to the tool.
+template <int PS>
+inline void baseline_pose(const Chain& ch, const double* q, double* pose) noexcept {
+  const int n = ch.n;
+  Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
+  for (const Elem& e : ch.elems) m = m * elem_matrix(e, q, n);
+  const Eigen::Vector4d p(ch.point[0].eval(q, n), ch.point[1].eval(q, n), ch.point[2].eval(q, n), 1.0);
+  const Eigen::Vector4d r = m * p;
+  pose[0] = r[0];
+  pose[1] = r[1];
+  pose[2] = r[2];
+  if constexpr (PS == 6) {
+    const Eigen::Vector3d d = m.topLeftCorner<3, 3>() * Eigen::Map<const Eigen::Vector3d>(ch.direction);
+    pose[3] = d[0];
+    pose[4] = d[1];
+    pose[5] = d[2];
+  }
+}
+
+// The exact tool error: actual chain minus nominal chain.
+template <int PS>
+inline void baseline_error(const Chain& actual, const Chain& nominal, const double* q, double* err) noexcept {
+  double a[PS], b[PS];
+  baseline_pose<PS>(actual, q, a);
+  baseline_pose<PS>(nominal, q, b);
+  for (int i = 0; i < PS; ++i) err[i] = a[i] - b[i];
+}
+
+// Pose and forward-difference Jacobian (PS x N, column-major) of the numeric product:
+// N + 1 products; step 1e-7 * max(1, |q_j|), divided by the step actually taken.
+template <int PS>
+inline void baseline_jacobian(const Chain& ch, const double* q, double* pose, double* jac) noexcept {
+  const int N = ch.n;
+  baseline_pose<PS>(ch, q, pose);
+  double qh[kMaxAxes], shifted[PS];
+  for (int j = 0; j < N; ++j) qh[j] = q[j];
+  for (int j = 0; j < N; ++j) {
+    qh[j] = q[j] + 1e-7 * std::max(1.0, std::abs(q[j]));
+    const double h = qh[j] - q[j];
+    baseline_pose<PS>(ch, qh, shifted);
+    for (int i = 0; i < PS; ++i) jac[i + PS * j] = (shifted[i] - pose[i]) / h;
+    qh[j] = q[j];
+  }
+}
+
+// compensate.hpp's Gauss-Newton (same steps, weights, Levenberg term, LDLT, status codes) on
+// the numeric product, with the forward-difference Jacobian. Unlike compensate.hpp it skips
+// the Jacobian on the last pass, where only the residual is needed (in the baseline's favour).
+template <int PS, bool DIR>
+int baseline_compensate(const Chain& actual, const Chain& nominal, const double* command, double* corrected,
+                        double* residual) noexcept {
+  using chaincomp::Status;
+  constexpr int rows = DIR ? 6 : 3;
+  const int N = actual.n;
+  // run-time number of axes, fixed maximum size: no heap
+  using Vec = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxAxes, 1>;
+  using Square = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxAxes, kMaxAxes>;
+  const Eigen::Map<const Vec> cmd(command, N);
+  Eigen::Map<Vec> out(corrected, N);
+  out = cmd;
+  residual[0] = residual[1] = 0;
+  if (!cmd.allFinite()) return static_cast<int>(Status::kNonFiniteInput);
+  double target[PS], pose[PS], jac[PS * kMaxAxes];
+  baseline_pose<PS>(nominal, command, target);
+  Vec q = cmd;
+  Eigen::Matrix<double, rows, 1> r;
+  Eigen::Matrix<double, rows, Eigen::Dynamic, 0, rows, kMaxAxes> J(rows, N);
+  const Eigen::Map<const Eigen::Matrix<double, PS, Eigen::Dynamic, 0, PS, kMaxAxes>> jm(jac, PS, N);
+  for (int step = 0; step <= chaincomp::kNewtonSteps; ++step) {
+    if (step == chaincomp::kNewtonSteps) {
+      baseline_pose<PS>(actual, q.data(), pose);
+    } else {
+      baseline_jacobian<PS>(actual, q.data(), pose, jac);
+      J.template topRows<3>() = jm.template topRows<3>();
+      if constexpr (DIR) J.template bottomRows<3>() = chaincomp::kDirectionWeight * jm.template bottomRows<3>();
+    }
+    for (int i = 0; i < 3; ++i) r[i] = pose[i] - target[i];
+    if constexpr (DIR) {
+      for (int i = 3; i < 6; ++i) r[i] = chaincomp::kDirectionWeight * (pose[i] - target[i]);
+    }
+    if (step == chaincomp::kNewtonSteps) break;
+    Square A = J.transpose() * J;
+    A.diagonal().array() += 1e-14 * (1.0 + A.diagonal().maxCoeff());
+    Eigen::LDLT<Square> ldlt(A);
+    if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return static_cast<int>(Status::kSingular);
+    q -= ldlt.solve(J.transpose() * r);
+  }
+  if (!q.allFinite() || !r.allFinite()) return static_cast<int>(Status::kNonFiniteOutput);
+  out = q;
+  residual[0] = r.template head<3>().norm();
+  if constexpr (DIR) residual[1] = r.template tail<3>().norm() / chaincomp::kDirectionWeight;
+  const bool ok = residual[0] <= chaincomp::kPointTolerance && residual[1] <= chaincomp::kDirectionTolerance;
+  return static_cast<int>(ok ? Status::kOk : Status::kResidual);
+}
+
+// ----------------------------------------------------------------------------- timing
+
+double g_sink_store = 0;
+volatile double g_sink = 0;
+
+// Tells the compiler the pointed-to memory is read and written: the work producing it stays.
+inline void escape(const void* p) noexcept { asm volatile("" : : "g"(p) : "memory"); }
+
+struct Stats {
+  double median_ns = 0, worst_ns = 0, best_ns = 0;
+  long calls_per_batch = 0;
+  int batches = 0;
+};
+
+using Clock = std::chrono::steady_clock;
+
+// f(i) runs one call on sample i and returns a value for the sink. Batches of calls over the
+// samples (round robin); per batch the mean ns per call; median, worst and best batch.
+template <class F>
+Stats time_calls(F&& f, int num_samples, int batches, double batch_ms) {
+  double sink = 0;
+  // warm-up and calibration: at least one pass over the samples and 20 ms
+  long calls = 0;
+  int idx = 0;
+  const auto w0 = Clock::now();
+  double elapsed = 0;
+  while (calls < num_samples || elapsed < 20e6) {
+    for (int k = 0; k < 64; ++k) {
+      sink += f(idx);
+      if (++idx == num_samples) idx = 0;
+    }
+    calls += 64;
+    elapsed = std::chrono::duration<double, std::nano>(Clock::now() - w0).count();
+  }
+  const double per_call = elapsed / static_cast<double>(calls);
+  Stats s;
+  s.calls_per_batch = std::max<long>(16, static_cast<long>(batch_ms * 1e6 / per_call));
+  s.batches = batches;
+  std::vector<double> ns(batches);
+  for (int b = 0; b < batches; ++b) {
+    const auto t0 = Clock::now();
+    for (long k = 0; k < s.calls_per_batch; ++k) {
+      sink += f(idx);
+      if (++idx == num_samples) idx = 0;
+    }
+    const auto t1 = Clock::now();
+    ns[b] = std::chrono::duration<double, std::nano>(t1 - t0).count() / static_cast<double>(s.calls_per_batch);
+  }
+  std::sort(ns.begin(), ns.end());
+  s.median_ns = ns[ns.size() / 2];
+  s.worst_ns = ns.back();
+  s.best_ns = ns.front();
+  g_sink_store += sink;
+  return s;
+}
+
+// ----------------------------------------------------------------------------- JSON
+
+std::string num(double v) {
+  if (!std::isfinite(v)) return "null";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return buf;
+}
+
+std::string stats_json(const Stats& s) {
+  return "{\"median_ns\":" + num(s.median_ns) + ",\"worst_ns\":" + num(s.worst_ns) + ",\"best_ns\":" +
+         num(s.best_ns) + ",\"calls_per_batch\":" + std::to_string(s.calls_per_batch) +
+         ",\"batches\":" + std::to_string(s.batches) + "}";
+}
+
+struct ModelBuffer {
+  alignas(64) unsigned char bytes[1 << 14];
+};
+
+struct Options {
+  int samples = 4096, batches = 101;
+  double batch_ms = 1.0;
+  unsigned seed = 20240611;
+};
+
+// ----------------------------------------------------------------------------- one machine
+
+template <int PS, bool DIR>
+std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& e, const void* model,
+                          const Options& opt) {
+  const auto& info = *e.info;
+  const int N = info.num_axes;
+  std::fprintf(stderr, "bench_codegen: %s (%d axes, pose %d, chain of %zu transforms)\n", info.name, N, PS,
+               spec.actual.elems.size());
+  // random axes within the limits, internal units
+  std::mt19937_64 rng(opt.seed);
+  std::vector<double> axes(static_cast<std::size_t>(opt.samples) * N);
+  for (int s = 0; s < opt.samples; ++s) {
+    for (int i = 0; i < N; ++i) {
+      const auto& a = info.axes[i];
+      std::uniform_real_distribution<double> u(a.lower * a.to_internal, a.upper * a.to_internal);
+      axes[static_cast<std::size_t>(s) * N + i] = u(rng);
+    }
+  }
+  auto q_at = [&](int s) { return axes.data() + static_cast<std::size_t>(s) * N; };
+
+  // ---- checks before timing
+  double pose_diff = 0, numpy_diff = 0, numpy_base_diff = 0, err1_diff = 0, err2_diff = 0, err_size = 0;
+  double gen_pose[PS], base_pose[PS], gen_err[PS], exact_err[PS];
+  for (int s = 0; s < opt.samples; ++s) {
+    e.pose_exact(model, q_at(s), gen_pose);
+    baseline_pose<PS>(spec.actual, q_at(s), base_pose);
+    baseline_error<PS>(spec.actual, spec.nominal, q_at(s), exact_err);
+    for (int i = 0; i < PS; ++i) pose_diff = std::max(pose_diff, std::abs(gen_pose[i] - base_pose[i]));
+    for (int order = 1; order <= 2; ++order) {
+      if (!e.error(model, q_at(s), order, gen_err)) die(std::string(info.name) + ": no order-" + std::to_string(order) + " error");
+      for (int i = 0; i < PS; ++i) {
+        double& d = order == 1 ? err1_diff : err2_diff;
+        d = std::max(d, std::abs(gen_err[i] - exact_err[i]));
+      }
+    }
+    for (int i = 0; i < 3; ++i) err_size = std::max(err_size, std::abs(exact_err[i]));
+  }
+  for (std::size_t c = 0; c < spec.check_axes.size(); ++c) {
+    e.pose_exact(model, spec.check_axes[c].data(), gen_pose);
+    baseline_pose<PS>(spec.actual, spec.check_axes[c].data(), base_pose);
+    for (int i = 0; i < PS; ++i) {
+      numpy_diff = std::max(numpy_diff, std::abs(gen_pose[i] - spec.check_pose[c][i]));
+      numpy_base_diff = std::max(numpy_base_diff, std::abs(base_pose[i] - spec.check_pose[c][i]));
+    }
+  }
+  if (!(pose_diff <= kCheckTolerance))
+    die(std::string(info.name) + ": baseline pose differs from the generated pose_exact by " + num(pose_diff) +
+        " (> 1e-9) over " + std::to_string(opt.samples) + " random axes: not timing an unequal pair");
+  if (!(numpy_diff <= kCheckTolerance) || !(numpy_base_diff <= kCheckTolerance))
+    die(std::string(info.name) + ": the numpy exact model's poses differ from the generated (" + num(numpy_diff) +
+        ") or baseline (" + num(numpy_base_diff) + ") pose by more than 1e-9");
+
+  // Jacobian: forward differences against the generated exact one (relative to its size)
+  double jac_diff = 0;
+  {
+    double gj[PS * kMaxAxes], bj[PS * kMaxAxes], gp[PS], bp[PS];
+    for (int s = 0; s < opt.samples; ++s) {
+      e.pose_jacobian(model, q_at(s), gp, gj);
+      baseline_jacobian<PS>(spec.actual, q_at(s), bp, bj);
+      for (int i = 0; i < PS * N; ++i) jac_diff = std::max(jac_diff, std::abs(gj[i] - bj[i]) / (1.0 + std::abs(gj[i])));
+    }
+  }
+  // compensation: the two implementations must agree (same statuses, same corrections)
+  double comp_axis_diff = 0, comp_axis_diff_ok = 0, comp_res_gen = 0, comp_res_base = 0;
+  int status_mismatch = 0, gen_ok = 0, base_ok = 0;
+  {
+    double cg[kMaxAxes], cb[kMaxAxes], rg[2], rb[2];
+    for (int s = 0; s < opt.samples; ++s) {
+      const int sg = e.compensate(model, q_at(s), cg, rg);
+      const int sb = baseline_compensate<PS, DIR>(spec.actual, spec.nominal, q_at(s), cb, rb);
+      status_mismatch += sg != sb;
+      gen_ok += sg == 0;
+      base_ok += sb == 0;
+      for (int i = 0; i < N; ++i) {
+        comp_axis_diff = std::max(comp_axis_diff, std::abs(cg[i] - cb[i]));
+        if (sg == 0 && sb == 0) comp_axis_diff_ok = std::max(comp_axis_diff_ok, std::abs(cg[i] - cb[i]));
+      }
+      comp_res_gen = std::max(comp_res_gen, rg[0]);
+      comp_res_base = std::max(comp_res_base, rb[0]);
+    }
+  }
+
+  // ---- timing
+  double out[PS], jac[PS * kMaxAxes];
+  double corr[kMaxAxes], res[2];
+  auto sum = [](const double* v, int n) {
+    double t = 0;
+    for (int i = 0; i < n; ++i) t += v[i];
+    return t;
+  };
+  struct Row {
+    const char* fn;
+    Stats gen, base;
+  };
+  std::vector<Row> rows;
+  const int S = opt.samples, B = opt.batches;
+  const double ms = opt.batch_ms;
+  rows.push_back({"pose_exact",
+                  time_calls([&](int s) { e.pose_exact(model, q_at(s), out); escape(out); return out[0]; }, S, B, ms),
+                  time_calls([&](int s) { baseline_pose<PS>(spec.actual, q_at(s), out); escape(out); return sum(out, PS); }, S, B, ms)});
+  rows.push_back({"error_order1",
+                  time_calls([&](int s) { e.error(model, q_at(s), 1, out); escape(out); return out[0]; }, S, B, ms),
+                  time_calls([&](int s) { baseline_error<PS>(spec.actual, spec.nominal, q_at(s), out); escape(out); return sum(out, PS); }, S, B, ms)});
+  rows.push_back({"error_order2",
+                  time_calls([&](int s) { e.error(model, q_at(s), 2, out); escape(out); return out[0]; }, S, B, ms),
+                  // the same exact-error baseline, timed again for its own figures
+                  time_calls([&](int s) { baseline_error<PS>(spec.actual, spec.nominal, q_at(s), out); escape(out); return sum(out, PS); }, S, B, ms)});
+  rows.push_back({"pose_jacobian",
+                  time_calls([&](int s) { e.pose_jacobian(model, q_at(s), out, jac); escape(jac); return out[0] + jac[0]; }, S, B, ms),
+                  time_calls([&](int s) { baseline_jacobian<PS>(spec.actual, q_at(s), out, jac); escape(jac); return out[0] + jac[0]; }, S, B, ms)});
+  rows.push_back({"compensate",
+                  time_calls([&](int s) { const int st = e.compensate(model, q_at(s), corr, res); escape(corr); return corr[0] + st; }, S, B, ms),
+                  time_calls([&](int s) { const int st = baseline_compensate<PS, DIR>(spec.actual, spec.nominal, q_at(s), corr, res); escape(corr); return corr[0] + st; }, S, B, ms)});
+
+  std::string j = "{\"machine\":\"" + std::string(info.name) + "\",\"num_axes\":" + std::to_string(N) +
+                  ",\"pose_size\":" + std::to_string(PS) + ",\"corrects_direction\":" + (DIR ? "true" : "false") +
+                  ",\"chain_transforms\":" + std::to_string(spec.actual.elems.size()) +
+                  ",\"samples\":" + std::to_string(opt.samples) + ",\"checks\":{" +
+                  "\"pose_max_abs_diff_baseline_vs_generated\":" + num(pose_diff) +
+                  ",\"pose_max_abs_diff_numpy_vs_generated\":" + num(numpy_diff) +
+                  ",\"pose_max_abs_diff_numpy_vs_baseline\":" + num(numpy_base_diff) +
+                  ",\"numpy_check_points\":" + std::to_string(spec.check_axes.size()) +
+                  ",\"tolerance\":" + num(kCheckTolerance) +
+                  ",\"exact_point_error_max_abs\":" + num(err_size) +
+                  ",\"error_order1_max_abs_diff_vs_exact\":" + num(err1_diff) +
+                  ",\"error_order2_max_abs_diff_vs_exact\":" + num(err2_diff) +
+                  ",\"jacobian_max_rel_diff_fd_vs_generated\":" + num(jac_diff) +
+                  ",\"compensate_max_axis_diff\":" + num(comp_axis_diff) +
+                  ",\"compensate_max_axis_diff_where_both_ok\":" + (gen_ok ? num(comp_axis_diff_ok) : std::string("null")) +
+                  ",\"compensate_status_mismatches\":" + std::to_string(status_mismatch) +
+                  ",\"compensate_ok_generated\":" + std::to_string(gen_ok) +
+                  ",\"compensate_ok_baseline\":" + std::to_string(base_ok) +
+                  ",\"compensate_max_residual_point_generated\":" + num(comp_res_gen) +
+                  ",\"compensate_max_residual_point_baseline\":" + num(comp_res_base) + "},\"timings\":{";
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    if (i) j += ",";
+    j += "\"" + std::string(rows[i].fn) + "\":{\"generated\":" + stats_json(rows[i].gen) +
+         ",\"baseline\":" + stats_json(rows[i].base) + "}";
+  }
+  j += "}}";
+  return j;
+}
+
+using BenchFn = std::string (*)(const MachineSpec&, const chaincomp::ModelEntry&, const void*, const Options&);
+
+BenchFn pick(int ps, bool dir) {
+  if (ps == 3 && !dir) return bench_machine<3, false>;
+  if (ps == 6 && !dir) return bench_machine<6, false>;
+  if (ps == 6 && dir) return bench_machine<6, true>;
+  return nullptr;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2) die("usage: bench_codegen CHAINS.txt [--samples N] [--batches N] [--batch-ms MS] [--seed N]");
+  Options opt;
+  for (int i = 2; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (i + 1 >= argc) die("missing value after " + a);
+    const char* v = argv[++i];
+    if (a == "--samples") opt.samples = std::atoi(v);
+    else if (a == "--batches") opt.batches = std::atoi(v);
+    else if (a == "--batch-ms") opt.batch_ms = std::atof(v);
+    else if (a == "--seed") opt.seed = static_cast<unsigned>(std::strtoul(v, nullptr, 10));
+    else die("unknown option " + a);
+  }
+  if (opt.samples < 1 || opt.batches < 1 || !(opt.batch_ms > 0)) die("bad option value");
+
+  std::string json = "{\"machines\":[";
+  bool first = true;
+  for (const MachineSpec& spec : read_specs(argv[1])) {
+    const chaincomp::ModelEntry* e = chaincomp::find_model(spec.name.c_str());
+    if (e == nullptr) die("machine " + spec.name + " is not compiled into chaincomp_models");
+    const auto& info = *e->info;
+    if (info.num_axes != static_cast<int>(spec.axis_names.size())) die(spec.name + ": axis count differs from the export");
+    for (int i = 0; i < info.num_axes; ++i)
+      if (spec.axis_names[i] != info.axes[i].name) die(spec.name + ": axis " + spec.axis_names[i] + " where the model has " + info.axes[i].name);
+    if ((info.pose_size == 6) != spec.actual.has_direction) die(spec.name + ": pose size differs from the export");
+    if (e->model_size > sizeof(ModelBuffer) || e->model_align > 64) die(spec.name + ": model too large for the buffer");
+    // parameters by name, every one required
+    std::vector<double> params(info.num_params);
+    for (int i = 0; i < info.num_params; ++i) {
+      auto it = std::find_if(spec.params.begin(), spec.params.end(),
+                             [&](const auto& p) { return p.first == info.params[i].name; });
+      if (it == spec.params.end()) die(spec.name + ": the export has no value for parameter " + info.params[i].name);
+      params[i] = it->second;
+    }
+    if (static_cast<int>(spec.params.size()) != info.num_params) die(spec.name + ": the export has unknown parameters");
+    auto* buf = new ModelBuffer;
+    e->prepare(params.data(), buf->bytes);
+    const BenchFn fn = pick(info.pose_size, info.corrects_direction);
+    if (fn == nullptr) die(spec.name + ": no baseline for this pose size / direction correction");
+    json += (first ? "" : ",") + fn(spec, *e, buf->bytes, opt);
+    first = false;
+    delete buf;
+  }
+  g_sink = g_sink_store;
+  json += "],\"sink\":" + num(g_sink) + ",\"options\":{\"samples\":" + std::to_string(opt.samples) +
+          ",\"batches\":" + std::to_string(opt.batches) + ",\"batch_ms\":" + num(opt.batch_ms) +
+          ",\"seed\":" + std::to_string(opt.seed) + "},\"compiler\":\"" + kCompiler + "\"}";
+  std::printf("%s\n", json.c_str());
+  return 0;
+}
