@@ -9,6 +9,8 @@ from ..errors import ChaincompError
 from . import derive, eval as eval_, generate, testvectors
 
 VERBS = (derive, eval_, generate, testvectors)
+from . import protocol  # noqa: E402
+VERBS += (protocol,)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,61 @@
+"""``chaincomp protocol``: the simplest measurement tests for each error (Freeman & Ford §5)."""
+
+from __future__ import annotations
+
+import json
+
+from ..errors import ChaincompError
+from ..params import parse_sets
+from ..protocol import build_protocol, to_json, to_text
+from .common import add_machine_argument, load
+
+
+def names(text: str | None) -> list[str]:
+    """'A, B,C' -> ['A', 'B', 'C']; repeated options arrive joined by commas."""
+    return [t.strip() for t in (text or "").split(",") if t.strip()]
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("protocol", help="find the simplest measurement tests for each error",
+                       description="Write the first-order tool-point equations at every set-up of the "
+                                   "rotary axes over an angle grid, form the sum and the difference of "
+                                   "every pair of set-ups for each measured coordinate, and find, error "
+                                   "by error, the simplest equation (fewest unknowns, then fewest terms) "
+                                   "given the errors already identified. Reports assumed zeros, one line "
+                                   "per test, simultaneous sets, and errors the set-ups cannot identify.")
+    add_machine_argument(p)
+    p.add_argument("--angles", default="0,90,180,270", metavar="A,B,...",
+                   help="values of every rotary axis, in its declared unit (default 0,90,180,270)")
+    p.add_argument("--assume-zero", action="append", default=[], metavar="E1,E2",
+                   help="errors taken as zero (the paper sets DY = 0)")
+    p.add_argument("--measure", default="x,y,z", metavar="X,Y,Z",
+                   help="tool-tip coordinates that are measured (default x,y,z)")
+    p.add_argument("--prefer", action="append", default=[], metavar="E1,E2",
+                   help="when several errors can be isolated, take these first, in this order")
+    p.add_argument("--set", dest="sets", action="append", default=[], metavar="AXIS=VALUE",
+                   help="value of a non-rotary axis during the tests (default 0, or mid-range)")
+    p.add_argument("--order", type=int, default=1,
+                   help="order of the equations: 1 (the tests are linear in the errors)")
+    p.add_argument("--format", choices=("text", "json"), default="text", help="output format")
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    if args.order != 1:
+        raise ChaincompError(f"--order {args.order}: protocol equations are first order (--order 1): "
+                             f"sums and differences isolate errors only when the equations are linear")
+    angles = []
+    for item in names(args.angles):
+        try:
+            angles.append(float(item))
+        except ValueError:
+            raise ChaincompError(f"--angles: expected numbers separated by commas, got {item!r}") from None
+    if not angles:
+        raise ChaincompError("--angles: give at least one value")
+    angles = list(dict.fromkeys(angles))
+    machine = load(args.machine)
+    fixed = {n: machine.symbol(n).from_internal(v) for n, v in parse_sets(args.sets, machine).items()}
+    proto = build_protocol(machine, angles, names(",".join(args.assume_zero)), names(args.measure),
+                           fixed, names(",".join(args.prefer)))
+    print(json.dumps(to_json(proto), indent=2) if args.format == "json" else to_text(proto))
+    return 0
