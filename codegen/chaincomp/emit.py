@@ -227,6 +227,8 @@ def _header(machine, banner, n, pose_size, corr_dir, order, n_pre, src_hash, src
     L += ["", "// The sizes and functions the generic compensation needs.", "struct Kinematics {",
           "  static constexpr int kNumAxes = models::" + name + "::kNumAxes;",
           "  static constexpr bool kCorrectsDirection = models::" + name + "::kCorrectsDirection;",
+          "  static constexpr bool kAxisIsAngle[kNumAxes] = {"
+          + ", ".join("true" if a.unit.kind == "angle" else "false" for a in machine.axes) + "};",
           "  using Model = models::" + name + "::Model;", "  using Axes = models::" + name + "::Axes;",
           "  using Pose = models::" + name + "::Pose;", "  using Jacobian = models::" + name + "::Jacobian;",
           "  static void pose_nominal(const Model& m, const Axes& q, Pose& out) noexcept { "

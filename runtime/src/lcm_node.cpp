@@ -26,17 +26,44 @@ std::string hex(std::uint64_t h) {
 }
 
 // The machine name's length field must be 1..kMaxMachineName+1 and fit in the payload.
-bool machine_name_fits(const lcm_recv_buf_t* rbuf) {
+bool machine_name_fits(const void* data, std::size_t size) {
   constexpr std::size_t kAt = 8 + 8 + 8;  // fingerprint, utime, seq
-  if (rbuf->data_size < kAt + 4) return false;
-  const auto* b = static_cast<const unsigned char*>(rbuf->data) + kAt;
+  if (size < kAt + 4) return false;
+  const auto* b = static_cast<const unsigned char*>(data) + kAt;
   const std::int64_t len = static_cast<std::int32_t>((std::uint32_t(b[0]) << 24) | (std::uint32_t(b[1]) << 16) |
                                                      (std::uint32_t(b[2]) << 8) | std::uint32_t(b[3]));
-  return len >= 1 && len <= LcmNode::kMaxMachineName + 1 &&
-         len <= static_cast<std::int64_t>(rbuf->data_size - kAt - 4);
+  return len >= 1 && len <= LcmNode::kMaxMachineName + 1 && len <= static_cast<std::int64_t>(size - kAt - 4);
 }
 
 }  // namespace
+
+bool decode_command(const void* data, std::size_t size, chaincomp_lcm::lcmt_axis_command& scratch,
+                    Command& out) noexcept {
+  if (!machine_name_fits(data, size) || scratch.decode(data, 0, static_cast<int>(size)) < 0 ||
+      scratch.num_axes < 0 || scratch.num_axes > kMaxAxes) {
+    return false;
+  }
+  out.utime = scratch.utime;
+  out.seq = scratch.seq;
+  out.machine = scratch.machine.c_str();
+  out.num_axes = scratch.num_axes;
+  for (int i = 0; i < kMaxAxes; ++i) out.axes[i] = scratch.axes[i];
+  return true;
+}
+
+void to_message(const Target& t, chaincomp_lcm::lcmt_corrected_target& o) noexcept {
+  o.utime = t.utime;
+  o.seq = t.seq;
+  o.num_axes = t.num_axes;
+  for (int i = 0; i < kMaxAxes; ++i) {
+    o.axes[i] = t.axes[i];
+    o.correction[i] = t.correction[i];
+  }
+  o.residual_point = t.residual_point;
+  o.residual_direction = t.residual_direction;
+  o.flags = t.flags;
+  o.status = t.status;
+}
 
 LcmNode::LcmNode(lcm_t* lcm, const ModelEntry& entry, const void* model, const DaemonConfig& config,
                  const std::string& params_file, const std::string& params_hash, RealtimeObtained rt)
@@ -82,29 +109,13 @@ void LcmNode::on_control(const lcm_recv_buf_t* rbuf, const char*, void* user) {
 
 void LcmNode::handle_command(const lcm_recv_buf_t* rbuf) {
   const auto t0 = Clock::now();
-  if (!machine_name_fits(rbuf) || cmd_msg_.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) < 0 ||
-      cmd_msg_.num_axes < 0 || cmd_msg_.num_axes > kMaxAxes) {
+  if (!decode_command(rbuf->data, rbuf->data_size, cmd_msg_, command_)) {
     comp_.count_undecodable();
     return;
   }
-  command_.utime = cmd_msg_.utime;
-  command_.seq = cmd_msg_.seq;
-  command_.machine = cmd_msg_.machine.c_str();
-  command_.num_axes = cmd_msg_.num_axes;
-  for (int i = 0; i < kMaxAxes; ++i) command_.axes[i] = cmd_msg_.axes[i];
   if (comp_.process(command_, target_)) {
     auto& o = out_msg_;
-    o.utime = target_.utime;
-    o.seq = target_.seq;
-    o.num_axes = target_.num_axes;
-    for (int i = 0; i < kMaxAxes; ++i) {
-      o.axes[i] = target_.axes[i];
-      o.correction[i] = target_.correction[i];
-    }
-    o.residual_point = target_.residual_point;
-    o.residual_direction = target_.residual_direction;
-    o.flags = target_.flags;
-    o.status = target_.status;
+    to_message(target_, o);
     o.compute_ns = ns_since(t0);
     const int n = o.encode(out_buf_.data(), 0, static_cast<int>(out_buf_.size()));
     if (n > 0 && lcm_publish(lcm_, config_.corrected_channel.c_str(), out_buf_.data(), n) == 0) {

@@ -16,7 +16,7 @@ sys.path.insert(0, os.path.join(BUILD, "lcmtypes"))
 import lcm  # noqa: E402
 
 sys.setswitchinterval(0.0002)  # let the listener thread take the GIL often
-from chaincomp_lcm import (lcmt_axis_command, lcmt_chaincomp_control,  # noqa: E402
+from chaincomp_lcm import (lcmt_axis_command, lcmt_chaincomp_control,  # noqa: E402,F401
                            lcmt_chaincomp_status, lcmt_corrected_target)
 
 URL = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=2097152"

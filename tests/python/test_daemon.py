@@ -87,3 +87,12 @@ def test_bad_input_and_random_payloads():
 @needs_netns
 def test_switching_is_bumpless():
     _scenario("tests/e2e/e2e_switch.py")
+
+
+@needs_netns
+def test_replay_equals_daemon_bit_for_bit(tmp_path):
+    log = tmp_path / "axes.lcmlog"
+    subprocess.run([PY, "-m", "chaincomp.cli.main", "simulate-log", machine_path("five_axis_ac"), "-o", str(log),
+                    "--seconds", "2"], check=True, capture_output=True, cwd=ROOT)
+    out = _scenario("tests/e2e/e2e_replay.py", str(log))
+    assert "targets differing: 0" in out

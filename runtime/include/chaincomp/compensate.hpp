@@ -6,6 +6,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Cholesky>
+#include <algorithm>
 #include <cmath>
 
 namespace chaincomp {
@@ -34,6 +35,11 @@ constexpr int kNewtonSteps = 3;
 constexpr double kPointTolerance = 1e-7;      // mm: 0.1 nm
 constexpr double kDirectionTolerance = 1e-9;  // rad
 constexpr double kDirectionWeight = 100.0;    // mm per rad: a direction error counts as at 100 mm
+// Largest correction compensate() will make, per axis kind: geometric errors need µm and
+// arcsec; more means a singular configuration (e.g. the tool axis along the C axis), where
+// the correction is bounded and the rest reported as residual.
+constexpr double kMaxLinearCorrection = 1.0;      // mm
+constexpr double kMaxAngularCorrection = 0.0175;  // rad, about 1 degree
 
 template <class K>
 struct Result {
@@ -74,9 +80,14 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
     Eigen::Matrix<double, n, n> A = J.transpose() * J;
     // A tiny Levenberg term keeps the step defined where an axis has no effect.
     A.diagonal().array() += 1e-14 * (1.0 + A.diagonal().maxCoeff());
-    Eigen::LDLT<Eigen::Matrix<double, n, n>> ldlt(A);
-    if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return Status::kSingular;
-    q -= ldlt.solve(J.transpose() * r);
+    Eigen::LLT<Eigen::Matrix<double, n, n>> llt(A);
+    if (llt.info() != Eigen::Success) return Status::kSingular;
+    q -= llt.solve(J.transpose() * r);
+    // Keep the total correction within its bound per axis (a trust region near singularities).
+    for (int i = 0; i < n; ++i) {
+      const double bound = K::kAxisIsAngle[i] ? kMaxAngularCorrection : kMaxLinearCorrection;
+      q[i] = std::clamp(q[i], command[i] - bound, command[i] + bound);
+    }
   }
   if (!q.allFinite() || !r.allFinite()) return Status::kNonFiniteOutput;
   out.corrected = q;

@@ -19,6 +19,13 @@
 
 namespace chaincomp {
 
+// A command payload into `out` (decoded through `scratch`, whose storage is reused);
+// false for anything lcm-gen's decoder must not see or cannot decode.
+bool decode_command(const void* data, std::size_t size, chaincomp_lcm::lcmt_axis_command& scratch,
+                    Command& out) noexcept;
+// A target into its message (compute_ns left to the caller).
+void to_message(const Target& t, chaincomp_lcm::lcmt_corrected_target& msg) noexcept;
+
 struct RealtimeObtained {
   bool mlockall = false, sched_fifo = false, cpu_pinned = false;
 };

@@ -1,0 +1,167 @@
+"""``chaincomp plot``: error maps over two axes, and the time plot of a replay CSV."""
+
+from __future__ import annotations
+
+import csv
+import sys
+
+import numpy as np
+
+from ..derive import derive
+from ..errors import ChaincompError
+from ..numeric import ExactModel, TruncatedModel
+from ..units import UNITS
+from .common import add_values_arguments, load, values_for
+
+COMPONENTS = ("dx", "dy", "dz", "dkx", "dky", "dkz", "norm")
+MODELS = ("first", "second", "exact", "second-first", "exact-first", "exact-second")
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("plot", help="error map over two axes, or the plot of a replay CSV",
+                       description="Plot one tool-error component over a grid of two axes (the paper's "
+                                   "Fig. 3 is dy over Ap and Cp), for the first-order, second-order or "
+                                   "exact model or the difference of two; or, with --replay, commanded "
+                                   "axes, correction and residual over time from a 'chaincomp replay' CSV.")
+    p.add_argument("machine", nargs="?", metavar="MACHINE.yaml")
+    add_values_arguments(p)
+    p.add_argument("--component", default="dy", choices=COMPONENTS, help="error component (default dy)")
+    p.add_argument("--over", metavar="A1,A2", help="the two axes of the map (default: the first two axes)")
+    p.add_argument("--range", dest="range1", metavar="LO:HI", help="range of the first axis (declared unit; "
+                   "default its limits)")
+    p.add_argument("--range2", metavar="LO:HI", help="range of the second axis (default: --range, else limits)")
+    p.add_argument("--grid", type=int, default=41, help="points per axis (default 41)")
+    p.add_argument("--model", default="first", choices=MODELS, help="model, or a difference of two")
+    p.add_argument("--style", default="heatmap", choices=("heatmap", "surface"))
+    p.add_argument("--replay", metavar="REPLAY.csv", help="plot a replay CSV instead of a map")
+    p.add_argument("-o", "--output", default="plot.png", metavar="OUT.png", help="image file (default plot.png)")
+    p.set_defaults(run=run)
+
+
+def _range(text: str, what: str) -> tuple[float, float]:
+    try:
+        lo, hi = (float(v) for v in text.split(":"))
+    except ValueError:
+        raise ChaincompError(f"{what} expects LO:HI, got {text!r}") from None
+    if not lo < hi:
+        raise ChaincompError(f"{what}: LO must be below HI, got {text!r}")
+    return lo, hi
+
+
+def error_grid(machine, values: dict, over: tuple[str, str], ranges, grid: int, component: str, model: str):
+    """(g1, g2, Z): axis values (declared units) and the component on the grid, Z in the
+    machine's length unit (direction components unitless)."""
+    a1, a2 = (machine.symbol(n) for n in over)
+    g1 = np.linspace(*ranges[0], grid)
+    g2 = np.linspace(*ranges[1], grid)
+    G1, G2 = np.meshgrid(g1, g2, indexing="ij")
+    v = dict(values)
+    v[a1.name] = a1.to_internal(G1)
+    v[a2.name] = a2.to_internal(G2)
+    scale = 1.0 / UNITS[machine.length_unit].to_internal
+    needs = set(model.split("-"))
+    truncated = TruncatedModel(derive(machine, 2)) if needs & {"first", "second"} else None
+    parts = {}
+    for name in needs:
+        if name == "exact":
+            dp, dd = ExactModel(machine).error(v)
+        else:
+            dp, dd = truncated.error(v, 1 if name == "first" else 2)
+        parts[name] = _component(dp, dd, component, scale, G1.shape)
+    z = parts[model.split("-")[0]] - (parts[model.split("-")[1]] if "-" in model else 0)
+    return g1, g2, z
+
+
+def _component(dp, dd, component, scale, shape):
+    if component in ("dkx", "dky", "dkz"):
+        if dd is None:
+            raise ChaincompError("this machine has no tool direction: use dx, dy, dz or norm")
+        return np.broadcast_to(np.asarray(dd["xyz".index(component[-1])], float), shape)
+    if component == "norm":
+        return np.sqrt(sum(np.broadcast_to(np.asarray(c, float), shape) ** 2 for c in dp)) * scale
+    return np.broadcast_to(np.asarray(dp["xyz".index(component[-1])], float), shape) * scale
+
+
+def run(args) -> int:
+    import matplotlib
+    matplotlib.use("Agg")
+    if args.replay:
+        _plot_replay(args.replay, args.output)
+    else:
+        if not args.machine:
+            raise ChaincompError("give a MACHINE.yaml (or --replay REPLAY.csv)")
+        _plot_map(args)
+    print(f"plot: wrote {args.output}", file=sys.stderr)
+    return 0
+
+
+def _plot_map(args) -> None:
+    import matplotlib.pyplot as plt
+    machine = load(args.machine)
+    if args.grid < 2 or args.grid > 1000:
+        raise ChaincompError(f"--grid must be between 2 and 1000, got {args.grid}")
+    names = [a.name for a in machine.axes]
+    over = tuple(args.over.split(",")) if args.over else tuple(names[:2])
+    if len(over) != 2 or over[0] == over[1] or any(n not in names for n in over):
+        raise ChaincompError(f"--over expects two different axes of {machine.name} ({', '.join(names)}), "
+                             f"got {args.over!r}")
+    r1 = _range(args.range1, "--range") if args.range1 else machine.symbol(over[0]).limits
+    r2 = _range(args.range2, "--range2") if args.range2 else (
+        _range(args.range1, "--range") if args.range1 else machine.symbol(over[1]).limits)
+    values, _ = values_for(machine, args.params, args.sets)
+    g1, g2, z = error_grid(machine, values, over, (r1, r2), args.grid, args.component, args.model)
+    unit = "" if args.component.startswith("dk") else machine.length_unit
+    if unit == "mm":
+        z, unit = z * 1000.0, "µm"
+    a1, a2 = machine.symbol(over[0]), machine.symbol(over[1])
+    fig = plt.figure(figsize=(8, 6), dpi=100)
+    label = f"{args.component} [{unit}]" if unit else args.component
+    if args.style == "surface":
+        ax = fig.add_subplot(projection="3d")
+        G1, G2 = np.meshgrid(g1, g2, indexing="ij")
+        ax.plot_surface(G1, G2, z, cmap="viridis")
+        ax.set_zlabel(label)
+    else:
+        ax = fig.add_subplot()
+        mesh = ax.pcolormesh(g1, g2, z.T, shading="auto", cmap="viridis")
+        fig.colorbar(mesh, ax=ax, label=label)
+    ax.set_xlabel(f"{a1.name} [{a1.unit.name}]")
+    ax.set_ylabel(f"{a2.name} [{a2.unit.name}]")
+    names = {"first": "first-order", "second": "second-order", "exact": "exact"}
+    model = " minus ".join(names[m] for m in args.model.split("-"))
+    ax.set_title(f"{machine.name}: {args.component}, {model} model")
+    fig.savefig(args.output)
+    plt.close(fig)
+
+
+def _plot_replay(path: str, output: str) -> None:
+    import matplotlib.pyplot as plt
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            rows = list(csv.DictReader(f))
+    except OSError as exc:
+        raise ChaincompError(f"{path}: cannot read: {exc.strerror}") from None
+    ok = [r for r in rows if r.get("result") == "ok"]
+    if not ok:
+        raise ChaincompError(f"{path}: no corrected records to plot (is it a 'chaincomp replay' CSV?)")
+    t = np.array([float(r["utime"]) for r in ok])
+    t = (t - t[0]) * 1e-6
+    axes = [c[len("commanded_"):] for c in ok[0] if c.startswith("commanded_")]
+    fig, (top, mid, bottom) = plt.subplots(3, 1, figsize=(9, 8), dpi=100, sharex=True)
+    for a in axes:
+        top.plot(t, [float(r["commanded_" + a]) for r in ok], label=a)
+        corr = np.array([float(r["correction_" + a]) for r in ok])
+        unit = a.rsplit("_", 1)[-1]
+        mid.plot(t, corr * (1000.0 if unit == "mm" else 3600.0),
+                 label=f"{a.rsplit('_', 1)[0]} [{'µm' if unit == 'mm' else 'arcsec'}]")
+    bottom.plot(t, [float(r["residual_point_mm"]) * 1e6 for r in ok])
+    top.set_ylabel("commanded")
+    mid.set_ylabel("correction")
+    bottom.set_ylabel("residual [nm]")
+    bottom.set_xlabel("time [s]")
+    top.legend(loc="upper right", fontsize="small")
+    mid.legend(loc="upper right", fontsize="small")
+    top.set_title(f"replay of {path}: {len(ok)} corrected, {len(rows) - len(ok)} rejected")
+    fig.tight_layout()
+    fig.savefig(output)
+    plt.close(fig)

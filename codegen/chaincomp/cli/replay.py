@@ -1,0 +1,38 @@
+"""``chaincomp replay``: a logged command stream through the daemon's compiled compensator."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+
+from ..buildtree import binary
+from ..errors import ChaincompError
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("replay", help="run a logged command stream through the compiled compensator",
+                       description="Run every command of an lcm-logger log through the same compiled C++ "
+                                   "compensator the daemon uses (same runtime settings: limits, ramp, "
+                                   "rejections), and write a corrected log (the original records plus "
+                                   "the corrected targets, original timestamps kept) and/or a CSV of "
+                                   "event, utime, seq, result, commanded, corrected, correction, residuals, "
+                                   "flags, status. Rejected records are listed and counted by reason.")
+    p.add_argument("input", metavar="IN.lcmlog")
+    p.add_argument("--machine", required=True, metavar="M.yaml")
+    p.add_argument("--params", required=True, metavar="P.yaml")
+    p.add_argument("--config", metavar="R.yaml", help="runtime settings (default: built-in defaults)")
+    p.add_argument("-o", "--output", metavar="OUT.lcmlog", help="corrected log")
+    p.add_argument("--csv", metavar="OUT.csv", help="CSV of every command")
+    p.add_argument("--channel", default="CHAINCOMP_COMMAND", help="command channel (default CHAINCOMP_COMMAND)")
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    if not os.path.isfile(args.input):
+        raise ChaincompError(f"{args.input}: no such log file")
+    cmd = [binary("chaincomp_replay"), "--machine", args.machine, "--params", args.params, "--in", args.input,
+           "--channel", args.channel]
+    for flag, value in (("--config", args.config), ("--out", args.output), ("--csv", args.csv)):
+        if value:
+            cmd += [flag, value]
+    return subprocess.run(cmd).returncode

@@ -1,0 +1,40 @@
+"""Commanded axis positions for logs and demos: a plausible toolpath for any machine."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .machine import Machine
+
+
+def toolpath(machine: Machine, rate_hz: float, seconds: float, period_s: float = 5.0) -> np.ndarray:
+    """Axis values (declared units, machine axis order), one row per sample.
+
+    Linear axes trace a circle (the first two) or a slow wave (the others) around the middle
+    of their range; rotary axes tilt and turn the tool with the circle: the kind of path a
+    5-axis contour produces. Amplitudes stay within 40% of each range.
+
+    Note: a tilt axis whose range is centred on zero tilts only to one side here.
+    """
+    n = int(round(rate_hz * seconds))
+    t = np.arange(n) / rate_hz
+    phase = 2 * math.pi * t / period_s
+    cols = []
+    linear = rotary = 0
+    for a in machine.axes:
+        lo, hi = a.limits
+        mid, amp = 0.5 * (lo + hi), 0.4 * (hi - lo)
+        if a.unit.kind == "length":
+            amp = min(amp, 100.0 * (1 if a.unit.name == "mm" else 1 / a.unit.to_internal))
+            wave = [np.cos(phase), np.sin(phase), np.sin(2 * phase)][min(linear, 2)]
+            linear += 1
+        else:
+            amp = min(amp, 45.0 * math.pi / 180 / a.unit.to_internal)
+            # the tilt stays between a quarter and all of its amplitude: away from the
+            # singular pose where the tool lies along the next rotary axis
+            wave = [0.625 + 0.375 * np.sin(phase), np.sin(phase)][min(rotary, 1)]
+            rotary += 1
+        cols.append(np.clip(mid + amp * wave, lo, hi))
+    return np.stack(cols, axis=1)

@@ -1,0 +1,221 @@
+// chaincomp_replay: runs every command of an lcm-logger log through the daemon's compensator
+// (the same compiled code, the same runtime settings) and writes a corrected log and/or a CSV.
+#include <lcm/eventlog.h>
+
+#include <charconv>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "chaincomp/compensator.hpp"
+#include "chaincomp/daemon_config.hpp"
+#include "chaincomp/lcm_node.hpp"
+#include "chaincomp/params_io.hpp"
+
+namespace {
+
+const char* kUsage =
+    "usage: chaincomp_replay --machine M.yaml --params P.yaml --in IN.lcmlog [--out OUT.lcmlog]\n"
+    "                        [--csv OUT.csv] [--config R.yaml] [--channel NAME] [--quiet]\n";
+
+int fail(const std::string& msg) {
+  std::fprintf(stderr, "chaincomp replay: error: %s\n", msg.c_str());
+  return 2;
+}
+
+// Appends numbers to a line with std::to_chars: shortest text that reads back exactly.
+struct Line {
+  char buf[4096];
+  std::size_t n = 0;
+  void num(double v) {
+    n += std::to_chars(buf + n, buf + sizeof buf - 64, v).ptr - (buf + n);
+    buf[n++] = ',';
+  }
+  void num(long long v) {
+    n += std::to_chars(buf + n, buf + sizeof buf - 64, v).ptr - (buf + n);
+    buf[n++] = ',';
+  }
+  void text(const char* s) {
+    const std::size_t k = std::strlen(s);
+    std::memcpy(buf + n, s, k);
+    n += k;
+    buf[n++] = ',';
+  }
+  void skip(int count) {
+    for (int i = 0; i < count; ++i) buf[n++] = ',';
+  }
+  void end(std::FILE* f) {
+    buf[n - 1] = '\n';
+    std::fwrite(buf, 1, n, f);
+    n = 0;
+  }
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string machine_path, params_path, config_path, in_path, out_path, csv_path, channel = "CHAINCOMP_COMMAND";
+  bool quiet = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    std::string* dst = a == "--machine" ? &machine_path : a == "--params" ? &params_path
+                     : a == "--config"  ? &config_path  : a == "--in"     ? &in_path
+                     : a == "--out"     ? &out_path     : a == "--csv"    ? &csv_path
+                     : a == "--channel" ? &channel      : nullptr;
+    if (a == "-h" || a == "--help") {
+      std::fputs(kUsage, stdout);
+      return 0;
+    } else if (a == "--quiet") {
+      quiet = true;
+    } else if (dst && i + 1 < argc) {
+      *dst = argv[++i];
+    } else {
+      std::fputs(kUsage, stderr);
+      return fail("unexpected argument '" + a + "'");
+    }
+  }
+  if (machine_path.empty() || params_path.empty() || in_path.empty()) {
+    std::fputs(kUsage, stderr);
+    return fail("--machine, --params and --in are required");
+  }
+  std::string error;
+  const chaincomp::ModelEntry* entry = chaincomp::open_machine(machine_path, error);
+  if (!entry) return fail(error);
+  std::vector<double> params;
+  if (!chaincomp::load_params(*entry->info, params_path, params, error)) return fail(error);
+  chaincomp::DaemonConfig config;
+  if (!chaincomp::load_daemon_config(*entry->info, config_path, config, error)) return fail(error);
+  std::vector<unsigned char> storage(entry->model_size + entry->model_align);
+  void* model = storage.data();
+  std::size_t space = storage.size();
+  model = std::align(entry->model_align, entry->model_size, model, space);
+  entry->prepare(params.data(), model);
+  chaincomp::Compensator comp(*entry, model, config.compensator);
+
+  lcm_eventlog_t* in = lcm_eventlog_create(in_path.c_str(), "r");
+  if (!in) return fail(in_path + ": cannot open the log for reading");
+  lcm_eventlog_t* out = nullptr;
+  if (!out_path.empty() && !(out = lcm_eventlog_create(out_path.c_str(), "w"))) {
+    return fail(out_path + ": cannot create the output log");
+  }
+  std::FILE* csv = nullptr;
+  if (!csv_path.empty() && !(csv = std::fopen(csv_path.c_str(), "w"))) {
+    return fail(csv_path + ": cannot create the CSV file");
+  }
+  const int n = entry->info->num_axes;
+  if (csv) {
+    std::string header = "event,utime,seq,result";
+    for (const char* part : {"commanded", "corrected", "correction"}) {
+      for (int i = 0; i < n; ++i) {
+        header += std::string(",") + part + "_" + entry->info->axes[i].name + "_" + entry->info->axes[i].unit;
+      }
+    }
+    header += ",residual_point_mm,residual_direction_rad,flags,status\n";
+    std::fputs(header.c_str(), csv);
+  }
+
+  chaincomp_lcm::lcmt_axis_command scratch;
+  scratch.machine.reserve(chaincomp::LcmNode::kMaxMachineName + 1);
+  chaincomp_lcm::lcmt_corrected_target msg;
+  std::vector<unsigned char> buf(msg.getEncodedSize() + 64);
+  const std::string out_channel = config.corrected_channel;
+  chaincomp::Command cmd;
+  chaincomp::Target target;
+  Line line;
+  long long events = 0, commands = 0, listed = 0;
+  std::vector<double> max_abs(n, 0.0), sum_sq(n, 0.0);
+  const auto t0 = std::chrono::steady_clock::now();
+  while (lcm_eventlog_event_t* ev = lcm_eventlog_read_next_event(in)) {
+    ++events;
+    if (out) lcm_eventlog_write_event(out, ev);  // the original record, untouched
+    if (channel != ev->channel) {
+      lcm_eventlog_free_event(ev);
+      continue;
+    }
+    ++commands;
+    chaincomp::Reject why = chaincomp::Reject::kUndecodable;
+    const bool decoded = chaincomp::decode_command(ev->data, ev->datalen, scratch, cmd);
+    bool ok = false;
+    if (decoded) {
+      ok = comp.process(cmd, target, &why);
+    } else {
+      comp.count_undecodable();
+    }
+    if (ok) {
+      comp.count_published();
+      for (int i = 0; i < n; ++i) {
+        max_abs[i] = std::max(max_abs[i], std::abs(target.correction[i]));
+        sum_sq[i] += target.correction[i] * target.correction[i];
+      }
+      if (out) {
+        chaincomp::to_message(target, msg);
+        msg.compute_ns = 0;  // offline: no latency to report
+        const int len = msg.encode(buf.data(), 0, static_cast<int>(buf.size()));
+        lcm_eventlog_event_t oe{};
+        oe.timestamp = ev->timestamp;  // original time kept
+        oe.channellen = static_cast<int32_t>(out_channel.size());
+        oe.datalen = len;
+        oe.channel = const_cast<char*>(out_channel.c_str());
+        oe.data = buf.data();
+        lcm_eventlog_write_event(out, &oe);
+      }
+    } else if (listed < 20) {
+      ++listed;
+      std::fprintf(stderr, "chaincomp replay: event %lld (timestamp %lld): rejected: %s\n",
+                   static_cast<long long>(ev->eventnum), static_cast<long long>(ev->timestamp),
+                   chaincomp::reject_name(why));
+    }
+    if (csv) {
+      line.num(static_cast<long long>(ev->eventnum));
+      line.num(static_cast<long long>(decoded ? cmd.utime : ev->timestamp));
+      if (decoded) line.num(static_cast<long long>(cmd.seq)); else line.skip(1);
+      line.text(ok ? "ok" : chaincomp::reject_name(why));
+      const bool axes_known = decoded && cmd.num_axes == n;
+      for (int i = 0; i < n; ++i) {
+        if (axes_known) line.num(cmd.axes[i]); else line.skip(1);
+      }
+      if (ok) {
+        for (int i = 0; i < n; ++i) line.num(target.axes[i]);
+        for (int i = 0; i < n; ++i) line.num(target.correction[i]);
+        line.num(target.residual_point);
+        line.num(target.residual_direction);
+        line.num(static_cast<long long>(target.flags));
+        line.num(static_cast<long long>(target.status));
+      } else {
+        line.skip(2 * n + 4);
+      }
+      line.end(csv);
+    }
+    lcm_eventlog_free_event(ev);
+    if (!quiet && commands % 1000000 == 0) {
+      std::fprintf(stderr, "chaincomp replay: %lld commands...\n", commands);
+    }
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  lcm_eventlog_destroy(in);
+  if (out) lcm_eventlog_destroy(out);
+  if (csv) std::fclose(csv);
+
+  const auto& k = comp.counters();
+  long long rejected = 0;
+  for (auto r : k.rejected) rejected += r;
+  std::fprintf(stderr, "chaincomp replay: %lld events, %lld commands on %s, %lld corrected, %lld rejected "
+               "(%.0f commands/s)\n", events, commands, channel.c_str(), static_cast<long long>(k.published),
+               rejected, commands / std::max(seconds, 1e-9));
+  for (int r = 0; r < chaincomp::kNumReasons; ++r) {
+    if (k.rejected[r]) {
+      std::fprintf(stderr, "  rejected %-20s %lld\n", chaincomp::reject_name(static_cast<chaincomp::Reject>(r)),
+                   static_cast<long long>(k.rejected[r]));
+    }
+  }
+  for (int i = 0; i < n; ++i) {
+    std::fprintf(stderr, "  correction %-4s max %.6g %s, RMS %.6g %s\n", entry->info->axes[i].name, max_abs[i],
+                 entry->info->axes[i].unit, k.published ? std::sqrt(sum_sq[i] / k.published) : 0.0,
+                 entry->info->axes[i].unit);
+  }
+  return 0;
+}
