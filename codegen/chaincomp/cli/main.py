@@ -9,8 +9,8 @@ from ..errors import ChaincompError
 from . import derive, eval as eval_, generate, testvectors
 
 VERBS = (derive, eval_, generate, testvectors)
-from . import protocol  # noqa: E402
-VERBS += (protocol,)
+from . import identify, protocol, simulate_measurements  # noqa: E402
+VERBS += (protocol, identify, simulate_measurements)
 
 
 def build_parser() -> argparse.ArgumentParser:
