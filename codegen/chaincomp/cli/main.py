@@ -11,8 +11,8 @@ from . import derive, eval as eval_, generate, testvectors
 VERBS = (derive, eval_, generate, testvectors)
 from . import identify, protocol, simulate_measurements  # noqa: E402
 VERBS += (protocol, identify, simulate_measurements)
-from . import check  # noqa: E402
-VERBS += (check,)
+from . import check, report  # noqa: E402
+VERBS += (check, report)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,40 @@
+"""``chaincomp report``: the machine's derived model as a Markdown or LaTeX document."""
+
+from __future__ import annotations
+
+import sys
+
+from .. import report
+from ..derive import derive
+from ..errors import ChaincompError
+from .common import add_machine_argument, check_order, load
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("report", help="write the derived model as a document (Markdown or LaTeX)",
+                       description="Write the symbol table, the chain as an equation, the nominal pose, "
+                                   "the error formulas collected by error and axis factor, and the error "
+                                   "gain matrix, as Markdown (default) or LaTeX.")
+    add_machine_argument(p)
+    p.add_argument("--order", type=int, default=1, help="highest total degree in the errors (default 1)")
+    p.add_argument("-o", "--output", metavar="FILE", help="write here (default: standard output)")
+    p.add_argument("--format", choices=("markdown", "latex"),
+                   help="output format (default: latex for a .tex output, else markdown)")
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    machine = load(args.machine)
+    d = derive(machine, check_order(args.order), progress=True)
+    fmt = args.format or ("latex" if (args.output or "").endswith(".tex") else "markdown")
+    text = report.latex(d) if fmt == "latex" else report.markdown(d)
+    if not args.output:
+        sys.stdout.write(text)
+        return 0
+    try:
+        with open(args.output, "w", encoding="utf-8") as f:
+            f.write(text)
+    except OSError as exc:
+        raise ChaincompError(f"cannot write the report: {exc.strerror}", args.output) from None
+    print(f"wrote {args.output} ({fmt}, {machine.name}, order {d.order})", file=sys.stderr)
+    return 0
