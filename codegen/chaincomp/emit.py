@@ -233,6 +233,8 @@ def _header(machine, banner, n, pose_size, corr_dir, order, n_pre, src_hash, src
           "  using Pose = models::" + name + "::Pose;", "  using Jacobian = models::" + name + "::Jacobian;",
           "  static void pose_nominal(const Model& m, const Axes& q, Pose& out) noexcept { "
           "models::" + name + "::pose_nominal(m, q, out); }",
+          "  static void pose_exact(const Model& m, const Axes& q, Pose& out) noexcept { "
+          "models::" + name + "::pose_exact(m, q, out); }",
           "  static void pose_jacobian(const Model& m, const Axes& q, Pose& out, Jacobian& J) noexcept { "
           "models::" + name + "::pose_jacobian(m, q, out, J); }",
           "};", "using Workspace = chaincomp::Workspace<Kinematics>;",

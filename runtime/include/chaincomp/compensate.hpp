@@ -31,7 +31,7 @@ inline const char* status_name(Status s) noexcept {
   return "unknown";
 }
 
-constexpr int kNewtonSteps = 3;
+constexpr int kNewtonSteps = 2;
 constexpr double kPointTolerance = 1e-7;      // mm: 0.1 nm
 constexpr double kDirectionTolerance = 1e-9;  // rad
 constexpr double kDirectionWeight = 100.0;    // mm per rad: a direction error counts as at 100 mm
@@ -40,6 +40,8 @@ constexpr double kDirectionWeight = 100.0;    // mm per rad: a direction error c
 // the correction is bounded and the rest reported as residual.
 constexpr double kMaxLinearCorrection = 1.0;      // mm
 constexpr double kMaxAngularCorrection = 0.0175;  // rad, about 1 degree
+// A step larger than this fraction of the bound refreshes the Jacobian.
+constexpr double kChordStepLimit = 0.05;
 
 template <class K>
 struct Result {
@@ -65,28 +67,59 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
   if (!command.allFinite()) return Status::kNonFiniteInput;
 
   K::pose_nominal(model, command, ws.target);
-  typename K::Axes q = command;
-  Eigen::Matrix<double, rows, 1> r;
+  // Chord Newton: the Jacobian at the command serves the following steps as long as they
+  // stay small (µm, arcsec: it then differs from the one at the solution by ~1e-4 relative,
+  // so each step gains about four digits) and one factorisation per call keeps the cost low.
+  // A large step (near a singular pose) takes a fresh Jacobian: the cost stays bounded.
   Eigen::Matrix<double, rows, n> J;
-  for (int step = 0; step <= kNewtonSteps; ++step) {
-    K::pose_jacobian(model, q, ws.pose, ws.jacobian);
-    r.template head<3>() = ws.pose.template head<3>() - ws.target.template head<3>();
+  Eigen::LLT<Eigen::Matrix<double, n, n>> llt;
+  bool at_bound[n] = {};  // axes whose correction reached its bound stay there
+  auto factorise = [&]() {
     J.template topRows<3>() = ws.jacobian.template topRows<3>();
     if constexpr (K::kCorrectsDirection) {
-      r.template tail<3>() = kDirectionWeight * (ws.pose.template tail<3>() - ws.target.template tail<3>());
       J.template bottomRows<3>() = kDirectionWeight * ws.jacobian.template bottomRows<3>();
     }
-    if (step == kNewtonSteps) break;
+    for (int i = 0; i < n; ++i) {
+      if (at_bound[i]) J.col(i).setZero();
+    }
     Eigen::Matrix<double, n, n> A = J.transpose() * J;
     // A tiny Levenberg term keeps the step defined where an axis has no effect.
     A.diagonal().array() += 1e-14 * (1.0 + A.diagonal().maxCoeff());
-    Eigen::LLT<Eigen::Matrix<double, n, n>> llt(A);
-    if (llt.info() != Eigen::Success) return Status::kSingular;
-    q -= llt.solve(J.transpose() * r);
-    // Keep the total correction within its bound per axis (a trust region near singularities).
+    llt.compute(A);
+    return llt.info() == Eigen::Success;
+  };
+  K::pose_jacobian(model, command, ws.pose, ws.jacobian);
+  if (!factorise()) return Status::kSingular;
+
+  typename K::Axes q = command;
+  Eigen::Matrix<double, rows, 1> r;
+  // An axis reaching its bound costs one more step (at most n): the cost stays bounded.
+  int steps = kNewtonSteps;
+  for (int step = 0;; ++step) {
+    r.template head<3>() = ws.pose.template head<3>() - ws.target.template head<3>();
+    if constexpr (K::kCorrectsDirection) {
+      r.template tail<3>() = kDirectionWeight * (ws.pose.template tail<3>() - ws.target.template tail<3>());
+    }
+    if (step == steps) break;
+    const typename K::Axes delta = llt.solve(J.transpose() * r);
+    bool large = false;
     for (int i = 0; i < n; ++i) {
+      // Keep the total correction within its bound per axis (a trust region near singular
+      // poses); an axis that reaches it is held there and the others correct what they can.
       const double bound = K::kAxisIsAngle[i] ? kMaxAngularCorrection : kMaxLinearCorrection;
-      q[i] = std::clamp(q[i], command[i] - bound, command[i] + bound);
+      const double wanted = q[i] - delta[i];
+      q[i] = std::clamp(wanted, command[i] - bound, command[i] + bound);
+      if (q[i] != wanted && !at_bound[i]) {
+        at_bound[i] = true;
+        ++steps;
+      }
+      large = large || q[i] != wanted || std::abs(delta[i]) > kChordStepLimit * bound;
+    }
+    if (large) {
+      K::pose_jacobian(model, q, ws.pose, ws.jacobian);
+      if (!factorise()) return Status::kSingular;
+    } else {
+      K::pose_exact(model, q, ws.pose);
     }
   }
   if (!q.allFinite() || !r.allFinite()) return Status::kNonFiniteOutput;
