@@ -11,6 +11,8 @@ from . import derive, eval as eval_, generate, testvectors
 VERBS = (derive, eval_, generate, testvectors)
 from . import identify, protocol, simulate_measurements  # noqa: E402
 VERBS += (protocol, identify, simulate_measurements)
+from . import plot, replay, simulate_log  # noqa: E402
+VERBS += (simulate_log, replay, plot)
 from . import check, report  # noqa: E402
 VERBS += (check, report)
 
@@ -26,9 +28,24 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+# Options whose values may start with '-' (e.g. --range -60:60), which argparse would
+# otherwise take for an option.
+_SIGNED_VALUE_OPTIONS = ("--range", "--range2")
+
+
+def _join_signed_values(argv: list[str]) -> list[str]:
+    out: list[str] = []
+    for token in argv:
+        if out and out[-1] in _SIGNED_VALUE_OPTIONS and token.startswith("-"):
+            out[-1] = f"{out[-1]}={token}"
+        else:
+            out.append(token)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_join_signed_values(sys.argv[1:] if argv is None else argv))
     try:
         return args.run(args) or 0
     except ChaincompError as exc:
