@@ -46,8 +46,7 @@ def parse(text: object, symbols: dict[str, sp.Symbol]) -> sp.Expr:
     source = str(text).strip()
     if not source:
         raise ExpressionError("empty expression")
-    if "**" not in source and "^" in source:
-        source = source.replace("^", "**")
+    source = source.replace("^", "**")  # both spellings of a power, even mixed
     local = dict(FUNCTIONS)
     local.update(symbols)
     try:
