@@ -53,10 +53,15 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
   if (have_last_) {
     if (in.seq == last_seq_) return reject(Reject::kDuplicateSeq, why);
     if (in.seq < last_seq_) return reject(Reject::kOutOfOrderSeq, why);
-    for (int i = 0; i < n_; ++i) {
-      if (std::abs(cmd[i] - last_axes_[i]) > config_.axes[i].max_step) return reject(Reject::kStepTooLarge, why);
-    }
   }
+  // A jump is measured from the previous valid command, accepted or not: a lone spike is
+  // rejected (and the command after it), while a stream that really moved on after a gap
+  // is followed again from its second command instead of being rejected for ever.
+  bool jumped = false;
+  for (int i = 0; i < n_ && have_seen_; ++i) jumped = jumped || std::abs(cmd[i] - seen_axes_[i]) > config_.axes[i].max_step;
+  have_seen_ = true;
+  seen_axes_ = cmd;
+  if (jumped) return reject(Reject::kStepTooLarge, why);
 
   // Full correction at this command, in axis units.
   double q[kMaxAxes], corrected[kMaxAxes], residual[2] = {0, 0};
@@ -113,7 +118,6 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
   have_last_ = true;
   last_seq_ = in.seq;
   last_utime_ = in.utime;
-  last_axes_ = cmd;
   last_correction_ = correction;
   return true;
 }

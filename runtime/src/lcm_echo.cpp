@@ -30,7 +30,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "lcm_echo: error: cannot open LCM at '%s'\n", argv[1]);
     return 2;
   }
-  lcm_subscribe(e.lcm, argv[2], on_message, &e);
+  // The same queue capacity as chaincompd's command subscription (LCM's default is 30).
+  lcm_subscription_set_queue_capacity(lcm_subscribe(e.lcm, argv[2], on_message, &e), 10000);
   struct sigaction sa {};
   sa.sa_handler = on_signal;
   sigaction(SIGINT, &sa, nullptr);

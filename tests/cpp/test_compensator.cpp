@@ -68,7 +68,7 @@ TEST_CASE("each kind of bad command is rejected under its reason", "[compensator
   expect(f.command(2, 10.0 + 10.5), chaincomp::Reject::kStepTooLarge);  // default max_step 10 mm
   expect(f.command(1), chaincomp::Reject::kDuplicateSeq);
   expect(f.command(0), chaincomp::Reject::kOutOfOrderSeq);
-  CHECK(comp.process(f.command(2), t));  // still answers
+  CHECK(comp.process(f.command(2, 20.4), t));  // still answers (near the last valid command)
   const auto& k = comp.counters();
   CHECK(k.received == 9);
   for (int r = 1; r <= 7; ++r) CHECK(k.rejected[r] == 1);
@@ -128,4 +128,22 @@ TEST_CASE("the correction ramps in and out without exceeding its per-command ste
   }
   CHECK(last == Approx(full).epsilon(1e-12));
   CHECK(slow.counters().clamped > 0);
+}
+
+TEST_CASE("after a jump the stream is followed again; a lone spike is dropped", "[compensator]") {
+  Fixture f;
+  chaincomp::Compensator comp(f.entry, f.model, f.config.compensator);
+  chaincomp::Target t;
+  chaincomp::Reject why;
+  REQUIRE(comp.process(f.command(1, 10.0), t));
+  // a lone spike: it and the command back from it are rejected, then the stream goes on
+  CHECK_FALSE(comp.process(f.command(2, 50.0), t, &why));
+  CHECK(why == chaincomp::Reject::kStepTooLarge);
+  CHECK_FALSE(comp.process(f.command(3, 10.1), t, &why));
+  CHECK(comp.process(f.command(4, 10.2), t));
+  // a real move after a gap (e.g. lost messages): followed again from its second command
+  CHECK_FALSE(comp.process(f.command(5, 40.0), t, &why));
+  CHECK(comp.process(f.command(6, 40.1), t));
+  CHECK(comp.process(f.command(7, 40.2), t));
+  CHECK(comp.counters().rejected[static_cast<int>(chaincomp::Reject::kStepTooLarge)] == 3);
 }

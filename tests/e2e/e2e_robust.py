@@ -50,6 +50,10 @@ def main(random_count: int) -> int:
             send(p)
             expected[reason] += 1
             time.sleep(0.001)
+    # The first command back from the spike is itself a jump from the last valid command.
+    send(h.command(seq + 1, path[(seq + 1) % 1000]))
+    expected["step_too_large"] += 1
+    time.sleep(0.001)
     good()
 
     # Random payloads: half pure noise, half with the right fingerprint and random fields.
@@ -65,7 +69,7 @@ def main(random_count: int) -> int:
             send(body)
         sent_random += 1
         if i % 20 == 19:
-            # 10 kHz in groups of 20: a loopback socket buffer holds only ~100 datagrams
+            # 10 kHz in groups of 20, well within the socket buffer and LCM's queue
             time.sleep(0.002)
     for _ in range(10):
         good()

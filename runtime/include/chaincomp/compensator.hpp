@@ -39,7 +39,7 @@ enum : int {
 
 struct AxisLimits {
   double lower = 0, upper = 0;        // command limits, axis unit (mm or deg)
-  double max_step = 0;                // largest accepted change between consecutive commands
+  double max_step = 0;                // largest change from the previous valid command
   double max_correction = 0;          // largest |correction|
   double max_correction_step = 0;     // largest change of the correction per command
 };
@@ -97,9 +97,10 @@ class Compensator {
   int n_;
   bool enabled_;
   double ramp_;
-  bool have_last_ = false;
+  bool have_last_ = false;  // a command has been accepted
+  bool have_seen_ = false;  // a valid command has been seen (for the step check)
   std::int64_t last_seq_ = 0, last_utime_ = 0;
-  std::array<double, kMaxAxes> last_axes_{}, last_correction_{};
+  std::array<double, kMaxAxes> seen_axes_{}, last_correction_{};
   Counters counters_;
 };
 
