@@ -135,7 +135,7 @@ def _gain(d: Derivation) -> tuple[list[str], list[tuple[str, list[sp.Expr]]]]:
     return columns, rows
 
 
-def markdown(d: Derivation) -> str:
+def markdown(d: Derivation, protocol: str | None = None) -> str:
     m = d.machine
     small, axes = d.small, {s.sym for s in m.axes}
     out = [f"# {m.name}: geometric error model", "", m.description, "",
@@ -166,6 +166,8 @@ def markdown(d: Derivation) -> str:
     for name, row in rows:
         cells = [f"`{_one_line(_lines(grouped(e, small, axes), _text))}`" if e != 0 else "0" for e in row]
         out.append(f"| {name} | " + " | ".join(cells) + " |")
+    if protocol:
+        out += ["", "## Measurement protocol", "", "```", protocol.rstrip(), "```"]
     return "\n".join(out) + "\n"
 
 
@@ -178,7 +180,7 @@ def _tex_escape(s: str) -> str:
     return "".join(_TEX.get(ch, ch) for ch in s)
 
 
-def latex(d: Derivation) -> str:
+def latex(d: Derivation, protocol: str | None = None) -> str:
     m = d.machine
     small, axes = d.small, {s.sym for s in m.axes}
     names = {s.sym: r"\mathit{" + s.name.replace("_", r"\_") + "}" for s in m.symbols}
@@ -227,5 +229,8 @@ def latex(d: Derivation) -> str:
             if e != 0:
                 comp = r"\delta " + (f"k_{c[-1]}" if c.startswith("dk") else c[-1])
                 out += block(rf"\partial\, {comp} / \partial {names[m.symbol(name).sym]}", e)
-    out += [r"\end{align*}", r"\end{document}"]
+    out.append(r"\end{align*}")
+    if protocol:
+        out += [r"\subsection*{Measurement protocol}", r"\begin{verbatim}", protocol.rstrip(), r"\end{verbatim}"]
+    out.append(r"\end{document}")
     return "\n".join(out) + "\n"

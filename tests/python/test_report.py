@@ -122,3 +122,16 @@ def test_unwritable_output_exits_2(tmp_path):
     proc = run_cli("report", machine_path("angle_head"), "-o", str(target), check=False)
     assert proc.returncode == 2
     assert proc.stderr.startswith(f"chaincomp report: error: {target}: cannot write the report")
+
+
+def test_report_appends_the_protocol(tmp_path):
+    from conftest import machine_path, run_cli
+    out = tmp_path / "r.md"
+    run_cli("report", machine_path("angle_head"), "--protocol", "--assume-zero", "DY", "-o", str(out))
+    proto = run_cli("protocol", machine_path("angle_head"), "--assume-zero", "DY").stdout
+    text = out.read_text()
+    assert "## Measurement protocol" in text
+    tests = [line for line in proto.splitlines() if line.startswith("Test ")]
+    assert tests and all(line in text for line in tests)
+    bad = run_cli("report", machine_path("angle_head"), "--assume-zero", "DY", check=False)
+    assert bad.returncode == 2 and "--assume-zero goes with --protocol" in bad.stderr

@@ -20,6 +20,10 @@ def add_parser(sub) -> None:
     p.add_argument("-o", "--output", metavar="FILE", help="write here (default: standard output)")
     p.add_argument("--format", choices=("markdown", "latex"),
                    help="output format (default: latex for a .tex output, else markdown)")
+    p.add_argument("--protocol", action="store_true",
+                   help="append the measurement protocol (chaincomp protocol with its defaults)")
+    p.add_argument("--assume-zero", action="append", default=[], metavar="E1,E2",
+                   help="with --protocol: errors taken as zero (repeatable)")
     p.set_defaults(run=run)
 
 
@@ -27,7 +31,14 @@ def run(args) -> int:
     machine = load(args.machine)
     d = derive(machine, check_order(args.order), progress=True)
     fmt = args.format or ("latex" if (args.output or "").endswith(".tex") else "markdown")
-    text = report.latex(d) if fmt == "latex" else report.markdown(d)
+    proto = None
+    if args.protocol:
+        from ..protocol import build_protocol, to_text
+        zero = [n.strip() for item in args.assume_zero for n in item.split(",") if n.strip()]
+        proto = to_text(build_protocol(machine, assume_zero=zero))
+    elif args.assume_zero:
+        raise ChaincompError("--assume-zero goes with --protocol")
+    text = report.latex(d, proto) if fmt == "latex" else report.markdown(d, proto)
     if not args.output:
         sys.stdout.write(text)
         return 0
