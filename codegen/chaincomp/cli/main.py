@@ -15,6 +15,8 @@ from . import plot, replay, simulate_log  # noqa: E402
 VERBS += (simulate_log, replay, plot)
 from . import check, report  # noqa: E402
 VERBS += (check, report)
+from . import budget  # noqa: E402
+VERBS += (budget,)
 
 
 def build_parser() -> argparse.ArgumentParser:

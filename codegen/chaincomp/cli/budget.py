@@ -1,0 +1,153 @@
+"""``chaincomp budget``: the error budget of a machine over its working volume."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import numpy as np
+
+from .. import budget as B
+from ..errors import ChaincompError
+from ..tolerances import from_params, load_tolerances
+from .common import add_machine_argument, add_values_arguments, load, values_for
+
+MAX_SAMPLES = 2_000_000
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("budget", help="error budget over the working volume: worst case, RSS, Monte Carlo",
+                       description="Error budget of the tool error over a grid of the machine's axes (limits "
+                                   "from the machine file): per component the worst case (sum of "
+                                   "|gain x bound|), the RSS and standard deviation of independent errors "
+                                   "(uniform or normal, from the tolerance file), a seeded Monte Carlo of the "
+                                   "exact model at the worst point, the dominant contributors there, and the "
+                                   "largest |gain| of every error over the grid. Without --tolerances the "
+                                   "error values of --params are read as bounds (uniform on +-|value|).")
+    add_machine_argument(p)
+    add_values_arguments(p)
+    p.add_argument("--tolerances", metavar="T.yaml", help="bounds and distributions (configs/tolerances/*.yaml)")
+    p.add_argument("--over", metavar="A1,A2,...", help="axes of the grid (default: every axis); the others "
+                   "stay at 0 (or mid-range), or --set")
+    p.add_argument("--grid", type=int, default=9, metavar="N", help="points per grid axis, limits included "
+                   "(default 9)")
+    p.add_argument("--order", default="1", choices=B.ORDERS, help="model of the gains (default 1)")
+    p.add_argument("--samples", type=int, default=10000, metavar="N",
+                   help="Monte Carlo samples of the exact model at each worst point (default 10000; 0: none)")
+    p.add_argument("--seed", type=int, default=1, help="Monte Carlo seed (default 1)")
+    p.add_argument("--format", default="text", choices=("text", "json"))
+    p.add_argument("--top", type=int, default=5, metavar="N",
+                   help="contributors listed per component in text (default 5; 0: all)")
+    p.add_argument("--plot", metavar="OUT.png", help="also write worst-case and RSS maps and a bar chart of "
+                   "the contributions")
+    p.add_argument("--map", metavar="A1,A2", help="the two grid axes of the maps (default: the first two)")
+    p.add_argument("--component", choices=B.POSITION + B.DIRECTION,
+                   help="component of the plot (default: the position component with the largest worst case)")
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    machine = load(args.machine)
+    if not 0 <= args.samples <= MAX_SAMPLES:
+        raise ChaincompError(f"--samples must be between 0 and {MAX_SAMPLES}, got {args.samples}")
+    over = [n.strip() for n in args.over.split(",")] if args.over else None
+    set_names = {item.partition("=")[0].strip() for item in args.sets}
+    values, _ = values_for(machine, args.params, args.sets)
+    grid_names = over or [a.name for a in machine.axes]
+    clash = [n for n in grid_names if n in set_names]
+    if clash:
+        raise ChaincompError(f"--set {clash[0]}: {clash[0]} is an axis of the grid; leave it out of --over "
+                             f"to hold it at a value")
+    if args.tolerances:
+        tol = load_tolerances(args.tolerances, machine)
+        centred = True
+    else:
+        tol = from_params(values, machine)
+        centred = False
+        if not tol.items:
+            raise ChaincompError("nothing to budget: give --tolerances T.yaml, or error values in --params")
+    grid = B.make_grid(machine, over, args.grid, values)
+    b = B.compute(machine, values, tol, grid, order=args.order, samples=args.samples, seed=args.seed,
+                  centre_on_params=centred)
+    if args.format == "json":
+        print(json.dumps(B.to_json(b), indent=2))
+    else:
+        print(B.to_text(b, args.top))
+    if args.plot:
+        plot(b, args.plot, args.map, args.component)
+        print(f"budget: wrote {args.plot}", file=sys.stderr)
+    return 0
+
+
+def plot(b: B.Budget, output: str, map_axes: str | None, component: str | None) -> None:
+    """Worst-case and RSS maps over two grid axes (the largest value over the other grid axes,
+    one colour scale for both) and a bar chart of the contributions at the worst point."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = [a.name for a in b.grid.axes]
+    if component is None:
+        component = max(B.POSITION, key=lambda c: float(b.components[c].worst.max()))
+    if component not in b.components:
+        raise ChaincompError(f"--component {component}: this machine has no tool direction")
+    cb = b.components[component]
+    scale, unit = B._display(b, component)
+    if map_axes:
+        pick = [n.strip() for n in map_axes.split(",")]
+        if len(pick) != 2 or pick[0] == pick[1] or any(n not in names for n in pick):
+            raise ChaincompError(f"--map expects two different axes of the grid ({', '.join(names)}), "
+                                 f"got {map_axes!r}")
+    else:
+        pick = names[:2]
+    two = len(pick) == 2
+    fig = plt.figure(figsize=(16 if two else 11, 5.2), dpi=100)
+    panels = 3 if two else 2
+    if two:
+        i1, i2 = names.index(pick[0]), names.index(pick[1])
+        rest = tuple(k for k in range(len(names)) if k not in (i1, i2))
+        maps = []
+        for arr in (cb.worst, cb.rss):
+            env = np.max(arr, axis=rest) if rest else np.asarray(arr)
+            maps.append(env if i1 < i2 else env.T)   # -> [axis 1, axis 2]
+        vmax = max(float(m.max()) for m in maps) * scale
+        a1, a2 = b.grid.axes[i1], b.grid.axes[i2]
+        others = ", ".join(names[k] for k in rest)
+        for p, (title, mp) in enumerate(zip(("worst case", "RSS"), maps), 1):
+            ax = fig.add_subplot(1, panels, p)
+            mesh = ax.pcolormesh(b.grid.points[i1], b.grid.points[i2], mp.T * scale, shading="auto",
+                                 cmap="viridis", vmin=0.0, vmax=vmax or 1.0)
+            fig.colorbar(mesh, ax=ax, label=f"{component} [{unit}]")
+            ax.set_xlabel(f"{a1.name} [{a1.unit.name}]")
+            ax.set_ylabel(f"{a2.name} [{a2.unit.name}]")
+            ax.set_title(f"{title}" + (f" (largest over {others})" if others else ""), fontsize="medium")
+    else:
+        i1 = names.index(pick[0])
+        rest = tuple(k for k in range(len(names)) if k != i1)
+        ax = fig.add_subplot(1, panels, 1)
+        x = b.grid.points[i1]
+        for label, arr in (("worst case", cb.worst), ("RSS", cb.rss), ("sigma", cb.sigma)):
+            ax.plot(x, (np.max(arr, axis=rest) if rest else arr) * scale, label=label)
+        a1 = b.grid.axes[i1]
+        ax.set_xlabel(f"{a1.name} [{a1.unit.name}]")
+        ax.set_ylabel(f"{component} [{unit}]")
+        ax.legend()
+    ax = fig.add_subplot(1, panels, panels)
+    rows = B.contributors(b, component)[:15]
+    if rows:
+        labels = [r["error"] for r in rows][::-1]
+        vals = [r["contribution"] * scale for r in rows][::-1]
+        bars = ax.barh(labels, vals, color="tab:blue")
+        for bar, r in zip(bars, rows[::-1]):
+            ax.text(bar.get_width(), bar.get_y() + bar.get_height() / 2, f" {100 * r['share_worst']:.1f} %",
+                    va="center", fontsize="small")
+        ax.set_xlim(0, max(vals) * 1.25 or 1.0)
+    ax.set_xlabel(f"|gain| x bound [{unit}]")
+    at = ", ".join(f"{n}={v:g}" for n, v in B._axes_at(b, cb.worst_index).items())
+    ax.set_title(f"contributions at the worst point\n({at})", fontsize="medium")
+    order = {"1": "first order", "2": "second order", "exact": "exact model"}[b.order]
+    fig.suptitle(f"{b.machine.name}: budget of {component}, {order}; worst {float(cb.worst.max()) * scale:.3g} "
+                 f"{unit}, RSS there {float(cb.rss[cb.worst_index]) * scale:.3g} {unit}")
+    fig.tight_layout()
+    fig.savefig(output)
+    plt.close(fig)
