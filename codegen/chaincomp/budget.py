@@ -116,6 +116,7 @@ class _Series:
         vecs = list(self.d.point) + (list(self.d.direction) if self.d.direction else [])
         self.series = dict(zip(components(machine), vecs))
         self._fns: dict = {}
+        self._truncated: TruncatedModel | None = None
 
     def _fn(self, comp: str):
         if comp not in self._fns:
@@ -153,7 +154,9 @@ class _Series:
             yield (comp, *self._gains(comp, args, centre, bounds))
 
     def systematic(self, args: dict) -> dict:
-        dp, dd = TruncatedModel(self.d).error(args, self.order, "numpy")
+        if self._truncated is None:
+            self._truncated = TruncatedModel(self.d)
+        dp, dd = self._truncated.error(args, self.order, "numpy")
         return dict(zip(components(self.machine), list(dp) + (list(dd) if dd is not None else [])))
 
 
@@ -229,6 +232,20 @@ def _as_grid(x, shape) -> np.ndarray:
     return np.broadcast_to(np.asarray(x, dtype=float), shape)
 
 
+def _grouped_sum(terms: list) -> np.ndarray:
+    """Sum of arrays on an open mesh: terms of the same shape (a gain of Y alone, of Y and Z,
+    a constant) are added in their own few dimensions first, and broadcast to the full grid
+    only in the last additions."""
+    groups: dict[tuple, np.ndarray] = {}
+    for t in terms:
+        t = np.asarray(t, dtype=float)
+        groups[t.shape] = groups[t.shape] + t if t.shape in groups else t
+    total = np.zeros(())
+    for key in sorted(groups, key=lambda k: int(np.prod(k)) if k else 1):
+        total = total + groups[key]
+    return total
+
+
 def compute(machine: Machine, values: dict, tolerances: Tolerances, grid: Grid, order: str = "1",
             samples: int = 10000, seed: int = 1, centre_on_params: bool = True,
             gains=None) -> Budget:
@@ -248,27 +265,31 @@ def compute(machine: Machine, values: dict, tolerances: Tolerances, grid: Grid, 
     args.update(grid.open_mesh())
     for s in errs:
         args[s.name] = centre.get(s.name, 0.0)
-    sys_args = dict(args)
-    sys_args.update(params_errors)
-    systematic = model.systematic(sys_args)
+    if params_errors:
+        sys_args = dict(args)
+        sys_args.update(params_errors)
+        systematic = model.systematic(sys_args)
+    else:
+        systematic = {c: 0.0 for c in components(machine)}
 
     shape = grid.shape
     out = Budget(machine, order, tolerances, grid, dict(values), centre, params_errors,
                  samples=samples, seed=seed)
     length_scale = 1.0 / UNITS[machine.length_unit].to_internal
     for comp, g, qb in model.gains(args, centre, bounds):
-        worst = np.zeros(shape)
-        var_q = np.zeros(shape)
-        var_s = np.zeros(shape)
+        terms_w, terms_q, terms_s = [], [], []
         max_gain = np.zeros(len(errs))
         for i, gi in enumerate(g):
             a = np.abs(np.asarray(gi, dtype=float))
             max_gain[i] = float(a.max()) if a.size else 0.0
             if bounds[i]:
-                worst = worst + a * bounds[i]
-                var_q = var_q + (a * quants[i]) ** 2
-                var_s = var_s + (a * sigmas[i]) ** 2
-        worst = _as_grid(worst + qb, shape)
+                terms_w.append(a * bounds[i])
+                terms_q.append((a * quants[i]) ** 2)
+                terms_s.append((a * sigmas[i]) ** 2)
+        terms_w.append(np.asarray(qb, dtype=float))
+        worst = _as_grid(_grouped_sum(terms_w), shape)
+        var_q = _grouped_sum(terms_q)
+        var_s = _grouped_sum(terms_s)
         idx = np.unravel_index(int(np.argmax(worst)), shape) if shape else ()
         at = np.array([float(_as_grid(gi, shape)[idx]) for gi in g])
         pos = comp in POSITION
