@@ -398,3 +398,25 @@ def test_bundled_tolerance_files_cover_their_machines():
         assert tol.items
     five = load_tolerances(FIVE_TOL, load_machine(FIVE))
     assert len(five.items) == 29
+
+
+def test_systematic_error_at_the_params_values_is_the_exact_models():
+    """With --params error values, the systematic figure at the worst point is the tool error
+    of the exact model there (order exact), and the second-order model's within its own order."""
+    machine = load_machine(FIVE)
+    params = os.path.join(PARAMS, "five_axis_ac-demo.yaml")
+    from chaincomp.params import load_params
+    errors = load_params(params, machine)
+    common = (FIVE, "--tolerances", FIVE_TOL, "--params", params, "--over", "X,Ap,Cp", "--grid", "4",
+              "--set", "Y=100", "--set", "Z=-300", "--samples", "0")
+    for order, tol in (("exact", 1e-12), ("2", 1e-7)):
+        out = budget_json(*common, "--order", order)
+        assert out["centre"] and out["params_errors"]
+        for c in ("dx", "dy", "dz"):
+            at = out["components"][c]["at_worst"]
+            v = machine.nominal_values()
+            for a in machine.axes:
+                v[a.name] = a.to_internal(at["axes"][a.name])
+            v.update(errors)
+            ref = float(ExactModel(machine).error(v)[0]["xyz".index(c[1])])
+            assert at["systematic"] == pytest.approx(ref, abs=tol), (order, c)
