@@ -232,6 +232,17 @@ def _as_grid(x, shape) -> np.ndarray:
     return np.broadcast_to(np.asarray(x, dtype=float), shape)
 
 
+def _first_max(a: np.ndarray) -> tuple[int, ...]:
+    """Index of the largest value; among values equal to it within rounding (symmetric
+    poses), the first in grid order, so the choice does not hang on the order of a sum."""
+    if not a.shape:
+        return ()
+    flat = np.asarray(a).reshape(-1)
+    top = float(flat.max())
+    i = int(np.flatnonzero(flat >= top - 1e-12 * abs(top))[0])
+    return tuple(int(k) for k in np.unravel_index(i, a.shape))
+
+
 def _grouped_sum(terms: list) -> np.ndarray:
     """Sum of arrays on an open mesh: terms of the same shape (a gain of Y alone, of Y and Z,
     a constant) are added in their own few dimensions first, and broadcast to the full grid
@@ -290,7 +301,7 @@ def compute(machine: Machine, values: dict, tolerances: Tolerances, grid: Grid, 
         worst = _as_grid(_grouped_sum(terms_w), shape)
         var_q = _grouped_sum(terms_q)
         var_s = _grouped_sum(terms_s)
-        idx = np.unravel_index(int(np.argmax(worst)), shape) if shape else ()
+        idx = _first_max(worst)
         at = np.array([float(_as_grid(gi, shape)[idx]) for gi in g])
         pos = comp in POSITION
         out.components[comp] = ComponentBudget(
@@ -426,7 +437,7 @@ def _axes_at(b: Budget, index) -> dict[str, float]:
 
 
 def _argmax(a: np.ndarray) -> tuple[int, ...]:
-    return tuple(int(i) for i in np.unravel_index(int(np.argmax(a)), a.shape)) if a.shape else ()
+    return _first_max(a)
 
 
 def to_json(b: Budget) -> dict:
