@@ -50,6 +50,21 @@ class _Printer(CXX17CodePrinter):
 _PRINTER = _Printer()
 
 
+class _ErrorPrinter(_Printer):
+    """For set_errors: sin and cos of (usually small) error angles by chaincomp::sin_small /
+    cos_small (a short series below 2^-6 rad, the library above), which tables of angular
+    errors evaluate on every call."""
+
+    def _print_sin(self, expr):
+        return f"chaincomp::sin_small({self._print(expr.args[0])})"
+
+    def _print_cos(self, expr):
+        return f"chaincomp::cos_small({self._print(expr.args[0])})"
+
+
+_ERROR_PRINTER = _ErrorPrinter()
+
+
 def ccode(expr: sp.Expr) -> str:
     return _PRINTER.doprint(expr)
 
@@ -148,6 +163,10 @@ def generate(machine: Machine, order: int = 2) -> dict[str, str]:
     jac = [[sp.diff(e, a) for a in axes] for e in exact]
     d = derive(machine, order)
     vecs = d.point + (d.direction or [])
+    # d pose / d error at zero errors (the first-order error gain matrix): the chain rule's
+    # factor for errors that vary along an axis (compensate.hpp, add_slopes).
+    gain = [d.gain(s) for s in vecs]
+    n_err = len(machine.errors)
     functions = [
         _Function("pose_exact", "const Model& m, const Axes& q, Pose& out",
                   [(f"out[{i}]", hoist(e)) for i, e in enumerate(exact)],
@@ -159,6 +178,12 @@ def generate(machine: Machine, order: int = 2) -> dict[str, str]:
                   [(f"out[{i}]", hoist(e)) for i, e in enumerate(exact)]
                   + [(f"J({i}, {j})", hoist(jac[i][j])) for i in range(pose_size) for j in range(n)],
                   "Actual pose and its exact Jacobian with respect to the axes (one shared CSE)."),
+        _Function("pose_jacobian_gain", "const Model& m, const Axes& q, Pose& out, Jacobian& J, Gain& G",
+                  [(f"out[{i}]", hoist(e)) for i, e in enumerate(exact)]
+                  + [(f"J({i}, {j})", hoist(jac[i][j])) for i in range(pose_size) for j in range(n)]
+                  + [(f"G({i}, {c})", hoist(gain[i][c])) for i in range(pose_size) for c in range(n_err)],
+                  "pose_jacobian, and the error gain matrix G = d pose / d error at zero errors (columns: "
+                  "the errors in kParams order)."),
     ]
     for k in range(1, order + 1):
         functions.append(_Function(
@@ -189,6 +214,7 @@ def _header(machine, banner, n, pose_size, corr_dir, order, n_pre, src_hash, src
          f"constexpr std::uint64_t kSourceHash = 0x{src_hash:016x}ull;",
          f"constexpr int kNumAxes = {n};",
          f"constexpr int kNumParams = {len(params)};",
+         f"constexpr int kNumErrors = {len(machine.errors)};  // the error parameters, in kParams order",
          f"constexpr int kPoseSize = {pose_size};  // tool point{', tool direction' if pose_size == 6 else ''}",
          f"constexpr bool kCorrectsDirection = {'true' if corr_dir else 'false'};",
          f"constexpr int kOrder = {order};",
@@ -196,14 +222,19 @@ def _header(machine, banner, n, pose_size, corr_dir, order, n_pre, src_hash, src
          "using Axes = Eigen::Matrix<double, kNumAxes, 1>;      // "
          + ", ".join(f"{a.name} [{'mm' if a.unit.kind == 'length' else 'rad'}]" for a in machine.axes),
          "using Pose = Eigen::Matrix<double, kPoseSize, 1>;",
-         "using Jacobian = Eigen::Matrix<double, kPoseSize, kNumAxes>;", "",
+         "using Jacobian = Eigen::Matrix<double, kPoseSize, kNumAxes>;",
+         f"using Gain = Eigen::Matrix<double, kPoseSize, {max(len(machine.errors), 1)}>;"
+         "  // d pose / d error, one column per error", "",
          "// Every constant and error by name, in internal units (mm, rad); defaults: nominal, errors 0.",
          "struct Params {"]
     for s in params:
         default = s.to_internal(s.nominal) if s.nominal is not None else 0.0
         L.append(f"  double {s.name} = {default!r};  // {s.role}, declared in {s.unit.name}: {s.meaning}")
     L += ["};", "", "// Immutable after prepare(): the parameters and what depends on them alone.",
-          "struct Model {", "  Params params;", f"  double k[{max(n_pre, 1)}] = {{}};", "};", "",
+          "struct Model {", "  Params params;", f"  double k[{max(n_pre, 1)}] = {{}};",
+          "  // Errors that vary along an axis (tables, polynomials), evaluated at the axes of each",
+          "  // call; nullptr: every error is the constant in params. prepare() sets nullptr.",
+          "  const VaryingErrors* varying = nullptr;", "};", "",
           "inline constexpr AxisInfo kAxes[kNumAxes] = {"]
     for a in machine.axes:
         L.append(f"    {{\"{a.name}\", \"{a.unit.name}\", UnitKind::{_kind(a.unit)}, {a.unit.to_internal!r}, "
@@ -221,22 +252,31 @@ def _header(machine, banner, n, pose_size, corr_dir, order, n_pre, src_hash, src
           "Params params_from_array(const double* v) noexcept;",
           "void params_to_array(const Params& p, double* v) noexcept;",
           "// Fills m from p (computes the parameter-only subexpressions once).",
-          "void prepare(const Params& p, Model& m) noexcept;", ""]
+          "void prepare(const Params& p, Model& m) noexcept;",
+          "// Sets each error parameter whose values[i] (kParams order) is not NaN and recomputes what",
+          "// depends on it: the errors that vary along an axis, at each evaluation.",
+          "void set_errors(Model& m, const double* values) noexcept;", ""]
     for f in functions:
         L += [f"// {f.comment}", f"void {f.name}({f.signature}) noexcept;"]
     L += ["", "// The sizes and functions the generic compensation needs.", "struct Kinematics {",
           "  static constexpr int kNumAxes = models::" + name + "::kNumAxes;",
+          "  static constexpr int kNumParams = models::" + name + "::kNumParams;",
           "  static constexpr bool kCorrectsDirection = models::" + name + "::kCorrectsDirection;",
           "  static constexpr bool kAxisIsAngle[kNumAxes] = {"
           + ", ".join("true" if a.unit.kind == "angle" else "false" for a in machine.axes) + "};",
           "  using Model = models::" + name + "::Model;", "  using Axes = models::" + name + "::Axes;",
           "  using Pose = models::" + name + "::Pose;", "  using Jacobian = models::" + name + "::Jacobian;",
+          "  using Gain = models::" + name + "::Gain;",
           "  static void pose_nominal(const Model& m, const Axes& q, Pose& out) noexcept { "
           "models::" + name + "::pose_nominal(m, q, out); }",
           "  static void pose_exact(const Model& m, const Axes& q, Pose& out) noexcept { "
           "models::" + name + "::pose_exact(m, q, out); }",
           "  static void pose_jacobian(const Model& m, const Axes& q, Pose& out, Jacobian& J) noexcept { "
           "models::" + name + "::pose_jacobian(m, q, out, J); }",
+          "  static void pose_jacobian_gain(const Model& m, const Axes& q, Pose& out, Jacobian& J, Gain& G) noexcept { "
+          "models::" + name + "::pose_jacobian_gain(m, q, out, J, G); }",
+          "  static void set_errors(Model& m, const double* values) noexcept { "
+          "models::" + name + "::set_errors(m, values); }",
           "};", "using Workspace = chaincomp::Workspace<Kinematics>;",
           "using Result = chaincomp::Result<Kinematics>;", "",
           "// Corrected axes such that the actual tool pose equals the nominal one at `command`.",
@@ -249,39 +289,72 @@ def _header(machine, banner, n, pose_size, corr_dir, order, n_pre, src_hash, src
 def _source(machine, banner, n, pre, functions, order) -> str:
     name = machine.name
     params = [s for s in machine.symbols if s.role != "axis"]
-    L = [banner, f"#include \"{name}.hpp\"", "", "#include <cmath>", "",
+    L = [banner, f"#include \"{name}.hpp\"", "", "#include <algorithm>", "#include <cmath>", "#include <limits>", "",
          f"namespace chaincomp::models::{name} {{", "",
          "Params params_from_array(const double* v) noexcept {", "  Params p;"]
     L += [f"  p.{s.name} = v[{i}];" for i, s in enumerate(params)]
     L += ["  return p;", "}", "", "void params_to_array(const Params& p, double* v) noexcept {"]
     L += [f"  v[{i}] = p.{s.name};" for i, s in enumerate(params)]
-    L += ["}", "", "void prepare(const Params& p, Model& m) noexcept {", "  m.params = p;"]
+    L += ["}", "", "void prepare(const Params& p, Model& m) noexcept {", "  m.params = p;", "  m.varying = nullptr;"]
     if pre:
         outputs = [(f"m.k[{i}]", e) for i, (e, _) in enumerate(pre)]
         body = _body(machine, outputs, hoisted=False)
         L += ["  " + line.replace("m.params.", "p.") for line in body]
     L += ["}", ""]
+    L += _set_errors(machine, params, pre)
     for f in functions:
         L += [f"void {f.name}({f.signature}) noexcept {{"]
         L += ["  " + line for line in _body(machine, f.outputs, hoisted=True)]
         L += ["}", ""]
+    # Type-erased entry points: with varying errors attached, each evaluates them at `axes`
+    # first (a model outside a rejecting range gives NaN).
+    nan = "std::numeric_limits<double>::quiet_NaN()"
     L += ["namespace {", "",
           "void erased_prepare(const double* params, void* model) noexcept {",
           "  prepare(params_from_array(params), *static_cast<Model*>(model));", "}",
+          "void erased_attach_varying(void* model, const VaryingErrors* varying) noexcept {",
+          "  static_cast<Model*>(model)->varying = varying;", "}",
           "void erased_pose_exact(const void* model, const double* axes, double* pose) noexcept {",
-          "  Pose out;", "  pose_exact(*static_cast<const Model*>(model), Eigen::Map<const Axes>(axes), out);",
-          "  Eigen::Map<Pose> pose_out(pose);", "  pose_out = out;", "}",
+          "  const Model& m = *static_cast<const Model*>(model);", "  const Eigen::Map<const Axes> q(axes);",
+          "  Eigen::Map<Pose> pose_out(pose);", "  Pose out;",
+          "  if (m.varying == nullptr) {", "    pose_exact(m, q, out);", "  } else {",
+          "    Model scratch;", "    double slope[kMaxVaryingErrors];",
+          "    const Model* at = model_at<Kinematics>(m, q, scratch, slope);",
+          f"    if (at == nullptr) {{ pose_out.setConstant({nan}); return; }}",
+          "    pose_exact(*at, q, out);", "  }", "  pose_out = out;", "}",
           "void erased_pose_nominal(const void* model, const double* axes, double* pose) noexcept {",
           "  Pose out;", "  pose_nominal(*static_cast<const Model*>(model), Eigen::Map<const Axes>(axes), out);",
           "  Eigen::Map<Pose> pose_out(pose);", "  pose_out = out;", "}",
+          "void erased_pose_jacobian_gain(const void* model, const double* axes, double* pose, double* jac,",
+          "                               double* gain) noexcept {",
+          "  const Model& m = *static_cast<const Model*>(model);", "  const Eigen::Map<const Axes> q(axes);",
+          "  Pose out;", "  Jacobian J;", "  Gain G;", "  Model scratch;", "  double slope[kMaxVaryingErrors];",
+          "  const Model* at = model_at<Kinematics>(m, q, scratch, slope);",
+          "  if (at == nullptr) {", f"    out.setConstant({nan});", f"    J.setConstant({nan});",
+          f"    G.setConstant({nan});", "  } else {", "    pose_jacobian_gain(*at, q, out, J, G);",
+          "    if (m.varying != nullptr) add_slopes<Kinematics>(*m.varying, G, slope, J);", "  }",
+          "  Eigen::Map<Pose> pose_out(pose);", "  pose_out = out;", "  Eigen::Map<Jacobian> jac_out(jac);",
+          "  jac_out = J;",
+          "  if (gain != nullptr) std::copy(G.data(), G.data() + kPoseSize * kNumErrors, gain);", "}",
           "void erased_pose_jacobian(const void* model, const double* axes, double* pose, double* jac) noexcept {",
+          "  const Model& m = *static_cast<const Model*>(model);",
+          "  if (m.varying != nullptr) {", "    erased_pose_jacobian_gain(model, axes, pose, jac, nullptr);",
+          "    return;", "  }",
           "  Pose out;", "  Jacobian J;",
-          "  pose_jacobian(*static_cast<const Model*>(model), Eigen::Map<const Axes>(axes), out, J);",
+          "  pose_jacobian(m, Eigen::Map<const Axes>(axes), out, J);",
           "  Eigen::Map<Pose> pose_out(pose);", "  pose_out = out;", "  Eigen::Map<Jacobian> jac_out(jac);", "  jac_out = J;", "}",
+          "void error_at(const Model& m, const Axes& q, int order, double* pose) noexcept {",
+          "  Pose out;", "  switch (order) {"]
+    L += [f"    case {k}: error_order{k}(m, q, out); break;" for k in range(1, order + 1)]
+    L += ["    default: return;", "  }", "  Eigen::Map<Pose> pose_out(pose);", "  pose_out = out;", "}",
           "bool erased_error(const void* model, const double* axes, int order, double* pose) noexcept {",
-          "  const Model& m = *static_cast<const Model*>(model);", "  Pose out;", "  switch (order) {"]
-    L += [f"    case {k}: error_order{k}(m, Eigen::Map<const Axes>(axes), out); break;" for k in range(1, order + 1)]
-    L += ["    default: return false;", "  }", "  Eigen::Map<Pose> pose_out(pose);", "  pose_out = out;", "  return true;", "}",
+          "  if (order < 1 || order > kOrder) return false;",
+          "  const Model& m = *static_cast<const Model*>(model);", "  const Eigen::Map<const Axes> q(axes);",
+          "  if (m.varying == nullptr) {", "    error_at(m, q, order, pose);", "    return true;", "  }",
+          "  Model scratch;", "  double slope[kMaxVaryingErrors];",
+          "  const Model* at = model_at<Kinematics>(m, q, scratch, slope);",
+          "  if (at == nullptr) {", f"    Eigen::Map<Pose>(pose).setConstant({nan});", "  } else {",
+          "    error_at(*at, q, order, pose);", "  }", "  return true;", "}",
           "int erased_compensate(const void* model, const double* command, double* corrected,",
           "                      double* residual) noexcept {",
           "  Workspace ws;", "  Result r;",
@@ -291,9 +364,28 @@ def _source(machine, banner, n, pre, functions, order) -> str:
           "  return static_cast<int>(s);", "}", "", "}  // namespace", "",
           "const ModelEntry kEntry = {&kInfo, sizeof(Model), alignof(Model), erased_prepare, erased_pose_exact,",
           "                           erased_pose_nominal, erased_pose_jacobian, erased_error, kOrder,",
-          "                           erased_compensate};", "",
+          "                           erased_compensate, kNumErrors, erased_attach_varying,",
+          "                           erased_pose_jacobian_gain};", "",
           f"}}  // namespace chaincomp::models::{name}", ""]
     return "\n".join(L)
+
+
+def _set_errors(machine, params, pre) -> list[str]:
+    """set_errors: per error parameter, a branch that sets it and recomputes the precomputed
+    k[i] depending on it (one call per evaluation, branches that always go the same way)."""
+    L = ["void set_errors(Model& m, const double* values) noexcept {"]
+    rename = {s.sym: sp.Symbol(f"m.params.{s.name}") for s in params}
+    for i, s in enumerate(params):
+        if s.role != "error":
+            continue
+        L.append(f"  if (!std::isnan(values[{i}])) {{")
+        L.append(f"    m.params.{s.name} = values[{i}];")
+        for j, (e, _) in enumerate(pre):
+            if s.sym in e.free_symbols:
+                L.append(f"    m.k[{j}] = {_ERROR_PRINTER.doprint(e.xreplace(rename))};")
+        L.append("  }")
+    L += ["}", ""]
+    return L
 
 
 def registry(names: list[str]) -> str:

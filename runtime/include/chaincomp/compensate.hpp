@@ -1,13 +1,18 @@
 // Compensation: corrected axis commands such that the actual tool point (and tool
 // direction, where the machine's rotary axes can correct it) equals the nominal one at the
 // commanded axes. A fixed number of Gauss-Newton steps on the generated exact Jacobian:
-// constant cost per call, no heap, no exceptions.
+// constant cost per call, no heap, no exceptions. Errors that vary along an axis (tables,
+// polynomials: varying.hpp) are evaluated at the command and at every Newton iterate, and
+// their slopes enter the Jacobian.
 #pragma once
 
 #include <Eigen/Core>
 #include <Eigen/Cholesky>
 #include <algorithm>
 #include <cmath>
+#include <limits>
+
+#include "chaincomp/varying.hpp"
 
 namespace chaincomp {
 
@@ -17,7 +22,9 @@ enum class Status : int {
   kResidual = 1,       // best correction found, but a residual remains (fewer DOF than errors)
   kNonFiniteInput = 2, // the command holds NaN or Inf: nothing computed, output = command
   kSingular = 3,       // the Jacobian is singular at the command: output = command
-  kNonFiniteOutput = 4 // the iteration produced NaN or Inf: output = command
+  kNonFiniteOutput = 4, // the iteration produced NaN or Inf: output = command
+  kOutsideTable = 5     // an axis lies outside a table (or polynomial range) whose `outside` is
+                        // reject: output = command
 };
 
 inline const char* status_name(Status s) noexcept {
@@ -27,6 +34,7 @@ inline const char* status_name(Status s) noexcept {
     case Status::kNonFiniteInput: return "non_finite_input";
     case Status::kSingular: return "singular";
     case Status::kNonFiniteOutput: return "non_finite_output";
+    case Status::kOutsideTable: return "outside_table";
   }
   return "unknown";
 }
@@ -54,7 +62,63 @@ template <class K>
 struct Workspace {
   typename K::Pose target, pose;
   typename K::Jacobian jacobian;
+  // With varying errors: the model with their values at the current axes, the error gain
+  // matrix, and per varying error its table interval and slope at the current axes.
+  typename K::Model model;
+  typename K::Gain gain;
+  int hint[kMaxVaryingErrors];
+  double slope[kMaxVaryingErrors];
+  double values[K::kNumParams];  // the varying errors' values; NaN for the others
 };
+
+// Sets every varying error of `m` (a copy of the model) to its value at `q` and its slope
+// into `slope`; false where an axis lies outside a range whose `outside` is reject (the
+// value is then held at the end of the range). `values` (kNumParams) is NaN but for the
+// varying errors, whose entries this overwrites.
+template <class K, bool kSlope = true>
+bool set_varying(const VaryingErrors& v, typename K::Model& m, const typename K::Axes& q, int* hint,
+                 double* slope, double* values) noexcept {
+  bool inside = true;
+  for (int i = 0; i < v.count; ++i) {
+    const VaryingError& e = v.items[i];
+    inside &= evaluate<kSlope>(v, e, q[e.axis], hint ? hint + i : nullptr, values[e.param], slope[i]);
+  }
+  K::set_errors(m, values);
+  return inside;
+}
+
+template <class K>
+void clear_values(double* values) noexcept {
+  for (int i = 0; i < K::kNumParams; ++i) values[i] = std::numeric_limits<double>::quiet_NaN();
+}
+
+// The Jacobian with respect to the axes of the pose with varying errors: the chain rule adds
+// (d pose / d error) * (d error / d axis) to the column of the error's axis. d pose / d error
+// is the first-order error gain matrix: exact at zero errors; the part it leaves out is of
+// the order of the error times the slope (~1e-9 of the Jacobian at µm and arcsec).
+template <class K>
+void add_slopes(const VaryingErrors& v, const typename K::Gain& gain, const double* slope,
+                typename K::Jacobian& J) noexcept {
+  constexpr int rows = K::Jacobian::RowsAtCompileTime;
+  for (int i = 0; i < v.count; ++i) {
+    const VaryingError& e = v.items[i];
+    double* col = J.data() + rows * e.axis;  // column-major, fixed size
+    const double* g = gain.data() + rows * e.column;
+    for (int r = 0; r < rows; ++r) col[r] += slope[i] * g[r];
+  }
+}
+
+// The model to evaluate at `q`: `m` itself without varying errors, else `scratch` holding
+// them at `q` (slopes into `slope`); nullptr where `q` lies outside a range that rejects.
+template <class K>
+const typename K::Model* model_at(const typename K::Model& m, const typename K::Axes& q,
+                                  typename K::Model& scratch, double* slope) noexcept {
+  if (m.varying == nullptr) return &m;
+  scratch = m;
+  double values[K::kNumParams];
+  clear_values<K>(values);
+  return set_varying<K>(*m.varying, scratch, q, nullptr, slope, values) ? &scratch : nullptr;
+}
 
 // K: the generated Kinematics of one machine (sizes, Model, pose_nominal, pose_jacobian).
 template <class K>
@@ -65,6 +129,32 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
   out.corrected = command;
   out.residual_point = out.residual_direction = 0;
   if (!command.allFinite()) return Status::kNonFiniteInput;
+  const VaryingErrors* varying = model.varying;
+  if (varying != nullptr) {
+    if (!within_ranges(*varying, command.data())) return Status::kOutsideTable;
+    ws.model = model;
+    for (int i = 0; i < varying->count; ++i) ws.hint[i] = -1;
+    clear_values<K>(ws.values);
+  }
+  // The actual pose (and its Jacobian) at q, varying errors evaluated at q. Newton iterates
+  // that step past the end of a rejecting table by the correction are evaluated held there.
+  auto pose_at = [&](const typename K::Axes& q) {
+    if (varying == nullptr) {
+      K::pose_exact(model, q, ws.pose);
+    } else {
+      set_varying<K, false>(*varying, ws.model, q, ws.hint, ws.slope, ws.values);
+      K::pose_exact(ws.model, q, ws.pose);
+    }
+  };
+  auto jacobian_at = [&](const typename K::Axes& q) {
+    if (varying == nullptr) {
+      K::pose_jacobian(model, q, ws.pose, ws.jacobian);
+    } else {
+      set_varying<K>(*varying, ws.model, q, ws.hint, ws.slope, ws.values);
+      K::pose_jacobian_gain(ws.model, q, ws.pose, ws.jacobian, ws.gain);
+      add_slopes<K>(*varying, ws.gain, ws.slope, ws.jacobian);
+    }
+  };
 
   K::pose_nominal(model, command, ws.target);
   // Chord Newton: the Jacobian at the command serves the following steps as long as they
@@ -88,7 +178,7 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
     llt.compute(A);
     return llt.info() == Eigen::Success;
   };
-  K::pose_jacobian(model, command, ws.pose, ws.jacobian);
+  jacobian_at(command);
   if (!factorise()) return Status::kSingular;
 
   typename K::Axes q = command;
@@ -116,10 +206,10 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
       large = large || q[i] != wanted || std::abs(delta[i]) > kChordStepLimit * bound;
     }
     if (large) {
-      K::pose_jacobian(model, q, ws.pose, ws.jacobian);
+      jacobian_at(q);
       if (!factorise()) return Status::kSingular;
     } else {
-      K::pose_exact(model, q, ws.pose);
+      pose_at(q);
     }
   }
   if (!q.allFinite() || !r.allFinite()) return Status::kNonFiniteOutput;

@@ -8,6 +8,8 @@
 
 namespace chaincomp {
 
+struct VaryingErrors;  // varying.hpp
+
 enum class UnitKind : int { kLength = 0, kAngle = 1, kRatio = 2 };
 enum class ParamRole : int { kConstant = 0, kError = 1 };
 
@@ -55,6 +57,16 @@ struct ModelEntry {
   int max_order;
   // Returns a chaincomp::Status code; residual[0] point (mm), residual[1] direction (rad).
   int (*compensate)(const void* model, const double* command, double* corrected, double* residual) noexcept;
+  int num_errors;  // error parameters (kParams order): the columns of the error gain matrix
+  // Errors that vary along an axis (params_io.hpp's load_params), attached after prepare()
+  // (which detaches them); they must outlive the model. Every entry point above then
+  // evaluates them at its axes; outside a range that rejects, poses are NaN and compensate
+  // returns kOutsideTable.
+  void (*attach_varying)(void* model, const VaryingErrors* varying) noexcept;
+  // pose_jacobian (with the varying errors' slopes), and the error gain matrix d pose / d error
+  // at zero errors (pose_size x num_errors, column-major; `gain` may be null).
+  void (*pose_jacobian_gain)(const void* model, const double* axes, double* pose, double* jacobian,
+                             double* gain) noexcept;
 };
 
 struct UnitInfo {
