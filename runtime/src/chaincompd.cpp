@@ -105,7 +105,8 @@ int main(int argc, char** argv) {
   const chaincomp::ModelEntry* entry = chaincomp::open_machine(machine_path, error);
   if (!entry) return fail(error);
   std::vector<double> params;
-  if (!chaincomp::load_params(*entry->info, params_path, params, error)) return fail(error);
+  chaincomp::VaryingErrors varying;  // tables and polynomials; outlives the model
+  if (!chaincomp::load_params(*entry->info, params_path, params, varying, error)) return fail(error);
   chaincomp::DaemonConfig config;
   if (!chaincomp::load_daemon_config(*entry->info, config_path, config, error)) return fail(error);
   // The model lives in heap storage sized and aligned for it, filled once.
@@ -114,6 +115,7 @@ int main(int argc, char** argv) {
   void* model = storage.get();
   model = std::align(entry->model_align, entry->model_size, model, space);
   entry->prepare(params.data(), model);
+  if (varying.count > 0) entry->attach_varying(model, &varying);
 
   lcm_t* lcm = lcm_create(config.lcm_url.c_str());
   if (!lcm) return fail("cannot open LCM at '" + config.lcm_url + "'");
@@ -124,8 +126,10 @@ int main(int argc, char** argv) {
   sa.sa_handler = on_signal;
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
-  std::fprintf(stderr, "chaincompd: %s with %s on %s: %s -> %s; ready\n", entry->info->name, params_path.c_str(),
-               config.lcm_url.c_str(), config.command_channel.c_str(), config.corrected_channel.c_str());
+  const std::string tables = chaincomp::describe_varying(varying);
+  std::fprintf(stderr, "chaincompd: %s with %s%s on %s: %s -> %s; ready\n", entry->info->name, params_path.c_str(),
+               tables.empty() ? "" : (" (" + tables + ")").c_str(), config.lcm_url.c_str(),
+               config.command_channel.c_str(), config.corrected_channel.c_str());
 
   using Clock = std::chrono::steady_clock;
   const int fd = lcm_get_fileno(lcm);

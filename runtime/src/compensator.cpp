@@ -67,6 +67,8 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
   double q[kMaxAxes], corrected[kMaxAxes], residual[2] = {0, 0};
   for (int i = 0; i < n_; ++i) q[i] = cmd[i] * info[i].to_internal;
   const auto status = static_cast<Status>(entry_.compensate(model_, q, corrected, residual));
+  // outside a table whose `outside` is reject: the errors are not known there
+  if (status == Status::kOutsideTable) return reject(Reject::kOutOfLimits, why);
   if (status != Status::kOk && status != Status::kResidual) return reject(Reject::kCompensationFailed, why);
 
   // Ramp towards on (1) or off (0) over ramp_time of command time: bumpless switching.

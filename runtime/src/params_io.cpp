@@ -80,6 +80,206 @@ bool parse_value(const ParamInfo& p, const std::string& text, double& out, std::
   return true;
 }
 
+const char* a_kind(UnitKind k) {
+  return k == UnitKind::kLength ? "a length" : k == UnitKind::kAngle ? "an angle" : "a ratio";
+}
+
+int line_of(const YAML::Node& n) { return n.Mark().line >= 0 ? n.Mark().line + 1 : 0; }
+
+std::string at(const std::string& path, int line, const std::string& key) {
+  return path + (line > 0 ? ":" + std::to_string(line) : std::string()) + ": " + key + ": ";
+}
+
+std::string show(const YAML::Node& n) {
+  if (n.IsScalar()) return "'" + n.Scalar() + "'";
+  if (n.IsSequence()) return "a list of " + std::to_string(n.size()) + (n.size() == 1 ? " item" : " items");
+  if (n.IsMap()) return "a mapping";
+  return "nothing";
+}
+
+// A plain YAML number (YAML's .nan and .inf included: they are refused as non-finite).
+bool number(const YAML::Node& n, double& out, std::string& why) {
+  if (!n.IsScalar() || n.Tag() == "!") {
+    why = "expected a number, got " + show(n);
+    return false;
+  }
+  try {
+    out = n.as<double>();
+  } catch (const YAML::Exception&) {
+    why = "expected a number, got " + show(n);
+    return false;
+  }
+  if (!std::isfinite(out)) {
+    why = "expected finite numbers, got " + show(n);
+    return false;
+  }
+  return true;
+}
+
+// One error given as a table or a polynomial over one axis (the Python loader,
+// chaincomp/varying.py, takes the same format with the same messages).
+bool load_varying(const MachineInfo& info, int param, const std::string& path, const YAML::Node& keynode,
+                  const YAML::Node& node, VaryingErrors& varying, std::string& error) {
+  const ParamInfo& p = info.params[param];
+  const std::string base = std::string("values.") + p.name;
+  auto fail = [&](const YAML::Node& where_node, const std::string& key, const std::string& why) {
+    error = at(path, line_of(where_node), key) + why;
+    return false;
+  };
+  if (p.role != ParamRole::kError) {
+    return fail(keynode, base, std::string("only error symbols may vary along an axis; '") + p.name +
+                                   "' is a constant");
+  }
+  const bool is_table = static_cast<bool>(node["table"]), is_poly = static_cast<bool>(node["polynomial"]);
+  if (is_table == is_poly) {
+    return fail(keynode, base, is_table ? "give either 'table' or 'polynomial', not both"
+                                        : "expected a number, or a mapping with 'table' or 'polynomial'");
+  }
+  const char* const table_keys[] = {"axis", "units", "interpolation", "outside", "table"};
+  const char* const poly_keys[] = {"axis", "units", "polynomial", "range", "outside"};
+  for (const auto& kv : node) {
+    const std::string key = kv.first.as<std::string>();
+    bool known = false;
+    for (const char* k : is_table ? table_keys : poly_keys) known = known || key == k;
+    if (!known) {
+      return fail(kv.first, base + "." + key,
+                  std::string("unknown field '") + key + "' (expected one of: " +
+                      (is_table ? "axis, interpolation, outside, table, units" : "axis, outside, polynomial, range, units") +
+                      ")");
+    }
+  }
+  auto key_node = [&](const char* key) {
+    for (const auto& kv : node) {
+      if (kv.first.as<std::string>() == key) return kv.first;
+    }
+    return keynode;
+  };
+  // axis
+  if (!node["axis"]) return fail(keynode, base, "missing required field 'axis'");
+  const std::string axis_name = node["axis"].IsScalar() ? node["axis"].Scalar() : "";
+  int axis = -1;
+  std::string names;
+  for (int i = 0; i < info.num_axes; ++i) {
+    if (axis_name == info.axes[i].name) axis = i;
+    names += std::string(i ? ", " : "") + info.axes[i].name;
+  }
+  if (axis < 0) {
+    return fail(key_node("axis"), base + ".axis", "'" + (node["axis"].IsScalar() ? axis_name : show(node["axis"])) +
+                                                       "' is not an axis of " + info.name + " (axes: " + names + ")");
+  }
+  const AxisInfo& a = info.axes[axis];
+  // units: [position unit, value unit]
+  const YAML::Node units = node["units"];
+  if (!units) return fail(keynode, base, "missing required field 'units' ([position unit, value unit], e.g. [mm, um])");
+  if (!units.IsSequence() || units.size() != 2 || !units[0].IsScalar() || !units[1].IsScalar()) {
+    return fail(key_node("units"), base + ".units",
+                "expected [position unit, value unit], e.g. [mm, um], got " + show(units));
+  }
+  const UnitInfo* pu = find_unit(units[0].Scalar().c_str());
+  const UnitInfo* vu = find_unit(units[1].Scalar().c_str());
+  if (pu == nullptr || vu == nullptr) {
+    return fail(key_node("units"), base + ".units", "unknown unit '" + (pu ? units[1] : units[0]).Scalar() + "'");
+  }
+  if (pu->kind != a.kind) {
+    return fail(key_node("units"), base + ".units",
+                std::string("position unit '") + pu->name + "' is " + a_kind(pu->kind) + " unit, but axis " + a.name +
+                    " is " + a_kind(a.kind) + " (declared in '" + a.unit + "')");
+  }
+  if (vu->kind != p.kind) {
+    return fail(key_node("units"), base + ".units",
+                std::string("value unit '") + vu->name + "' is " + a_kind(vu->kind) + " unit, but " + p.name + " is " +
+                    a_kind(p.kind) + " (declared in '" + p.unit + "')");
+  }
+  int column = 0;
+  for (int i = 0; i < param; ++i) column += info.params[i].role == ParamRole::kError;
+  // outside
+  Outside outside = Outside::kHold;
+  const bool has_range = is_poly && node["range"];
+  if (is_table || has_range) {
+    if (!node["outside"]) return fail(keynode, base, "missing required field 'outside' (hold or reject)");
+    const std::string o = node["outside"].IsScalar() ? node["outside"].Scalar() : "";
+    if (o != "hold" && o != "reject") {
+      return fail(key_node("outside"), base + ".outside", "outside must be hold or reject, got " + show(node["outside"]));
+    }
+    outside = o == "hold" ? Outside::kHold : Outside::kReject;
+  } else if (node["outside"]) {
+    return fail(key_node("outside"), base + ".outside",
+                "'outside' applies to a polynomial's 'range' (give range: [low, high] in the position unit)");
+  }
+  std::string why;
+  int bad = -1;
+  if (is_table) {
+    if (!node["interpolation"]) {
+      return fail(keynode, base, "missing required field 'interpolation' (linear or monotone_cubic)");
+    }
+    const std::string it = node["interpolation"].IsScalar() ? node["interpolation"].Scalar() : "";
+    if (it != "linear" && it != "monotone_cubic") {
+      return fail(key_node("interpolation"), base + ".interpolation",
+                  "interpolation must be linear or monotone_cubic, got " + show(node["interpolation"]));
+    }
+    const YAML::Node rows = node["table"];
+    if (!rows.IsSequence()) {
+      return fail(key_node("table"), base + ".table", "expected a list of [position, value] rows, got " + show(rows));
+    }
+    const int n = static_cast<int>(rows.size());
+    if (n < 2 || n > kMaxTableKnots) {
+      return fail(key_node("table"), base + ".table",
+                  n < 2 ? "a table needs at least 2 points, got " + std::to_string(n)
+                        : "a table holds at most " + std::to_string(kMaxTableKnots) + " points, got " + std::to_string(n));
+    }
+    std::vector<double> x(n), y(n);
+    for (int i = 0; i < n; ++i) {
+      const YAML::Node row = rows[i];
+      const std::string key = base + ".table[" + std::to_string(i) + "]";
+      if (!row.IsSequence() || row.size() != 2) return fail(row, key, "expected [position, value], got " + show(row));
+      if (!number(row[0], x[i], why) || !number(row[1], y[i], why)) return fail(row, key, why);
+      x[i] *= pu->to_internal;
+      y[i] *= vu->to_internal;
+    }
+    if (!add_table(varying, param, column, axis, x.data(), y.data(), n,
+                   it == "linear" ? Interpolation::kLinear : Interpolation::kMonotoneCubic, outside, why, bad)) {
+      // back to the declared units for the message
+      if (bad >= 0) {
+        const YAML::Node row = rows[bad];
+        if (why.rfind("duplicate", 0) == 0) why = "duplicate position " + row[0].Scalar();
+        else if (why.rfind("positions", 0) == 0) why = "positions must increase: " + row[0].Scalar() + " follows " +
+                                                       rows[bad - 1][0].Scalar();
+        return fail(row, base + ".table[" + std::to_string(bad) + "]", why);
+      }
+      return fail(key_node("table"), base + ".table", why);
+    }
+    return true;
+  }
+  const YAML::Node coeffs = node["polynomial"];
+  if (!coeffs.IsSequence() || coeffs.size() < 1 || coeffs.size() > static_cast<std::size_t>(kMaxPolynomialCoefficients)) {
+    return fail(key_node("polynomial"), base + ".polynomial",
+                "expected a list of 1 to " + std::to_string(kMaxPolynomialCoefficients) +
+                    " coefficients [c0, c1, ...] (c0 + c1*x + ...), got " + show(coeffs));
+  }
+  std::vector<double> c(coeffs.size());
+  for (std::size_t i = 0; i < coeffs.size(); ++i) {
+    if (!number(coeffs[i], c[i], why)) return fail(coeffs[i], base + ".polynomial[" + std::to_string(i) + "]", why);
+  }
+  double lower = -INFINITY, upper = INFINITY;
+  if (has_range) {
+    const YAML::Node r = node["range"];
+    if (!r.IsSequence() || r.size() != 2) {
+      return fail(key_node("range"), base + ".range", "expected [low, high] in the position unit, got " + show(r));
+    }
+    if (!number(r[0], lower, why) || !number(r[1], upper, why)) return fail(key_node("range"), base + ".range", why);
+    if (!(lower < upper)) {
+      return fail(key_node("range"), base + ".range", "low " + r[0].Scalar() + " must be below high " + r[1].Scalar());
+    }
+    lower *= pu->to_internal;
+    upper *= pu->to_internal;
+  }
+  if (!add_polynomial(varying, param, column, axis, c.data(), static_cast<int>(c.size()), 1.0 / pu->to_internal,
+                      vu->to_internal, lower, upper, outside, why, bad)) {
+    return fail(key_node("polynomial"), base + ".polynomial", why);
+  }
+  return true;
+}
+
 }  // namespace
 
 const ModelEntry* open_machine(const std::string& path, std::string& error) {
@@ -109,7 +309,9 @@ const ModelEntry* open_machine(const std::string& path, std::string& error) {
 }
 
 bool load_params(const MachineInfo& info, const std::string& path, std::vector<double>& values,
-                 std::string& error) {
+                 VaryingErrors& varying, std::string& error) {
+  varying.count = 0;
+  varying.storage.clear();
   values.assign(info.num_params, 0.0);
   for (int i = 0; i < info.num_params; ++i) values[i] = info.params[i].nominal;
   std::string text;
@@ -151,8 +353,15 @@ bool load_params(const MachineInfo& info, const std::string& path, std::vector<d
                        : "unknown symbol '" + name + "' for machine '" + info.name + "'");
       return false;
     }
+    if (kv.second.IsMap()) {
+      if (!load_varying(info, index, path, kv.first, kv.second, varying, error)) return false;
+      values[index] = 0.0;
+      continue;
+    }
     if (!kv.second.IsScalar() || kv.second.IsNull()) {
-      error = where(path, kv.first, key) + "missing value";
+      error = where(path, kv.first, key) + (kv.second.IsSequence()
+                                                ? "expected a number, or a mapping with 'table' or 'polynomial'"
+                                                : "missing value");
       return false;
     }
     std::string why;
@@ -160,6 +369,33 @@ bool load_params(const MachineInfo& info, const std::string& path, std::vector<d
       error = where(path, kv.first, key) + why;
       return false;
     }
+  }
+  return true;
+}
+
+std::string describe_varying(const VaryingErrors& varying) {
+  if (varying.count == 0) return "";
+  int tables = 0, points = 0;
+  for (int i = 0; i < varying.count; ++i) {
+    if (varying.items[i].kind == VaryingKind::kTable) {
+      ++tables;
+      points += varying.items[i].count;
+    }
+  }
+  const int polys = varying.count - tables;
+  return std::to_string(varying.count) + (varying.count == 1 ? " error varies" : " errors vary") +
+         " along an axis: " + std::to_string(tables) + (tables == 1 ? " table (" : " tables (") +
+         std::to_string(points) + " points), " + std::to_string(polys) + (polys == 1 ? " polynomial" : " polynomials");
+}
+
+bool load_params(const MachineInfo& info, const std::string& path, std::vector<double>& values,
+                 std::string& error) {
+  VaryingErrors varying;
+  if (!load_params(info, path, values, varying, error)) return false;
+  if (varying.count > 0) {
+    error = path + ": values." + info.params[varying.items[0].param].name +
+            ": an error that varies along an axis needs a loader that keeps it (VaryingErrors)";
+    return false;
   }
   return true;
 }

@@ -86,7 +86,8 @@ int main(int argc, char** argv) {
   const chaincomp::ModelEntry* entry = chaincomp::open_machine(machine_path, error);
   if (!entry) return fail(error);
   std::vector<double> params;
-  if (!chaincomp::load_params(*entry->info, params_path, params, error)) return fail(error);
+  chaincomp::VaryingErrors varying;  // tables and polynomials; outlives the model
+  if (!chaincomp::load_params(*entry->info, params_path, params, varying, error)) return fail(error);
   chaincomp::DaemonConfig config;
   if (!chaincomp::load_daemon_config(*entry->info, config_path, config, error)) return fail(error);
   std::vector<unsigned char> storage(entry->model_size + entry->model_align);
@@ -94,6 +95,10 @@ int main(int argc, char** argv) {
   std::size_t space = storage.size();
   model = std::align(entry->model_align, entry->model_size, model, space);
   entry->prepare(params.data(), model);
+  if (varying.count > 0) {
+    entry->attach_varying(model, &varying);
+    if (!quiet) std::fprintf(stderr, "chaincomp replay: %s: %s\n", params_path.c_str(), chaincomp::describe_varying(varying).c_str());
+  }
   chaincomp::Compensator comp(*entry, model, config.compensator);
 
   lcm_eventlog_t* in = lcm_eventlog_create(in_path.c_str(), "r");

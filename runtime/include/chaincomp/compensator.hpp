@@ -19,7 +19,7 @@ enum class Reject : int {
   kWrongMachine = 1,
   kWrongAxisCount = 2,
   kNonFinite = 3,
-  kOutOfLimits = 4,
+  kOutOfLimits = 4,    // outside the axis limits, or outside a table whose `outside` is reject
   kStepTooLarge = 5,
   kDuplicateSeq = 6,
   kOutOfOrderSeq = 7,

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "chaincomp/model_info.hpp"
+#include "chaincomp/varying.hpp"
 
 namespace chaincomp {
 
@@ -17,6 +18,16 @@ const ModelEntry* open_machine(const std::string& path, std::string& error);
 // Parameter values (internal units, kParams order) from a params file: nominal values for
 // constants and 0 for errors the file does not list. Unknown names, axes, null or non-finite
 // values, unparsable text and units of the wrong kind are errors naming file, line and key.
+// An error may also vary along an axis (a table or a polynomial, README "Errors that vary
+// along an axis"): it goes into `varying` (emptied first; its value in `values` is 0), and
+// every mistake in a table is an error naming file, line and key as well.
+bool load_params(const MachineInfo& info, const std::string& path, std::vector<double>& values,
+                 VaryingErrors& varying, std::string& error);
+
+// "18 errors vary along an axis: 18 tables (1818 points), 0 polynomials" (empty for none).
+std::string describe_varying(const VaryingErrors& varying);
+
+// Constant values only: a file with tables or polynomials is refused.
 bool load_params(const MachineInfo& info, const std::string& path, std::vector<double>& values,
                  std::string& error);
 
