@@ -1,5 +1,6 @@
 """Numeric evaluation: the exact model (the chain multiplied without truncation) and
-the truncated models, with numpy (arrays broadcast) or mpmath (high precision)."""
+the truncated models, with numpy (arrays broadcast) or mpmath (high precision). Errors that
+vary along an axis (chaincomp.varying) are evaluated at the axis values given."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import sympy as sp
 
 from .derive import _ROT_PLANE, Derivation
 from .machine import Machine, Rotation
+from .varying import resolve
 
 BACKENDS = ("numpy", "mpmath")
 
@@ -47,6 +49,7 @@ class ExactModel:
         """(point, direction or None) for ``values`` (internal units, every symbol by name)."""
         lib = _lib(backend)
         steps, point_f, dir_f = self._compiled(backend)
+        values = resolve(values)
         args = [values[s.name] for s in self.machine.symbols]
         p = [f(*args) for f in point_f]
         d = [f(*args) for f in dir_f] if dir_f else None
@@ -63,6 +66,7 @@ class ExactModel:
 
     def error(self, values: dict, backend: str = "numpy"):
         """Exact tool error: pose with the errors minus pose with every error at zero."""
+        values = resolve(values)
         nominal_values = dict(values)
         for s in self.machine.errors:
             nominal_values[s.name] = 0 * values[s.name]
@@ -91,6 +95,7 @@ class TruncatedModel:
         return self._cache[key]
 
     def error(self, values: dict, order: int, backend: str = "numpy"):
+        values = resolve(values)
         args = [values[s.name] for s in self.machine.symbols]
         dp = [f(*args) for f in self._fn("point", order, backend)]
         dd = [f(*args) for f in self._fn("direction", order, backend)] if self.d.direction else None

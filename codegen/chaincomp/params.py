@@ -1,4 +1,6 @@
-"""Error values (and constant overrides) for a machine, from a params file or the command line."""
+"""Error values (and constant overrides) for a machine, from a params file or the command line.
+
+An error may also vary along an axis (a table or a polynomial): chaincomp.varying."""
 
 from __future__ import annotations
 
@@ -8,6 +10,7 @@ import re
 from . import units
 from .errors import ChaincompError
 from .machine import Machine, Symbol
+from .varying import MAX_VARYING_ERRORS, Varying, parse_varying
 from .yamlsource import load_yaml
 
 _VALUE = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([^\s\d].*)?$")
@@ -41,8 +44,11 @@ def parse_value(sym: Symbol, raw) -> float:
     return value * unit.to_internal
 
 
-def load_params(path: str, machine: Machine) -> dict[str, float]:
-    """Values from a params file, by symbol name, in internal units (mm, rad)."""
+def load_params(path: str, machine: Machine) -> dict[str, float | Varying]:
+    """Values from a params file, by symbol name, in internal units (mm, rad).
+
+    An error given as a table or polynomial over an axis is a ``Varying`` (callable on the
+    axis value); chaincomp.numeric's models evaluate it at the axes (``varying.resolve``)."""
     doc = load_yaml(path)
     if not isinstance(doc, dict):
         raise ChaincompError("expected a mapping with 'values'", path, 1)
@@ -68,6 +74,15 @@ def load_params(path: str, machine: Machine) -> dict[str, float]:
         if sym.role == "axis":
             raise ChaincompError(f"{name!r} is an axis: axis values are commands, not parameters",
                                  path, line, f"values.{name}")
+        if isinstance(raw, dict):
+            out[name] = parse_varying(raw, name, path, line, machine)
+            if sum(isinstance(v, Varying) for v in out.values()) > MAX_VARYING_ERRORS:
+                raise ChaincompError(f"more than {MAX_VARYING_ERRORS} varying errors", path, line,
+                                     f"values.{name}")
+            continue
+        if isinstance(raw, list):
+            raise ChaincompError("expected a number, or a mapping with 'table' or 'polynomial'", path, line,
+                                 f"values.{name}")
         try:
             out[name] = parse_value(sym, raw)
         except ValueError as exc:

@@ -7,6 +7,7 @@ import json
 from ..derive import derive
 from ..numeric import ExactModel, TruncatedModel
 from ..units import UNITS
+from ..varying import check_inside, resolve, varying_errors
 from .common import add_machine_argument, add_values_arguments, load, values_for
 
 
@@ -14,7 +15,8 @@ def add_parser(sub) -> None:
     p = sub.add_parser("eval", help="evaluate the tool point and its error at given axis values",
                        description="Evaluate the nominal tool point (and tool direction) at given axis "
                                    "values and, when error values are given, the tool-point error of "
-                                   "the first-order, second-order and exact models.")
+                                   "the first-order, second-order and exact models. An error given as a "
+                                   "table or polynomial over an axis takes its value at the axes given.")
     add_machine_argument(p)
     add_values_arguments(p)
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
@@ -34,6 +36,13 @@ def evaluate(machine, values: dict, with_errors: bool) -> dict:
     }
     if direction is not None:
         out["direction"] = [float(v) for v in direction]
+    varying = varying_errors(values)
+    if varying:
+        # errors that vary along an axis, at these axes, in their declared units
+        at = resolve(values)
+        out["varying"] = {k: {"value": float(f"{machine.symbol(k).from_internal(at[k]):.15g}"),
+                              "unit": machine.symbol(k).unit.name, "axis": v.axis}
+                          for k, v in varying.items()}
     if with_errors:
         model = TruncatedModel(derive(machine, 2))
         err, derr = {}, {}
@@ -51,6 +60,7 @@ def evaluate(machine, values: dict, with_errors: bool) -> dict:
 def run(args) -> int:
     machine = load(args.machine)
     values, with_errors = values_for(machine, args.params, args.sets)
+    check_inside(values)
     out = evaluate(machine, values, with_errors)
     print(json.dumps(out, indent=2) if args.json else _text(out))
     return 0
@@ -63,6 +73,9 @@ def _text(out: dict) -> str:
     lines = [f"{out['machine']} at {axes}", f"  tool point       {fmt(out['position'])} {unit}"]
     if "direction" in out:
         lines.append(f"  tool direction   {fmt(out['direction'])}")
+    if "varying" in out:
+        lines.append("  errors that vary along an axis, here: "
+                     + ", ".join(f"{k} = {v['value']:.6g} {v['unit']}" for k, v in out["varying"].items()))
     for key, title, u in (("error", "tool point error", unit), ("direction_error", "direction error", "")):
         if key in out:
             lines.append(f"  {title} ({u or 'unit vector'}):")

@@ -1,0 +1,427 @@
+"""Errors that vary along an axis: a table over one axis (linear or monotone-cubic
+interpolation, held or rejected outside) or a polynomial in one axis, given in a params file
+in place of a constant, and evaluated at the axes of each pose.
+
+The same format, limits and messages as the C++ loader (runtime/src/params_io.cpp) and the
+same interpolants as the runtime (runtime/include/chaincomp/varying.hpp)::
+
+    values:
+      EXX:                       # a table over X
+        axis: X
+        units: [mm, um]          # position unit (the axis' kind), value unit (the error's kind)
+        interpolation: monotone_cubic   # or linear
+        outside: hold            # or reject
+        table:
+          - [-400, 0.0]
+          - [-392, 0.31]
+      EBX:                       # a polynomial in X: c0 + c1*X + c2*X^2 (X in mm, value in arcsec)
+        axis: X
+        units: [mm, arcsec]
+        polynomial: [0.5, 2.0e-3, -1.5e-6]
+        range: [-400, 400]       # optional, with outside: hold or reject
+        outside: hold
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import units as U
+from .errors import ChaincompError
+
+MAX_TABLE_KNOTS = 4096            # runtime: kMaxTableKnots
+MAX_POLYNOMIAL_COEFFICIENTS = 16  # runtime: kMaxPolynomialCoefficients
+MAX_VARYING_ERRORS = 64           # runtime: kMaxVaryingErrors
+INTERPOLATIONS = ("linear", "monotone_cubic")
+OUTSIDE = ("hold", "reject")
+TABLE_KEYS = ("axis", "interpolation", "outside", "table", "units")
+POLYNOMIAL_KEYS = ("axis", "outside", "polynomial", "range", "units")
+
+
+def _a(kind: str) -> str:
+    return {"length": "a length", "angle": "an angle", "ratio": "a ratio"}[kind]
+
+
+# ----------------------------------------------------------------------------- interpolants
+
+def monotone_cubic_slopes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Fritsch-Carlson (PCHIP) slopes at the knots: interior slopes by the weighted harmonic
+    mean of Fritsch & Butland (zero at a local extremum or next to a flat piece), end slopes
+    by the shape-preserving three-point formula; two knots: the line's slope."""
+    x = np.asarray(x, float)
+    y = np.asarray(y, float)
+    n = len(x)
+    h = np.diff(x)
+    m = np.diff(y) / h
+    if n == 2:
+        return np.array([m[0], m[0]])
+    d = np.zeros(n)
+    for k in range(1, n - 1):
+        if np.sign(m[k - 1]) != np.sign(m[k]) or m[k - 1] == 0 or m[k] == 0:
+            d[k] = 0.0
+        else:
+            w1, w2 = 2 * h[k] + h[k - 1], h[k] + 2 * h[k - 1]
+            d[k] = (w1 + w2) / (w1 / m[k - 1] + w2 / m[k])
+
+    def edge(h0, h1, m0, m1):
+        e = ((2 * h0 + h1) * m0 - h0 * m1) / (h0 + h1)
+        if np.sign(e) != np.sign(m0):
+            e = 0.0
+        elif np.sign(m0) != np.sign(m1) and abs(e) > 3 * abs(m0):
+            e = 3 * m0
+        return e
+
+    d[0] = edge(h[0], h[1], m[0], m[1])
+    d[-1] = edge(h[-1], h[-2], m[-1], m[-2])
+    return d
+
+
+def _is_mp(t) -> bool:
+    return type(t).__module__.startswith("mpmath")
+
+
+@dataclass(frozen=True, eq=False)
+class Varying:
+    """An error that varies along one axis; values in internal units (mm, rad, 1)."""
+
+    error: str
+    axis: str
+    units: tuple[U.Unit, U.Unit]   # position unit, value unit (as declared)
+    outside: str                   # "hold" | "reject"
+    lower: float                   # range, internal units (infinite: valid everywhere)
+    upper: float
+    file: str = ""
+    line: int = 0
+
+    @property
+    def key(self) -> str:
+        return f"values.{self.error}"
+
+    def __call__(self, t):
+        """Value at axis position(s) t (internal units; numpy arrays and mpmath scalars).
+        Outside the range: held at the nearest end, or NaN where ``outside`` is reject."""
+        return self._value_slope(t)[0]
+
+    def slope(self, t):
+        """d value / d axis at t (internal units); 0 outside the range."""
+        return self._value_slope(t)[1]
+
+    def inside(self, t):
+        t = np.asarray(t, float)
+        return (t >= self.lower) & (t <= self.upper)
+
+    def check_inside(self, t: float, axis_unit: U.Unit | None = None) -> None:
+        """ChaincompError naming the file, line and key when t lies outside a rejecting range."""
+        if self.outside == "reject" and not bool(self.inside(float(t))):
+            pu = self.units[0]
+            raise ChaincompError(
+                f"{self.axis} = {float(t) / pu.to_internal:g} {pu.name} lies outside the "
+                f"{'table' if isinstance(self, Table) else 'range'} [{self.lower / pu.to_internal:g}, "
+                f"{self.upper / pu.to_internal:g}] {pu.name} of {self.error} (outside: reject)",
+                self.file, self.line, self.key)
+
+    def describe(self) -> str:
+        raise NotImplementedError
+
+    def _value_slope(self, t):
+        raise NotImplementedError
+
+
+@dataclass(frozen=True, eq=False)
+class Table(Varying):
+    interpolation: str = "linear"
+    x: np.ndarray = field(default=None, repr=False)   # positions, internal units
+    y: np.ndarray = field(default=None, repr=False)   # values, internal units
+    d: np.ndarray = field(default=None, repr=False)   # slopes at the knots (monotone cubic)
+
+    def describe(self) -> str:
+        pu = self.units[0]
+        return (f"table over {self.axis}, {len(self.x)} points in [{self.x[0] / pu.to_internal:g}, "
+                f"{self.x[-1] / pu.to_internal:g}] {pu.name}, {self.interpolation.replace('_', ' ')}, "
+                f"outside: {self.outside}")
+
+    def _value_slope(self, t):
+        if _is_mp(t):
+            return self._scalar(t)
+        arr = np.asarray(t, dtype=float)
+        x, y, n = self.x, self.y, len(self.x)
+        k = np.clip(np.searchsorted(x, arr, side="right") - 1, 0, n - 2)
+        h = x[k + 1] - x[k]
+        if self.interpolation == "linear":
+            s = (y[k + 1] - y[k]) / h
+            v = s * (arr - x[k]) + y[k]
+        else:
+            u = (arr - x[k]) / h
+            v, s = _hermite(u, h, y[k], y[k + 1], self.d[k], self.d[k + 1])
+        first = arr <= x[0]
+        last = arr >= x[-1]
+        v = np.where(first, y[0], np.where(last, y[-1], v))
+        s0 = (y[1] - y[0]) / (x[1] - x[0]) if self.interpolation == "linear" else self.d[0]
+        s1 = (y[-1] - y[-2]) / (x[-1] - x[-2]) if self.interpolation == "linear" else self.d[-1]
+        s = np.where(arr == x[0], s0, np.where(arr == x[-1], s1, np.where(first | last, 0.0, s)))
+        if self.outside == "reject":
+            out = ~((arr >= x[0]) & (arr <= x[-1]))
+            v = np.where(out, np.nan, v)
+            s = np.where(out, np.nan, s)
+        if v.ndim == 0:
+            return float(v), float(s)
+        return v, s
+
+    def _scalar(self, t):
+        """mpmath: the interval found in floats, the interpolant in t's precision."""
+        import mpmath
+        x, y, n = self.x, self.y, len(self.x)
+        tf = float(t)
+        if self.outside == "reject" and not x[0] <= tf <= x[-1]:
+            return mpmath.mpf("nan"), mpmath.mpf("nan")
+        if tf <= x[0] or tf >= x[-1]:
+            i = 0 if tf <= x[0] else n - 1
+            return mpmath.mpf(float(y[i])), mpmath.mpf(0)
+        k = int(min(max(np.searchsorted(x, tf, side="right") - 1, 0), n - 2))
+        xk, x1, yk, y1 = (mpmath.mpf(float(v)) for v in (x[k], x[k + 1], y[k], y[k + 1]))
+        h = x1 - xk
+        if self.interpolation == "linear":
+            s = (y1 - yk) / h
+            return s * (t - xk) + yk, s
+        return _hermite((t - xk) / h, h, yk, y1, mpmath.mpf(float(self.d[k])), mpmath.mpf(float(self.d[k + 1])))
+
+
+def _hermite(u, h, y0, y1, d0, d1):
+    """Cubic Hermite on one interval, its value and slope (the runtime's formula)."""
+    u2 = u * u
+    u3 = u2 * u
+    h00 = 2 * u3 - 3 * u2 + 1
+    h10 = u3 - 2 * u2 + u
+    h01 = 3 * u2 - 2 * u3
+    h11 = u3 - u2
+    value = h00 * y0 + h10 * h * d0 + h01 * y1 + h11 * h * d1
+    slope = 6 * (u2 - u) / h * (y0 - y1) + (3 * u2 - 4 * u + 1) * d0 + (3 * u2 - 2 * u) * d1
+    return value, slope
+
+
+@dataclass(frozen=True, eq=False)
+class Polynomial(Varying):
+    coefficients: tuple[float, ...] = ()   # declared units: value_unit / position_unit^k
+
+    def describe(self) -> str:
+        pu = self.units[0]
+        deg = len(self.coefficients) - 1
+        rng = ("" if math.isinf(self.lower) else
+               f" over [{self.lower / pu.to_internal:g}, {self.upper / pu.to_internal:g}] {pu.name}, "
+               f"outside: {self.outside}")
+        return f"polynomial of degree {deg} in {self.axis}{rng}"
+
+    def _value_slope(self, t):
+        pu, vu = self.units
+        c = self.coefficients
+        if _is_mp(t):
+            import mpmath
+            tf = float(t)
+            if self.outside == "reject" and not self.lower <= tf <= self.upper:
+                return mpmath.mpf("nan"), mpmath.mpf("nan")
+            inside = self.lower <= tf <= self.upper
+            tc = t if inside else mpmath.mpf(min(max(tf, self.lower), self.upper))
+            u = tc / mpmath.mpf(pu.to_internal)
+        else:
+            arr = np.asarray(t, dtype=float)
+            inside = (arr >= self.lower) & (arr <= self.upper)
+            u = np.clip(arr, self.lower, self.upper) / pu.to_internal
+        p = c[-1] + 0 * u
+        dp = 0 * u
+        for ck in reversed(c[:-1]):
+            dp = dp * u + p
+            p = p * u + ck
+        value = p * vu.to_internal
+        slope = dp * vu.to_internal / pu.to_internal
+        if _is_mp(t):
+            return value, slope if inside else slope * 0
+        slope = np.where(inside, slope, 0.0)
+        if self.outside == "reject":
+            value = np.where(inside, value, np.nan)
+            slope = np.where(inside, slope, np.nan)
+        if np.ndim(value) == 0:
+            return float(value), float(slope)
+        return value, slope
+
+
+# ----------------------------------------------------------------------------- evaluation
+
+def resolve(values: dict) -> dict:
+    """``values`` with each varying error replaced by its value at the axis values given there."""
+    varying = [(k, v) for k, v in values.items() if isinstance(v, Varying)]
+    if not varying:
+        return values
+    out = dict(values)
+    for k, v in varying:
+        out[k] = v(values[v.axis])
+    return out
+
+
+def check_inside(values: dict) -> None:
+    """A ChaincompError (file, line, key) for an axis outside a range that rejects."""
+    for v in values.values():
+        if isinstance(v, Varying) and np.ndim(values[v.axis]) == 0:
+            v.check_inside(values[v.axis])
+
+
+def varying_errors(values: dict) -> dict[str, Varying]:
+    return {k: v for k, v in values.items() if isinstance(v, Varying)}
+
+
+# ----------------------------------------------------------------------------- parsing
+
+def _lines(node, key, default):
+    lines = getattr(node, "lines", None)
+    if isinstance(lines, dict):
+        return lines.get(key, default)
+    if isinstance(lines, list) and isinstance(key, int) and 0 <= key < len(lines):
+        return lines[key]
+    return default
+
+
+def _show(value) -> str:
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list):
+        return f"a list of {len(value)} item" + ("" if len(value) == 1 else "s")
+    if value is None:
+        return "nothing"
+    return repr(value)
+
+
+def _number(value, fail) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        fail(f"expected a number, got {_show(value)}")
+    if not math.isfinite(value):
+        fail(f"expected finite numbers, got {value!r}")
+    return float(value)
+
+
+def parse_varying(node, name: str, path: str, line: int, machine=None) -> Varying:
+    """One error given as a table or polynomial (a mapping in a params file's ``values``).
+
+    With ``machine`` the axis, the error and the units' kinds are checked against it;
+    without, only what the entry itself states (for ``chaincomp plot --table``)."""
+    base = f"values.{name}"
+
+    def fail(msg, at_line=None, key=None):
+        raise ChaincompError(msg, path, at_line or line, key or base)
+
+    if machine is not None:
+        sym = machine.symbol(name)
+        if sym.role != "error":
+            fail(f"only error symbols may vary along an axis; {name!r} is a {sym.role}")
+    is_table, is_poly = "table" in node, "polynomial" in node
+    if is_table == is_poly:
+        fail("give either 'table' or 'polynomial', not both" if is_table
+             else "expected a number, or a mapping with 'table' or 'polynomial'")
+    allowed = TABLE_KEYS if is_table else POLYNOMIAL_KEYS
+    for key in node:
+        if key not in allowed:
+            fail(f"unknown field {key!r} (expected one of: {', '.join(allowed)})", _lines(node, key, line),
+                 f"{base}.{key}")
+    kline = lambda k: _lines(node, k, line)  # noqa: E731
+
+    if "axis" not in node:
+        fail("missing required field 'axis'")
+    axis = node["axis"]
+    axis_sym = None
+    if machine is not None:
+        names = [a.name for a in machine.axes]
+        if not isinstance(axis, str) or axis not in names:
+            shown = repr(axis) if isinstance(axis, str) else _show(axis)
+            fail(f"{shown} is not an axis of {machine.name} (axes: {', '.join(names)})", kline("axis"),
+                 f"{base}.axis")
+        axis_sym = machine.symbol(axis)
+    elif not isinstance(axis, str):
+        fail(f"expected an axis name, got {_show(axis)}", kline("axis"), f"{base}.axis")
+
+    if "units" not in node:
+        fail("missing required field 'units' ([position unit, value unit], e.g. [mm, um])")
+    raw_units = node["units"]
+    if not isinstance(raw_units, list) or len(raw_units) != 2 or not all(isinstance(u, str) for u in raw_units):
+        fail(f"expected [position unit, value unit], e.g. [mm, um], got {_show(raw_units)}", kline("units"),
+             f"{base}.units")
+    try:
+        pu, vu = U.unit(raw_units[0]), U.unit(raw_units[1])
+    except KeyError as exc:
+        fail(exc.args[0], kline("units"), f"{base}.units")
+    if axis_sym is not None and pu.kind != axis_sym.unit.kind:
+        fail(f"position unit {pu.name!r} is {_a(pu.kind)} unit, but axis {axis} is {_a(axis_sym.unit.kind)} "
+             f"(declared in {axis_sym.unit.name!r})", kline("units"), f"{base}.units")
+    if machine is not None:
+        sym = machine.symbol(name)
+        if vu.kind != sym.unit.kind:
+            fail(f"value unit {vu.name!r} is {_a(vu.kind)} unit, but {name} is {_a(sym.unit.kind)} "
+                 f"(declared in {sym.unit.name!r})", kline("units"), f"{base}.units")
+
+    has_range = is_poly and "range" in node
+    outside = "hold"
+    if is_table or has_range:
+        if "outside" not in node:
+            fail("missing required field 'outside' (hold or reject)")
+        outside = node["outside"]
+        if outside not in OUTSIDE:
+            fail(f"outside must be hold or reject, got {_show(outside)}", kline("outside"), f"{base}.outside")
+    elif "outside" in node:
+        fail("'outside' applies to a polynomial's 'range' (give range: [low, high] in the position unit)",
+             kline("outside"), f"{base}.outside")
+
+    common = dict(error=name, axis=axis, units=(pu, vu), outside=outside, file=path, line=line)
+    if is_table:
+        if "interpolation" not in node:
+            fail("missing required field 'interpolation' (linear or monotone_cubic)")
+        interp = node["interpolation"]
+        if interp not in INTERPOLATIONS:
+            fail(f"interpolation must be linear or monotone_cubic, got {_show(interp)}", kline("interpolation"),
+                 f"{base}.interpolation")
+        rows = node["table"]
+        if not isinstance(rows, list):
+            fail(f"expected a list of [position, value] rows, got {_show(rows)}", kline("table"), f"{base}.table")
+        n = len(rows)
+        if n < 2:
+            fail(f"a table needs at least 2 points, got {n}", kline("table"), f"{base}.table")
+        if n > MAX_TABLE_KNOTS:
+            fail(f"a table holds at most {MAX_TABLE_KNOTS} points, got {n}", kline("table"), f"{base}.table")
+        xs, ys = [], []
+        for i, row in enumerate(rows):
+            rline = _lines(rows, i, kline("table"))
+            rkey = f"{base}.table[{i}]"
+            rfail = lambda msg, rline=rline, rkey=rkey: fail(msg, rline, rkey)  # noqa: E731
+            if not isinstance(row, list) or len(row) != 2:
+                rfail(f"expected [position, value], got {_show(row)}")
+            p, v = _number(row[0], rfail), _number(row[1], rfail)
+            if xs and p == xs[-1]:
+                rfail(f"duplicate position {row[0]!r}")
+            if xs and p < xs[-1]:
+                rfail(f"positions must increase: {row[0]!r} follows {rows[i - 1][0]!r}")
+            xs.append(p)
+            ys.append(v)
+        x = np.array(xs) * pu.to_internal
+        y = np.array(ys) * vu.to_internal
+        d = monotone_cubic_slopes(x, y) if interp == "monotone_cubic" else np.zeros(n)
+        for a in (x, y, d):
+            a.setflags(write=False)
+        return Table(**common, lower=float(x[0]), upper=float(x[-1]), interpolation=interp, x=x, y=y, d=d)
+
+    coeffs = node["polynomial"]
+    if not isinstance(coeffs, list) or not 1 <= len(coeffs) <= MAX_POLYNOMIAL_COEFFICIENTS:
+        fail(f"expected a list of 1 to {MAX_POLYNOMIAL_COEFFICIENTS} coefficients [c0, c1, ...] "
+             f"(c0 + c1*x + ...), got {_show(coeffs)}", kline("polynomial"), f"{base}.polynomial")
+    c = tuple(_number(v, lambda msg, i=i: fail(msg, _lines(coeffs, i, kline("polynomial")),
+                                                     f"{base}.polynomial[{i}]"))
+              for i, v in enumerate(coeffs))
+    lower, upper = -math.inf, math.inf
+    if has_range:
+        r = node["range"]
+        rfail = lambda msg: fail(msg, kline("range"), f"{base}.range")  # noqa: E731
+        if not isinstance(r, list) or len(r) != 2:
+            rfail(f"expected [low, high] in the position unit, got {_show(r)}")
+        lo, hi = _number(r[0], rfail), _number(r[1], rfail)
+        if not lo < hi:
+            rfail(f"low {r[0]!r} must be below high {r[1]!r}")
+        lower, upper = lo * pu.to_internal, hi * pu.to_internal
+    return Polynomial(**common, lower=lower, upper=upper, coefficients=c)
