@@ -17,6 +17,8 @@ from . import check, report  # noqa: E402
 VERBS += (check, report)
 from . import budget  # noqa: E402
 VERBS += (budget,)
+from . import simulate_calibration  # noqa: E402
+VERBS += (simulate_calibration,)
 
 
 def build_parser() -> argparse.ArgumentParser:
