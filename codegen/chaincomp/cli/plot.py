@@ -1,4 +1,5 @@
-"""``chaincomp plot``: error maps over two axes, and the time plot of a replay CSV."""
+"""``chaincomp plot``: error maps over two axes, the time plot of a replay CSV, and an error
+that varies along an axis (a table and its interpolant, or a polynomial)."""
 
 from __future__ import annotations
 
@@ -18,11 +19,15 @@ MODELS = ("first", "second", "exact", "second-first", "exact-first", "exact-seco
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("plot", help="error map over two axes, or the plot of a replay CSV",
+    p = sub.add_parser("plot", help="error map over two axes, a replay CSV, or an error table",
                        description="Plot one tool-error component over a grid of two axes (the paper's "
                                    "Fig. 3 is dy over Ap and Cp), for the first-order, second-order or "
                                    "exact model or the difference of two; or, with --replay, commanded "
-                                   "axes, correction and residual over time from a 'chaincomp replay' CSV.")
+                                   "axes, correction and residual over time from a 'chaincomp replay' CSV; "
+                                   "or, with --table P.yaml --error NAME, an error that varies along an "
+                                   "axis: its points and its interpolant (or polynomial) with the slope, "
+                                   "past both ends to show what happens outside (MACHINE.yaml optional: "
+                                   "given, the entry is checked against it).")
     p.add_argument("machine", nargs="?", metavar="MACHINE.yaml")
     add_values_arguments(p)
     p.add_argument("--component", default="dy", choices=COMPONENTS, help="error component (default dy)")
@@ -34,6 +39,9 @@ def add_parser(sub) -> None:
     p.add_argument("--model", default="first", choices=MODELS, help="model, or a difference of two")
     p.add_argument("--style", default="heatmap", choices=("heatmap", "surface"))
     p.add_argument("--replay", metavar="REPLAY.csv", help="plot a replay CSV instead of a map")
+    p.add_argument("--table", metavar="P.yaml", help="plot an error of this params file that varies along an "
+                   "axis (with --error)")
+    p.add_argument("--error", metavar="NAME", help="the error to plot with --table")
     p.add_argument("-o", "--output", default="plot.png", metavar="OUT.png", help="image file (default plot.png)")
     p.set_defaults(run=run)
 
@@ -87,6 +95,8 @@ def run(args) -> int:
     matplotlib.use("Agg")
     if args.replay:
         _plot_replay(args.replay, args.output)
+    elif args.table or args.error:
+        _plot_table(args)
     else:
         if not args.machine:
             raise ChaincompError("give a MACHINE.yaml (or --replay REPLAY.csv)")
@@ -164,4 +174,60 @@ def _plot_replay(path: str, output: str) -> None:
     top.set_title(f"replay of {path}: {len(ok)} corrected, {len(rows) - len(ok)} rejected")
     fig.tight_layout()
     fig.savefig(output)
+    plt.close(fig)
+
+
+def _plot_table(args) -> None:
+    """Points, interpolant and slope of one varying error, 5 % past both ends."""
+    import matplotlib.pyplot as plt
+    from ..varying import Table, parse_varying
+    from ..yamlsource import load_yaml
+    if not (args.table and args.error):
+        raise ChaincompError("--table P.yaml and --error NAME go together")
+    machine = load(args.machine) if args.machine else None
+    doc = load_yaml(args.table)
+    values = doc.get("values") if isinstance(doc, dict) else None
+    if not isinstance(values, dict) or args.error not in values:
+        raise ChaincompError(f"no values.{args.error} in this file", args.table)
+    raw = values[args.error]
+    if not isinstance(raw, dict):
+        raise ChaincompError(f"{args.error} is a constant here, not a table or polynomial", args.table,
+                             values.lines[args.error], f"values.{args.error}")
+    if machine is not None:
+        from ..params import load_params
+        v = load_params(args.table, machine)[args.error]  # the whole file checked against the machine
+    else:
+        v = parse_varying(raw, args.error, args.table, values.lines[args.error])
+    pu, vu = v.units
+    if isinstance(v, Table):
+        lo, hi = v.x[0], v.x[-1]
+    elif np.isfinite(v.lower):
+        lo, hi = v.lower, v.upper
+    elif machine is not None:
+        lo, hi = (machine.symbol(v.axis).to_internal(x) for x in machine.symbol(v.axis).limits)
+    else:
+        raise ChaincompError(f"{args.error} is a polynomial without a range: give the MACHINE.yaml to plot it "
+                             "over the axis limits")
+    pad = 0.05 * (hi - lo)
+    t = np.linspace(lo - pad, hi + pad, 4001)
+    value, slope = v._value_slope(t)
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 7), dpi=100, sharex=True,
+                                      gridspec_kw={"height_ratios": [3, 2]})
+    top.plot(t / pu.to_internal, value / vu.to_internal, lw=1.2,
+             label="interpolant" if isinstance(v, Table) else "polynomial")
+    if isinstance(v, Table):
+        top.plot(v.x / pu.to_internal, v.y / vu.to_internal, "o", ms=3, label=f"{len(v.x)} points")
+    for ax in (top, bottom):
+        ax.axvspan((lo - pad) / pu.to_internal, lo / pu.to_internal, color="0.9")
+        ax.axvspan(hi / pu.to_internal, (hi + pad) / pu.to_internal, color="0.9")
+        ax.grid(alpha=0.3)
+    bottom.plot(t / pu.to_internal, slope / vu.to_internal * pu.to_internal, lw=1.0, color="C2")
+    top.set_ylabel(f"{args.error} [{vu.name}]")
+    bottom.set_ylabel(f"slope [{vu.name}/{pu.name}]")
+    bottom.set_xlabel(f"{v.axis} [{pu.name}]")
+    top.legend(loc="best", fontsize="small")
+    top.set_title(f"{args.error}: {v.describe()}\n(shaded: outside the {'table' if isinstance(v, Table) else 'range'})",
+                  fontsize="medium")
+    fig.tight_layout()
+    fig.savefig(args.output)
     plt.close(fig)
