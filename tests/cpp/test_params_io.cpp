@@ -90,3 +90,140 @@ TEST_CASE("bad params files name file, line and key", "[params]") {
     CHECK(error.find(c.words) != std::string::npos);
   }
 }
+
+namespace {
+
+const std::string kFiveMachine = std::string(CHAINCOMP_SOURCE_DIR) + "/configs/machines/five_axis_ac.yaml";
+
+// A params file with one table (EXX over X, line 3 on) and one polynomial (EBX, line 12 on).
+const std::string kTables =
+    "machine: five_axis_ac\n"                  // 1
+    "values:\n"                                // 2
+    "  EXX:\n"                                 // 3
+    "    axis: X\n"                            // 4
+    "    units: [mm, um]\n"                    // 5
+    "    interpolation: monotone_cubic\n"      // 6
+    "    outside: hold\n"                      // 7
+    "    table:\n"                             // 8
+    "      - [-400, 0.0]\n"                    // 9
+    "      - [0, 2.5]\n"                       // 10
+    "      - [400, 1.0]\n"                     // 11
+    "  EBX:\n"                                 // 12
+    "    axis: X\n"                            // 13
+    "    units: [mm, arcsec]\n"                // 14
+    "    polynomial: [1.0, 0.01, -2.0e-5]\n"   // 15
+    "    range: [-400, 400]\n"                 // 16
+    "    outside: reject\n"                    // 17
+    "  ECX: 2 arcsec\n";                       // 18
+
+std::string replace(std::string text, const std::string& from, const std::string& to) {
+  const auto at = text.find(from);
+  REQUIRE(at != std::string::npos);
+  return text.replace(at, from.size(), to);
+}
+
+}  // namespace
+
+TEST_CASE("tables and polynomials load into fixed storage, in internal units", "[params][varying]") {
+  std::string error;
+  const auto* e = chaincomp::open_machine(kFiveMachine, error);
+  REQUIRE(e != nullptr);
+  std::vector<double> v;
+  chaincomp::VaryingErrors varying;
+  REQUIRE(chaincomp::load_params(*e->info, write_temp("tables.yaml", kTables), v, varying, error));
+  REQUIRE(varying.count == 2);
+  const auto& exx = varying.items[0];
+  CHECK(exx.param == index_of(*e->info, "EXX"));
+  CHECK(exx.column == 0);
+  CHECK(exx.axis == 0);
+  CHECK(exx.kind == chaincomp::VaryingKind::kTable);
+  CHECK(exx.interpolation == chaincomp::Interpolation::kMonotoneCubic);
+  CHECK(exx.count == 3);
+  double value, slope;
+  CHECK(chaincomp::evaluate(varying, exx, 0.0, nullptr, value, slope));
+  CHECK(value == Approx(2.5e-3));
+  CHECK(chaincomp::evaluate(varying, exx, 500.0, nullptr, value, slope));  // hold
+  CHECK(value == Approx(1.0e-3));
+  const auto& ebx = varying.items[1];
+  CHECK(ebx.kind == chaincomp::VaryingKind::kPolynomial);
+  CHECK(chaincomp::evaluate(varying, ebx, 100.0, nullptr, value, slope));
+  CHECK(value == Approx((1.0 + 1.0 - 0.2) * M_PI / 648000.0));
+  CHECK(slope == Approx((0.01 - 4e-3) * M_PI / 648000.0));
+  CHECK_FALSE(chaincomp::evaluate(varying, ebx, 401.0, nullptr, value, slope));  // reject
+  CHECK(v[index_of(*e->info, "EXX")] == 0.0);
+  CHECK(v[index_of(*e->info, "ECX")] == Approx(2 * M_PI / 648000.0));
+  CHECK(chaincomp::describe_varying(varying) == "2 errors vary along an axis: 1 table (3 points), 1 polynomial");
+  // the constants-only loader refuses it rather than drop the tables
+  CHECK_FALSE(chaincomp::load_params(*e->info, write_temp("tables.yaml", kTables), v, error));
+  CHECK(error.find("values.EXX") != std::string::npos);
+}
+
+TEST_CASE("the bundled laser calibration loads: 18 tables of 101 points", "[params][varying]") {
+  std::string error;
+  const auto* e = chaincomp::open_machine(kFiveMachine, error);
+  REQUIRE(e != nullptr);
+  std::vector<double> v;
+  chaincomp::VaryingErrors varying;
+  REQUIRE(chaincomp::load_params(*e->info, std::string(CHAINCOMP_SOURCE_DIR) + "/configs/params/five_axis_ac-laser.yaml",
+                                 v, varying, error));
+  CHECK(varying.count == 18);
+  for (int i = 0; i < varying.count; ++i) {
+    CHECK(varying.items[i].count == 101);
+    CHECK(varying.items[i].inv_step > 0);
+  }
+  CHECK(varying.storage.size() == 18u * 101u * chaincomp::kTableRecord);
+}
+
+TEST_CASE("bad tables and polynomials name file, line and key", "[params][varying]") {
+  std::string error;
+  const auto* e = chaincomp::open_machine(kFiveMachine, error);
+  REQUIRE(e != nullptr);
+  struct Case {
+    std::string body;
+    const char* line_key;
+    const char* words;
+  };
+  const Case cases[] = {
+      {replace(kTables, "[0, 2.5]", "[-500, 2.5]"), ":10: values.EXX.table[1]", "positions must increase: -500 follows -400"},
+      {replace(kTables, "[0, 2.5]", "[-400, 2.5]"), ":10: values.EXX.table[1]", "duplicate position -400"},
+      {replace(kTables, "[0, 2.5]", "[0, .nan]"), ":10: values.EXX.table[1]", "expected finite numbers"},
+      {replace(kTables, "[400, 1.0]", "[.inf, 1.0]"), ":11: values.EXX.table[2]", "expected finite numbers"},
+      {replace(kTables, "[0, 2.5]", "[0, abc]"), ":10: values.EXX.table[1]", "expected a number"},
+      {replace(kTables, "[0, 2.5]", "[0, 2.5, 3]"), ":10: values.EXX.table[1]", "expected [position, value]"},
+      {replace(kTables, "      - [0, 2.5]\n      - [400, 1.0]\n", ""), ":8: values.EXX.table", "at least 2 points, got 1"},
+      {replace(kTables, "axis: X\n    units: [mm, um]", "axis: W\n    units: [mm, um]"), ":4: values.EXX.axis",
+       "'W' is not an axis of five_axis_ac"},
+      {replace(kTables, "axis: X\n    units: [mm, um]", "axis: G\n    units: [mm, um]"), ":4: values.EXX.axis",
+       "'G' is not an axis"},
+      {replace(kTables, "[mm, um]", "[deg, um]"), ":5: values.EXX.units", "position unit 'deg' is an angle unit, but axis X"},
+      {replace(kTables, "[mm, um]", "[mm, arcsec]"), ":5: values.EXX.units", "value unit 'arcsec' is an angle unit, but EXX"},
+      {replace(kTables, "[mm, um]", "[mm, furlong]"), ":5: values.EXX.units", "unknown unit 'furlong'"},
+      {replace(kTables, "[mm, um]", "mm"), ":5: values.EXX.units", "expected [position unit, value unit]"},
+      {replace(kTables, "    units: [mm, um]\n", ""), ":3: values.EXX", "missing required field 'units'"},
+      {replace(kTables, "monotone_cubic", "spline"), ":6: values.EXX.interpolation", "linear or monotone_cubic"},
+      {replace(kTables, "outside: hold", "outside: clamp"), ":7: values.EXX.outside", "hold or reject"},
+      {replace(kTables, "    outside: hold\n", ""), ":3: values.EXX", "missing required field 'outside'"},
+      {replace(kTables, "    outside: hold\n", "    outside: hold\n    polynomial: [1]\n"), ":3: values.EXX",
+       "not both"},
+      {replace(kTables, "    outside: hold\n", "    outside: hold\n    step: 8\n"), ":8: values.EXX.step",
+       "unknown field 'step'"},
+      {replace(kTables, "[1.0, 0.01, -2.0e-5]", "[1.0, .nan]"), ":15: values.EBX.polynomial[1]", "expected finite"},
+      {replace(kTables, "[1.0, 0.01, -2.0e-5]", "[]"), ":15: values.EBX.polynomial", "1 to 16 coefficients"},
+      {replace(kTables, "[-400, 400]", "[400, -400]"), ":16: values.EBX.range", "must be below"},
+      {replace(kTables, "    range: [-400, 400]\n", ""), ":16: values.EBX.outside", "applies to a polynomial's 'range'"},
+      {replace(kTables, "  ECX: 2 arcsec\n", "  G:\n    axis: X\n    units: [mm, mm]\n    polynomial: [1]\n"), ":18: values.G",
+       "only error symbols may vary"},
+      {replace(kTables, "  ECX: 2 arcsec\n", "  ECX: [1, 2]\n"), ":18: values.ECX", "or a mapping with 'table' or 'polynomial'"},
+  };
+  int i = 0;
+  for (const Case& c : cases) {
+    const std::string path = write_temp("badtable" + std::to_string(i++) + ".yaml", c.body);
+    std::vector<double> v;
+    chaincomp::VaryingErrors varying;
+    INFO(c.body);
+    CHECK_FALSE(chaincomp::load_params(*e->info, path, v, varying, error));
+    INFO(error);
+    CHECK(error.find(path + c.line_key + ": ") != std::string::npos);
+    CHECK(error.find(c.words) != std::string::npos);
+  }
+}
