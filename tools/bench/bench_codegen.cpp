@@ -11,7 +11,15 @@
 // The baseline is an interpreter: the number of axes is a run-time value (Eigen matrices
 // of fixed maximum size, so no heap); only the pose size is a template parameter.
 //
+// Tables case (--tables-machine NAME --tables P.yaml [--tables-linear P2.yaml]): compensate,
+// pose_exact and pose_jacobian with every error of P.yaml that varies along an axis attached
+// (the bundled laser calibration: 18 tables of 101 points) against the same model with each
+// of those errors a constant (its value at the middle of its table), after checking that
+// every correction with tables puts the actual tool point (tables evaluated at the corrected
+// axes) on the nominal one.
+//
 // Usage: bench_codegen CHAINS.txt [--samples N] [--batches N] [--batch-ms MS] [--seed N]
+//                     [--tables-machine NAME --tables P.yaml [--tables-linear P2.yaml]]
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 
@@ -22,6 +30,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <memory>
 #include <random>
 #include <sstream>
 #include <string>
@@ -29,6 +38,8 @@
 
 #include "chaincomp/compensate.hpp"
 #include "chaincomp/model_info.hpp"
+#include "chaincomp/params_io.hpp"
+#include "chaincomp/varying.hpp"
 
 namespace {
 
@@ -385,7 +396,121 @@ struct Options {
   int samples = 4096, batches = 101;
   double batch_ms = 1.0;
   unsigned seed = 20240611;
+  std::string tables_machine, tables, tables_linear;
 };
+
+// ----------------------------------------------------------------------------- tables
+
+struct TablesCase {
+  std::vector<double> params;
+  chaincomp::VaryingErrors varying;
+  ModelBuffer model;
+};
+
+void load_case(const chaincomp::ModelEntry& e, const std::string& path, TablesCase& c) {
+  std::string error;
+  if (!chaincomp::load_params(*e.info, path, c.params, c.varying, error)) die(error);
+  e.prepare(c.params.data(), c.model.bytes);
+  e.attach_varying(c.model.bytes, &c.varying);
+}
+
+std::string bench_tables(const Options& opt) {
+  const chaincomp::ModelEntry* e = chaincomp::find_model(opt.tables_machine.c_str());
+  if (e == nullptr) die("machine " + opt.tables_machine + " is not compiled into chaincomp_models");
+  const auto& info = *e->info;
+  const int N = info.num_axes, PS = info.pose_size;
+  auto tables = std::make_unique<TablesCase>();
+  load_case(*e, opt.tables, *tables);
+  if (tables->varying.count == 0) die(opt.tables + ": no error varies along an axis");
+  std::unique_ptr<TablesCase> linear;
+  if (!opt.tables_linear.empty()) {
+    linear = std::make_unique<TablesCase>();
+    load_case(*e, opt.tables_linear, *linear);
+  }
+  // constants: each varying error at the middle of its range
+  auto constants = std::make_unique<TablesCase>();
+  constants->params = tables->params;
+  int knots_min = 1 << 30, knots_max = 0;
+  for (int i = 0; i < tables->varying.count; ++i) {
+    const auto& v = tables->varying.items[i];
+    double value, slope;
+    chaincomp::evaluate(tables->varying, v, 0.5 * (v.lower + v.upper), nullptr, value, slope);
+    constants->params[v.param] = value;
+    knots_min = std::min(knots_min, v.count);
+    knots_max = std::max(knots_max, v.count);
+  }
+  e->prepare(constants->params.data(), constants->model.bytes);
+  std::fprintf(stderr, "bench_codegen: %s tables: %s\n", info.name, chaincomp::describe_varying(tables->varying).c_str());
+
+  std::mt19937_64 rng(opt.seed);
+  std::vector<double> axes(static_cast<std::size_t>(opt.samples) * N);
+  for (int s = 0; s < opt.samples; ++s) {
+    for (int i = 0; i < N; ++i) {
+      const auto& a = info.axes[i];
+      std::uniform_real_distribution<double> u(a.lower * a.to_internal, a.upper * a.to_internal);
+      axes[static_cast<std::size_t>(s) * N + i] = u(rng);
+    }
+  }
+  auto q_at = [&](int s) { return axes.data() + static_cast<std::size_t>(s) * N; };
+
+  // checks: with tables, the actual point at the corrected axes is the nominal one
+  int ok[3] = {0, 0, 0};
+  double worst[3] = {0, 0, 0};
+  const void* models[3] = {constants->model.bytes, tables->model.bytes, linear ? linear->model.bytes : nullptr};
+  for (int m = 0; m < 3; ++m) {
+    if (models[m] == nullptr) continue;
+    for (int s = 0; s < opt.samples; ++s) {
+      double corr[kMaxAxes], res[2], target[6], actual[6];
+      const int st = e->compensate(models[m], q_at(s), corr, res);
+      e->pose_nominal(models[m], q_at(s), target);
+      e->pose_exact(models[m], corr, actual);
+      double d = 0;
+      for (int i = 0; i < 3; ++i) d += (actual[i] - target[i]) * (actual[i] - target[i]);
+      if (st == 0) {
+        ++ok[m];
+        worst[m] = std::max(worst[m], std::sqrt(d));
+      }
+    }
+  }
+  if (!(worst[1] <= 1e-6) || !(worst[2] <= 1e-6))
+    die(std::string(info.name) + ": with tables a corrected point is off the nominal one by " +
+        num(std::max(worst[1], worst[2])) + " mm (> 1 nm): not timing");
+
+  double out[6], jac[6 * kMaxAxes], corr[kMaxAxes], res[2];
+  const int S = opt.samples, B = opt.batches;
+  const double ms = opt.batch_ms;
+  auto comp = [&](const void* model) {
+    return time_calls([&](int s) { const int st = e->compensate(model, q_at(s), corr, res); escape(corr); return corr[0] + st; },
+                      S, B, ms);
+  };
+  auto pose = [&](const void* model) {
+    return time_calls([&](int s) { e->pose_exact(model, q_at(s), out); escape(out); return out[0]; }, S, B, ms);
+  };
+  auto jacobian = [&](const void* model) {
+    return time_calls([&](int s) { e->pose_jacobian(model, q_at(s), out, jac); escape(jac); return out[0] + jac[0]; },
+                      S, B, ms);
+  };
+  const Stats c_const = comp(constants->model.bytes), c_tab = comp(tables->model.bytes);
+  const Stats c_lin = linear ? comp(linear->model.bytes) : Stats{};
+  const Stats p_const = pose(constants->model.bytes), p_tab = pose(tables->model.bytes);
+  const Stats j_const = jacobian(constants->model.bytes), j_tab = jacobian(tables->model.bytes);
+  (void)PS;
+  std::string j = "{\"machine\":\"" + std::string(info.name) + "\",\"varying\":" +
+                  std::to_string(tables->varying.count) + ",\"knots_min\":" + std::to_string(knots_min) +
+                  ",\"knots_max\":" + std::to_string(knots_max) + ",\"description\":\"" +
+                  chaincomp::describe_varying(tables->varying) + "\",\"samples\":" + std::to_string(S) +
+                  ",\"checks\":{\"ok_constants\":" + std::to_string(ok[0]) + ",\"ok_tables\":" +
+                  std::to_string(ok[1]) + ",\"ok_tables_linear\":" + (linear ? std::to_string(ok[2]) : "null") +
+                  ",\"max_point_residual_ok_tables\":" + num(worst[1]) +
+                  ",\"max_point_residual_ok_tables_linear\":" + (linear ? num(worst[2]) : "null") +
+                  ",\"max_point_residual_ok_constants\":" + num(worst[0]) + "},\"timings\":{" +
+                  "\"compensate\":{\"constants\":" + stats_json(c_const) + ",\"tables\":" + stats_json(c_tab) +
+                  (linear ? ",\"tables_linear\":" + stats_json(c_lin) : std::string()) + "}," +
+                  "\"pose_exact\":{\"constants\":" + stats_json(p_const) + ",\"tables\":" + stats_json(p_tab) + "}," +
+                  "\"pose_jacobian\":{\"constants\":" + stats_json(j_const) + ",\"tables\":" + stats_json(j_tab) +
+                  "}}}";
+  return j;
+}
 
 // ----------------------------------------------------------------------------- one machine
 
@@ -553,9 +678,13 @@ int main(int argc, char** argv) {
     else if (a == "--batches") opt.batches = std::atoi(v);
     else if (a == "--batch-ms") opt.batch_ms = std::atof(v);
     else if (a == "--seed") opt.seed = static_cast<unsigned>(std::strtoul(v, nullptr, 10));
+    else if (a == "--tables-machine") opt.tables_machine = v;
+    else if (a == "--tables") opt.tables = v;
+    else if (a == "--tables-linear") opt.tables_linear = v;
     else die("unknown option " + a);
   }
   if (opt.samples < 1 || opt.batches < 1 || !(opt.batch_ms > 0)) die("bad option value");
+  if (opt.tables.empty() != opt.tables_machine.empty()) die("--tables and --tables-machine go together");
 
   std::string json = "{\"machines\":[";
   bool first = true;
@@ -585,8 +714,9 @@ int main(int argc, char** argv) {
     first = false;
     delete buf;
   }
+  json += "],\"tables\":" + (opt.tables.empty() ? std::string("null") : bench_tables(opt));
   g_sink = g_sink_store;
-  json += "],\"sink\":" + num(g_sink) + ",\"options\":{\"samples\":" + std::to_string(opt.samples) +
+  json += ",\"sink\":" + num(g_sink) + ",\"options\":{\"samples\":" + std::to_string(opt.samples) +
           ",\"batches\":" + std::to_string(opt.batches) + ",\"batch_ms\":" + num(opt.batch_ms) +
           ",\"seed\":" + std::to_string(opt.seed) + "},\"compiler\":\"" + kCompiler + "\"}";
   std::printf("%s\n", json.c_str());
