@@ -95,6 +95,7 @@ class Varying:
     upper: float
     file: str = ""
     line: int = 0
+    axis_unit: U.Unit | None = None  # the axis' declared unit, when parsed against a machine
 
     @property
     def key(self) -> str:
@@ -113,10 +114,10 @@ class Varying:
         t = np.asarray(t, float)
         return (t >= self.lower) & (t <= self.upper)
 
-    def check_inside(self, t: float, axis_unit: U.Unit | None = None) -> None:
+    def check_inside(self, t: float) -> None:
         """ChaincompError naming the file, line and key when t lies outside a rejecting range."""
         if self.outside == "reject" and not bool(self.inside(float(t))):
-            pu = self.units[0]
+            pu = self.axis_unit or self.units[0]
             raise ChaincompError(
                 f"{self.axis} = {float(t) / pu.to_internal:g} {pu.name} lies outside the "
                 f"{'table' if isinstance(self, Table) else 'range'} [{self.lower / pu.to_internal:g}, "
@@ -135,7 +136,12 @@ class Table(Varying):
     interpolation: str = "linear"
     x: np.ndarray = field(default=None, repr=False)   # positions, internal units
     y: np.ndarray = field(default=None, repr=False)   # values, internal units
-    d: np.ndarray = field(default=None, repr=False)   # slopes at the knots (monotone cubic)
+    d: np.ndarray = field(default=None, repr=False)   # slopes at the knots
+    # per interval k, the cubic y[k] + u (b + u (c + u e)) in u = t - x[k] (linear: c = e = 0),
+    # as the runtime evaluates it
+    b: np.ndarray = field(default=None, repr=False)
+    c: np.ndarray = field(default=None, repr=False)
+    e: np.ndarray = field(default=None, repr=False)
 
     def describe(self) -> str:
         pu = self.units[0]
@@ -149,19 +155,14 @@ class Table(Varying):
         arr = np.asarray(t, dtype=float)
         x, y, n = self.x, self.y, len(self.x)
         k = np.clip(np.searchsorted(x, arr, side="right") - 1, 0, n - 2)
-        h = x[k + 1] - x[k]
-        if self.interpolation == "linear":
-            s = (y[k + 1] - y[k]) / h
-            v = s * (arr - x[k]) + y[k]
-        else:
-            u = (arr - x[k]) / h
-            v, s = _hermite(u, h, y[k], y[k + 1], self.d[k], self.d[k + 1])
+        u = arr - x[k]
+        b, c, e = self.b[k], self.c[k], self.e[k]
+        v = y[k] + u * (b + u * (c + u * e))
+        s = b + u * (2 * c + 3 * u * e)
         first = arr <= x[0]
         last = arr >= x[-1]
         v = np.where(first, y[0], np.where(last, y[-1], v))
-        s0 = (y[1] - y[0]) / (x[1] - x[0]) if self.interpolation == "linear" else self.d[0]
-        s1 = (y[-1] - y[-2]) / (x[-1] - x[-2]) if self.interpolation == "linear" else self.d[-1]
-        s = np.where(arr == x[0], s0, np.where(arr == x[-1], s1, np.where(first | last, 0.0, s)))
+        s = np.where(arr == x[0], self.d[0], np.where(arr == x[-1], self.d[-1], np.where(first | last, 0.0, s)))
         if self.outside == "reject":
             out = ~((arr >= x[0]) & (arr <= x[-1]))
             v = np.where(out, np.nan, v)
@@ -171,7 +172,7 @@ class Table(Varying):
         return v, s
 
     def _scalar(self, t):
-        """mpmath: the interval found in floats, the interpolant in t's precision."""
+        """mpmath: the interval found in floats, the cubic in t's precision."""
         import mpmath
         x, y, n = self.x, self.y, len(self.x)
         tf = float(t)
@@ -179,27 +180,21 @@ class Table(Varying):
             return mpmath.mpf("nan"), mpmath.mpf("nan")
         if tf <= x[0] or tf >= x[-1]:
             i = 0 if tf <= x[0] else n - 1
-            return mpmath.mpf(float(y[i])), mpmath.mpf(0)
+            return mpmath.mpf(float(y[i])), mpmath.mpf(float(self.d[i]) if tf == x[i] else 0)
         k = int(min(max(np.searchsorted(x, tf, side="right") - 1, 0), n - 2))
-        xk, x1, yk, y1 = (mpmath.mpf(float(v)) for v in (x[k], x[k + 1], y[k], y[k + 1]))
-        h = x1 - xk
-        if self.interpolation == "linear":
-            s = (y1 - yk) / h
-            return s * (t - xk) + yk, s
-        return _hermite((t - xk) / h, h, yk, y1, mpmath.mpf(float(self.d[k])), mpmath.mpf(float(self.d[k + 1])))
+        u = t - mpmath.mpf(float(x[k]))
+        b, c, e = (mpmath.mpf(float(a[k])) for a in (self.b, self.c, self.e))
+        return mpmath.mpf(float(y[k])) + u * (b + u * (c + u * e)), b + u * (2 * c + 3 * u * e)
 
 
-def _hermite(u, h, y0, y1, d0, d1):
-    """Cubic Hermite on one interval, its value and slope (the runtime's formula)."""
-    u2 = u * u
-    u3 = u2 * u
-    h00 = 2 * u3 - 3 * u2 + 1
-    h10 = u3 - 2 * u2 + u
-    h01 = 3 * u2 - 2 * u3
-    h11 = u3 - u2
-    value = h00 * y0 + h10 * h * d0 + h01 * y1 + h11 * h * d1
-    slope = 6 * (u2 - u) / h * (y0 - y1) + (3 * u2 - 4 * u + 1) * d0 + (3 * u2 - 2 * u) * d1
-    return value, slope
+def cubic_coefficients(x: np.ndarray, y: np.ndarray, d: np.ndarray, interpolation: str):
+    """Per interval, b, c, e of y[k] + u (b + u (c + u e)), u = t - x[k]: the Hermite cubic with
+    the knots' slopes d (monotone cubic), or the secant (linear; c = e = 0)."""
+    h = np.diff(x)
+    delta = np.diff(y) / h
+    if interpolation == "linear":
+        return delta, np.zeros_like(delta), np.zeros_like(delta)
+    return d[:-1].copy(), (3 * delta - 2 * d[:-1] - d[1:]) / h, (d[:-1] + d[1:] - 2 * delta) / (h * h)
 
 
 @dataclass(frozen=True, eq=False)
@@ -370,7 +365,8 @@ def parse_varying(node, name: str, path: str, line: int, machine=None) -> Varyin
         fail("'outside' applies to a polynomial's 'range' (give range: [low, high] in the position unit)",
              kline("outside"), f"{base}.outside")
 
-    common = dict(error=name, axis=axis, units=(pu, vu), outside=outside, file=path, line=line)
+    common = dict(error=name, axis=axis, units=(pu, vu), outside=outside, file=path, line=line,
+                  axis_unit=axis_sym.unit if axis_sym is not None else None)
     if is_table:
         if "interpolation" not in node:
             fail("missing required field 'interpolation' (linear or monotone_cubic)")
@@ -402,10 +398,16 @@ def parse_varying(node, name: str, path: str, line: int, machine=None) -> Varyin
             ys.append(v)
         x = np.array(xs) * pu.to_internal
         y = np.array(ys) * vu.to_internal
-        d = monotone_cubic_slopes(x, y) if interp == "monotone_cubic" else np.zeros(n)
-        for a in (x, y, d):
+        if interp == "monotone_cubic":
+            d = monotone_cubic_slopes(x, y)
+        else:  # one-sided at the ends, as the runtime
+            secant = np.diff(y) / np.diff(x)
+            d = np.concatenate([secant, secant[-1:]])
+        b, c, e = cubic_coefficients(x, y, d, interp)
+        for a in (x, y, d, b, c, e):
             a.setflags(write=False)
-        return Table(**common, lower=float(x[0]), upper=float(x[-1]), interpolation=interp, x=x, y=y, d=d)
+        return Table(**common, lower=float(x[0]), upper=float(x[-1]), interpolation=interp, x=x, y=y, d=d,
+                     b=b, c=c, e=e)
 
     coeffs = node["polynomial"]
     if not isinstance(coeffs, list) or not 1 <= len(coeffs) <= MAX_POLYNOMIAL_COEFFICIENTS:
