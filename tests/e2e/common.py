@@ -11,7 +11,8 @@ from chaincomp.numeric import ExactModel
 from lcm_harness import ROOT
 
 MACHINE = os.path.join(ROOT, "configs", "machines", "five_axis_ac.yaml")
-PARAMS = os.path.join(ROOT, "configs", "params", "five_axis_ac-demo.yaml")
+# CHAINCOMP_E2E_PARAMS runs the scenarios with another params file (e.g. one with tables)
+PARAMS = os.environ.get("CHAINCOMP_E2E_PARAMS") or os.path.join(ROOT, "configs", "params", "five_axis_ac-demo.yaml")
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
