@@ -271,12 +271,6 @@ def compute(machine: Machine, values: dict, tolerances: Tolerances, grid: Grid, 
     sigmas = np.array([tol[s.name].sigma if s.name in tol else 0.0 for s in errs])
     params_errors = {s.name: values[s.name] for s in errs if values.get(s.name, 0.0) != 0.0}
     centre = dict(params_errors) if centre_on_params else {}
-    from .varying import varying_errors
-    for name, v in varying_errors(params_errors).items():
-        # bounds and centres that change over the grid: not what a budget of constants states
-        raise ChaincompError(f"{name} varies along {v.axis} ({v.describe()}): the budget takes constant error "
-                             "values (give constants in --params, or the bounds in --tolerances)",
-                             v.file, v.line, v.key)
 
     args = dict(values)
     args.update(grid.open_mesh())

@@ -10,6 +10,7 @@ import numpy as np
 from .. import budget as B
 from ..errors import ChaincompError
 from ..tolerances import from_params, load_tolerances
+from ..varying import varying_errors
 from .common import add_machine_argument, add_values_arguments, load, values_for
 
 MAX_SAMPLES = 2_000_000
@@ -53,6 +54,11 @@ def run(args) -> int:
     over = [n.strip() for n in args.over.split(",")] if args.over else None
     set_names = {item.partition("=")[0].strip() for item in args.sets}
     values, _ = values_for(machine, args.params, args.sets)
+    for name, v in varying_errors(values).items():
+        # bounds and centres that change over the grid: not what a budget of constants states
+        raise ChaincompError(f"{name} varies along {v.axis} ({v.describe()}): the budget takes constant error "
+                             "values (give constants in --params, or the bounds in --tolerances)",
+                             v.file, v.line, v.key)
     grid_names = over or [a.name for a in machine.axes]
     clash = [n for n in grid_names if n in set_names]
     if clash:
