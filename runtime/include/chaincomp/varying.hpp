@@ -62,14 +62,12 @@ void monotone_cubic_slopes(const double* x, const double* y, int count, double* 
 
 // --- evaluation
 
-// The interval k (x[k] <= t < x[k+1]) of a table (records r) for t inside [x[0], x[count-1]).
-inline int locate(const VaryingError& e, const double* r, double t, int hint) noexcept {
+// The interval k (x[k] <= t < x[k+1]) of a table (records r) for t inside (x[0], x[count-1]).
+inline int locate(const VaryingError& e, const double* r, double t) noexcept {
   constexpr int R = kTableRecord;
   const int last = e.count - 2;
-  if (hint >= 0 && hint <= last && r[R * hint] <= t && t < r[R * (hint + 1)]) return hint;
-  int k;
   if (e.inv_step > 0) {
-    k = static_cast<int>((t - r[0]) * e.inv_step);
+    int k = static_cast<int>((t - r[0]) * e.inv_step);
     k = k < 0 ? 0 : k > last ? last : k;
     // the spacing is equal only to rounding: step once if the product landed next door
     if (t < r[R * k] && k > 0) --k;
@@ -86,29 +84,35 @@ inline int locate(const VaryingError& e, const double* r, double t, int hint) no
 
 // The error's value and slope (d value / d axis, internal units) at axis position t. Outside
 // its range it is held at the nearest end with slope 0, and the result is false where
-// `outside` is reject. `hint` (may be null) keeps the last interval of a table. Without
-// kSlope the slope is left alone (the Newton iterates need only the value).
+// `outside` is reject. `hint` (may be null; -1: none) keeps the last interval of a table:
+// the Newton iterates, microns from the command, find it there. Without kSlope the slope is
+// left alone (the iterates need only the value).
 template <bool kSlope = true>
 inline bool evaluate(const VaryingErrors& v, const VaryingError& e, double t, int* hint, double& value,
                      double& slope) noexcept {
   const double* s = v.storage.data() + e.offset;
   if (e.kind == VaryingKind::kTable) {
     constexpr int R = kTableRecord;
-    const double* last = s + R * (e.count - 1);
-    if (t > s[0] && t < last[0]) {  // inside: the interval's cubic in u = t - x[k] (linear: y + u b,
-      // np.interp's slope * (t - x[k]) + y[k] to the bit); exact at the knot x[k]
-      const int k = locate(e, s, t, hint ? *hint : -1);
+    const int h = hint ? *hint : -1;
+    const double* r = s + R * h;
+    if (!(h >= 0 && r[0] <= t && t < r[R])) {
+      const double* last = s + R * (e.count - 1);
+      if (!(t > s[0] && t < last[0])) {  // at or past an end (NaN: the first)
+        const double* end = t > s[0] ? last : s;
+        value = end[1];
+        if (kSlope) slope = t == end[0] ? end[2] : 0.0;
+        return t == end[0] || e.outside == Outside::kHold;
+      }
+      const int k = locate(e, s, t);
       if (hint) *hint = k;
-      const double* r = s + R * k;
-      const double u = t - r[0];
-      value = r[1] + u * (r[2] + u * (r[3] + u * r[4]));
-      if (kSlope) slope = r[2] + u * (2 * r[3] + 3 * u * r[4]);
-      return true;
+      r = s + R * k;
     }
-    const double* end = t > s[0] ? last : s;  // at or past an end (NaN: the first)
-    value = end[1];
-    if (kSlope) slope = t == end[0] ? end[2] : 0.0;
-    return t == end[0] || e.outside == Outside::kHold;
+    // the interval's cubic in u = t - x[k] (linear: y + u b, np.interp's slope * (t - x[k]) +
+    // y[k] to the bit); exact at the knot x[k]
+    const double u = t - r[0];
+    value = r[1] + u * (r[2] + u * (r[3] + u * r[4]));
+    if (kSlope) slope = r[2] + u * (2 * r[3] + 3 * u * r[4]);
+    return true;
   }
   const bool inside = t >= e.lower && t <= e.upper;
   const double u = (t < e.lower ? e.lower : t > e.upper ? e.upper : t) * e.scale_in;
