@@ -48,6 +48,8 @@ constexpr double kDirectionWeight = 100.0;    // mm per rad: a direction error c
 // the correction is bounded and the rest reported as residual.
 constexpr double kMaxLinearCorrection = 1.0;      // mm
 constexpr double kMaxAngularCorrection = 0.0175;  // rad, about 1 degree
+constexpr int kMaxExtraSteps = 4;  // steps a call near a singular pose may add
+constexpr double kConvergedStep = 1e-3;  // a last step above this fraction of the bound (1 µm, 3.6 arcsec): not converged yet
 // A step larger than this fraction of the bound refreshes the Jacobian.
 constexpr double kChordStepLimit = 0.05;
 
@@ -121,6 +123,32 @@ const typename K::Model* model_at(const typename K::Model& m, const typename K::
 }
 
 // K: the generated Kinematics of one machine (sizes, Model, pose_nominal, pose_jacobian).
+// The number of linear axes.
+template <class K>
+constexpr int kLinearAxes() noexcept {
+  int count = 0;
+  for (int i = 0; i < K::kNumAxes; ++i) count += K::kAxisIsAngle[i] ? 0 : 1;
+  return count;
+}
+
+// The residual with its direction rows zeroed.
+template <class K, int Rows>
+Eigen::Matrix<double, Rows, 1> point_rows(const Eigen::Matrix<double, Rows, 1>& r) noexcept {
+  Eigen::Matrix<double, Rows, 1> out = r;
+  out.template tail<Rows - 3>().setZero();
+  return out;
+}
+
+// Whether every axis of q lies within its correction bound around the command.
+template <class K>
+bool within_bounds(const typename K::Axes& q, const typename K::Axes& command) noexcept {
+  for (int i = 0; i < K::kNumAxes; ++i) {
+    const double bound = K::kAxisIsAngle[i] ? kMaxAngularCorrection : kMaxLinearCorrection;
+    if (std::abs(q[i] - command[i]) > bound) return false;
+  }
+  return true;
+}
+
 template <class K>
 Status compensate(const typename K::Model& model, Workspace<K>& ws, const typename K::Axes& command,
                   Result<K>& out) noexcept {
@@ -164,13 +192,18 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
   Eigen::Matrix<double, rows, n> J;
   Eigen::LLT<Eigen::Matrix<double, n, n>> llt;
   bool at_bound[n] = {};  // axes whose correction reached its bound stay there
+  // Near a singular pose (the tool along a rotary axis) the direction cannot be corrected
+  // within the trust region: the point alone is corrected then, by the linear axes where
+  // the machine has three, and the direction error is reported.
+  bool point_only = false;
   auto factorise = [&]() {
     J.template topRows<3>() = ws.jacobian.template topRows<3>();
     if constexpr (K::kCorrectsDirection) {
       J.template bottomRows<3>() = kDirectionWeight * ws.jacobian.template bottomRows<3>();
+      if (point_only) J.template bottomRows<3>().setZero();
     }
     for (int i = 0; i < n; ++i) {
-      if (at_bound[i]) J.col(i).setZero();
+      if (at_bound[i] || (point_only && K::kAxisIsAngle[i] && kLinearAxes<K>() >= 3)) J.col(i).setZero();
     }
     Eigen::Matrix<double, n, n> A = J.transpose() * J;
     // A tiny Levenberg term keeps the step defined where an axis has no effect.
@@ -185,14 +218,25 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
   Eigen::Matrix<double, rows, 1> r;
   // An axis reaching its bound costs one more step (at most n): the cost stays bounded.
   int steps = kNewtonSteps;
+  double last_step = 0;  // the last step's largest axis move, as a fraction of its bound
   for (int step = 0;; ++step) {
     r.template head<3>() = ws.pose.template head<3>() - ws.target.template head<3>();
     if constexpr (K::kCorrectsDirection) {
       r.template tail<3>() = kDirectionWeight * (ws.pose.template tail<3>() - ws.target.template tail<3>());
     }
+    // Near a singular pose the steps are large and the chord converges slowly: a few more
+    // steps (bounded, so the worst-case cost is known) until the point is corrected.
+    if (step == steps && steps < kNewtonSteps + kMaxExtraSteps && last_step > kConvergedStep) ++steps;
     if (step == steps) break;
-    const typename K::Axes delta = llt.solve(J.transpose() * r);
+    typename K::Axes delta = llt.solve(J.transpose() * (point_only ? point_rows<K, rows>(r) : r));
+    if (K::kCorrectsDirection && !point_only && !within_bounds<K>(q - delta, command)) {
+      point_only = true;  // one more step for the switch: the cost stays bounded
+      ++steps;
+      if (!factorise()) return Status::kSingular;
+      delta = llt.solve(J.transpose() * point_rows<K, rows>(r));
+    }
     bool large = false;
+    last_step = 0;
     for (int i = 0; i < n; ++i) {
       // Keep the total correction within its bound per axis (a trust region near singular
       // poses); an axis that reaches it is held there and the others correct what they can.
@@ -204,6 +248,7 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
         ++steps;
       }
       large = large || q[i] != wanted || std::abs(delta[i]) > kChordStepLimit * bound;
+      last_step = std::max(last_step, std::abs(delta[i]) / bound);
     }
     if (large) {
       jacobian_at(q);
