@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "chaincomp/daemon_config.hpp"
+#include "chaincomp/loaded_model.hpp"
 #include "chaincomp/hash.hpp"
 #include "chaincomp/lcm_node.hpp"
 #include "chaincomp/params_io.hpp"
@@ -102,20 +103,11 @@ int main(int argc, char** argv) {
   }
 
   std::string error;
-  const chaincomp::ModelEntry* entry = chaincomp::open_machine(machine_path, error);
-  if (!entry) return fail(error);
-  std::vector<double> params;
-  chaincomp::VaryingErrors varying;  // tables and polynomials; outlives the model
-  if (!chaincomp::load_params(*entry->info, params_path, params, varying, error)) return fail(error);
-  chaincomp::DaemonConfig config;
-  if (!chaincomp::load_daemon_config(*entry->info, config_path, config, error)) return fail(error);
-  // The model lives in heap storage sized and aligned for it, filled once.
-  std::size_t space = entry->model_size + entry->model_align;
-  std::unique_ptr<unsigned char[]> storage(new unsigned char[space]);
-  void* model = storage.get();
-  model = std::align(entry->model_align, entry->model_size, model, space);
-  entry->prepare(params.data(), model);
-  if (varying.count > 0) entry->attach_varying(model, &varying);
+  chaincomp::LoadedModel loaded;
+  if (!chaincomp::load_model(machine_path, params_path, config_path, loaded, error)) return fail(error);
+  const chaincomp::ModelEntry* entry = loaded.entry;
+  const chaincomp::DaemonConfig& config = loaded.config;
+  void* model = loaded.model;
 
   lcm_t* lcm = lcm_create(config.lcm_url.c_str());
   if (!lcm) return fail("cannot open LCM at '" + config.lcm_url + "'");
@@ -126,7 +118,7 @@ int main(int argc, char** argv) {
   sa.sa_handler = on_signal;
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
-  const std::string tables = chaincomp::describe_varying(varying);
+  const std::string tables = chaincomp::describe_varying(loaded.varying);
   std::fprintf(stderr, "chaincompd: %s with %s%s on %s: %s -> %s; ready\n", entry->info->name, params_path.c_str(),
                tables.empty() ? "" : (" (" + tables + ")").c_str(), config.lcm_url.c_str(),
                config.command_channel.c_str(), config.corrected_channel.c_str());

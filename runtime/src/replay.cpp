@@ -7,12 +7,12 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <memory>
 #include <string>
 #include <vector>
 
 #include "chaincomp/compensator.hpp"
 #include "chaincomp/daemon_config.hpp"
+#include "chaincomp/loaded_model.hpp"
 #include "chaincomp/lcm_node.hpp"
 #include "chaincomp/params_io.hpp"
 
@@ -83,21 +83,14 @@ int main(int argc, char** argv) {
     return fail("--machine, --params and --in are required");
   }
   std::string error;
-  const chaincomp::ModelEntry* entry = chaincomp::open_machine(machine_path, error);
-  if (!entry) return fail(error);
-  std::vector<double> params;
-  chaincomp::VaryingErrors varying;  // tables and polynomials; outlives the model
-  if (!chaincomp::load_params(*entry->info, params_path, params, varying, error)) return fail(error);
-  chaincomp::DaemonConfig config;
-  if (!chaincomp::load_daemon_config(*entry->info, config_path, config, error)) return fail(error);
-  std::vector<unsigned char> storage(entry->model_size + entry->model_align);
-  void* model = storage.data();
-  std::size_t space = storage.size();
-  model = std::align(entry->model_align, entry->model_size, model, space);
-  entry->prepare(params.data(), model);
-  if (varying.count > 0) {
-    entry->attach_varying(model, &varying);
-    if (!quiet) std::fprintf(stderr, "chaincomp replay: %s: %s\n", params_path.c_str(), chaincomp::describe_varying(varying).c_str());
+  chaincomp::LoadedModel loaded;
+  if (!chaincomp::load_model(machine_path, params_path, config_path, loaded, error)) return fail(error);
+  const chaincomp::ModelEntry* entry = loaded.entry;
+  const chaincomp::DaemonConfig& config = loaded.config;
+  const chaincomp::VaryingErrors& varying = loaded.varying;
+  void* model = loaded.model;
+  if (varying.count > 0 && !quiet) {
+    std::fprintf(stderr, "chaincomp replay: %s: %s\n", params_path.c_str(), chaincomp::describe_varying(varying).c_str());
   }
   chaincomp::Compensator comp(*entry, model, config.compensator);
 

@@ -1,0 +1,23 @@
+#include "chaincomp/loaded_model.hpp"
+
+#include <memory>
+
+namespace chaincomp {
+
+bool load_model(const std::string& machine_path, const std::string& params_path,
+                const std::string& config_path, LoadedModel& out, std::string& error) {
+  out.entry = open_machine(machine_path, error);
+  if (out.entry == nullptr) return false;
+  const ModelEntry& e = *out.entry;
+  if (!load_params(*e.info, params_path, out.params, out.varying, error)) return false;
+  if (!load_daemon_config(*e.info, config_path, out.config, error)) return false;
+  out.storage.assign(e.model_size + e.model_align, 0);
+  void* model = out.storage.data();
+  std::size_t space = out.storage.size();
+  out.model = std::align(e.model_align, e.model_size, model, space);
+  e.prepare(out.params.data(), out.model);
+  if (out.varying.count > 0) e.attach_varying(out.model, &out.varying);
+  return true;
+}
+
+}  // namespace chaincomp
