@@ -15,10 +15,9 @@ from typing import Callable
 import sympy as sp
 
 from . import series as S
-from .machine import Machine, Rotation, Translation
+from .machine import ROT_PLANE, Machine, Rotation
 
 COMPONENTS = ("x", "y", "z")
-_ROT_PLANE = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}  # (i, j): i' = c i - s j, j' = s i + c j
 
 
 class Progress:
@@ -142,7 +141,7 @@ def derive(machine: Machine, order: int = 1, htm: bool = False, progress: bool =
             s0 = {m: v for m, v in s0.items() if v}
             cos_t = S.add(S.mul(c0, c_d, k), S.mul(s0, s_d, k), -1)
             sin_t = S.add(S.mul(s0, c_d, k), S.mul(c0, s_d, k))
-            i, j = _ROT_PLANE[axis]
+            i, j = ROT_PLANE[axis]
             for vec, _w in vectors:
                 vi, vj = vec[i], vec[j]
                 vec[i] = S.add(S.mul(cos_t, vi, k), S.mul(sin_t, vj, k), -1)

@@ -15,7 +15,7 @@ import sympy as sp
 from sympy.printing.cxx import CXX17CodePrinter
 
 from .derive import derive
-from .machine import Machine, Rotation
+from .machine import ROT_PLANE, Machine, Rotation
 from .units import UNITS
 
 GENERATOR = "chaincomp generate"
@@ -78,7 +78,7 @@ def exact_pose(machine: Machine, with_errors: bool = True) -> list[sp.Expr]:
         if isinstance(el, Rotation):
             angle = el.angle.xreplace(zero)
             c, s = sp.cos(angle), sp.sin(angle)
-            i, j = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}[el.axis]
+            i, j = ROT_PLANE[el.axis]
             for v in (p, d) if d else (p,):
                 v[i], v[j] = c * v[i] - s * v[j], s * v[i] + c * v[j]
         else:

@@ -17,6 +17,8 @@ from .yamlsource import LineDict, LineList, load_yaml
 ROLES = ("axis", "constant", "error")
 SENSES = {"right_hand": 1, "left_hand": -1}
 AXES = ("x", "y", "z")
+# The coordinates a rotation about each axis mixes: i' = c·i − s·j, j' = s·i + c·j.
+ROT_PLANE = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
 
@@ -37,6 +39,13 @@ class Symbol:
     @property
     def small(self) -> bool:
         return self.role == "error"
+
+    @property
+    def default_position(self) -> float:
+        """Where an axis stands when nothing sets it: 0, or mid-range when 0 is outside its
+        limits (declared unit)."""
+        lo, hi = self.limits
+        return 0.0 if lo <= 0.0 <= hi else 0.5 * (lo + hi)
 
     def to_internal(self, value: float) -> float:
         return value * self.unit.to_internal

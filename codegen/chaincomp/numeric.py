@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import sympy as sp
 
-from .derive import _ROT_PLANE, Derivation
-from .machine import Machine, Rotation
+from .derive import Derivation
+from .machine import ROT_PLANE, Machine, Rotation
 from .varying import resolve
 
 BACKENDS = ("numpy", "mpmath")
@@ -37,7 +37,7 @@ class ExactModel:
             steps = []
             for el in reversed(self.machine.chain):
                 if isinstance(el, Rotation):
-                    steps.append(("rot", _ROT_PLANE[el.axis], f(el.angle)))
+                    steps.append(("rot", ROT_PLANE[el.axis], f(el.angle)))
                 else:
                     steps.append(("trans", [f(v) for v in el.vector]))
             point = [f(v) for v in self.machine.tool_point]

@@ -130,8 +130,7 @@ def build_protocol(machine: Machine, angles=(0.0, 90.0, 180.0, 270.0), assume_ze
                                  f"(axes: {', '.join(s.name for s in machine.axes)})")
     for s in machine.axes:
         if s not in grid_axes and s.name not in fixed:
-            lo, hi = s.limits
-            fixed[s.name] = 0.0 if lo <= 0.0 <= hi else 0.5 * (lo + hi)
+            fixed[s.name] = s.default_position
     grid, left_out = {}, {}
     for s in grid_axes:
         lo, hi = s.limits

@@ -11,15 +11,11 @@
 #include <csignal>
 #include <cstdio>
 #include <cstring>
-#include <fstream>
 #include <memory>
-#include <sstream>
 #include <string>
-#include <vector>
 
 #include "chaincomp/daemon_config.hpp"
 #include "chaincomp/loaded_model.hpp"
-#include "chaincomp/hash.hpp"
 #include "chaincomp/lcm_node.hpp"
 #include "chaincomp/params_io.hpp"
 
@@ -34,18 +30,6 @@ const char* kUsage =
     "  --machine M.yaml  machine description (its model must be compiled in: configs/machines/)\n"
     "  --params P.yaml   error values of the machine (configs/params/)\n"
     "  --config R.yaml   runtime settings (configs/runtime/default.yaml documents every key)\n";
-
-std::string file_hash(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  const std::string t = ss.str();
-  char buf[17];
-  std::snprintf(buf, sizeof buf, "%016llx",
-                static_cast<unsigned long long>(
-                    chaincomp::fnv1a64(reinterpret_cast<const unsigned char*>(t.data()), t.size())));
-  return buf;
-}
 
 // Each setting degrades with one warning when the system does not permit it.
 chaincomp::RealtimeObtained realtime_settings(const chaincomp::DaemonConfig& cfg) {
@@ -112,7 +96,7 @@ int main(int argc, char** argv) {
   lcm_t* lcm = lcm_create(config.lcm_url.c_str());
   if (!lcm) return fail("cannot open LCM at '" + config.lcm_url + "'");
   const chaincomp::RealtimeObtained rt = realtime_settings(config);
-  auto node = std::make_unique<chaincomp::LcmNode>(lcm, *entry, model, config, params_path, file_hash(params_path), rt);
+  auto node = std::make_unique<chaincomp::LcmNode>(lcm, *entry, model, config, params_path, chaincomp::file_hash_hex(params_path), rt);
 
   struct sigaction sa {};
   sa.sa_handler = on_signal;

@@ -1,8 +1,9 @@
 #include "chaincomp/lcm_node.hpp"
 
+#include "chaincomp/params_io.hpp"
+
 #include <dlfcn.h>
 
-#include <cstdio>
 
 namespace chaincomp {
 
@@ -17,12 +18,6 @@ std::int64_t ns_since(Clock::time_point t0) {
 std::int64_t wall_us() {
   return std::chrono::duration_cast<std::chrono::microseconds>(
              std::chrono::system_clock::now().time_since_epoch()).count();
-}
-
-std::string hex(std::uint64_t h) {
-  char buf[17];
-  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(h));
-  return buf;
 }
 
 // The machine name's length field must be 1..kMaxMachineName+1 and fit in the payload.
@@ -72,7 +67,7 @@ LcmNode::LcmNode(lcm_t* lcm, const ModelEntry& entry, const void* model, const D
   out_buf_.resize(out_msg_.getEncodedSize() + 64);
   auto& s = status_msg_;
   s.machine = entry.info->name;
-  s.model_hash = hex(entry.info->source_hash);
+  s.model_hash = hash_hex(entry.info->source_hash);
   s.params_file = params_file;
   s.params_hash = params_hash;
   s.mlockall_ok = rt.mlockall;

@@ -282,6 +282,18 @@ bool load_varying(const MachineInfo& info, int param, const std::string& path, c
 
 }  // namespace
 
+std::string hash_hex(std::uint64_t hash) {
+  char buf[17];
+  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(hash));
+  return buf;
+}
+
+std::string file_hash_hex(const std::string& path) {
+  std::string text, error;
+  if (!read_file(path, text, error)) return "";
+  return hash_hex(fnv1a64(reinterpret_cast<const unsigned char*>(text.data()), text.size()));
+}
+
 const ModelEntry* open_machine(const std::string& path, std::string& error) {
   std::string text;
   YAML::Node doc;
@@ -299,9 +311,7 @@ const ModelEntry* open_machine(const std::string& path, std::string& error) {
   }
   const auto hash = fnv1a64(reinterpret_cast<const unsigned char*>(text.data()), text.size());
   if (hash != entry->info->source_hash) {
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(hash));
-    error = path + ": the machine file changed since its model was compiled (hash " + buf +
+    error = path + ": the machine file changed since its model was compiled (hash " + hash_hex(hash) +
             " differs from the compiled " + entry->info->source_file + "); rebuild with tools/setup";
     return nullptr;
   }

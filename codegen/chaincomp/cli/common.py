@@ -34,8 +34,7 @@ def values_for(machine: Machine, params_path: str | None, sets: list[str]) -> tu
     """
     values = machine.nominal_values()
     for s in machine.axes:
-        lo, hi = s.limits
-        values[s.name] = s.to_internal(0.0 if lo <= 0.0 <= hi else 0.5 * (lo + hi))
+        values[s.name] = s.to_internal(s.default_position)
     given = {}
     if params_path:
         given.update(load_params(params_path, machine))

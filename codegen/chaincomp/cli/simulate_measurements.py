@@ -75,8 +75,7 @@ def setups(machine, spec: str, sets: list[str], rng) -> dict[str, np.ndarray]:
     count = len(next(iter(out.values()))) if out else 1
     for s in machine.axes:
         if s.name not in out:
-            lo, hi = s.limits
-            default = s.to_internal(0.0 if lo <= 0.0 <= hi else 0.5 * (lo + hi))
+            default = s.to_internal(s.default_position)
             out[s.name] = np.full(count, fixed.get(s.name, default))
     return out
 

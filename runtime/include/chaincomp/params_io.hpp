@@ -2,6 +2,7 @@
 // uses yaml-cpp and the heap; never included by real-time code).
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -9,6 +10,11 @@
 #include "chaincomp/varying.hpp"
 
 namespace chaincomp {
+
+// A content hash as the 16 hex digits the generated files, messages and status show.
+std::string hash_hex(std::uint64_t hash);
+// The content hash of a file (FNV-1a 64), in hex; empty when it cannot be read.
+std::string file_hash_hex(const std::string& path);
 
 // The compiled model for the machine file at `path`: reads its `name`, finds the model in
 // the registry and checks the file's content hash against the one it was generated from.
