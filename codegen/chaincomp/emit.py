@@ -98,6 +98,21 @@ class _Function:
     signature: str
     outputs: list[tuple[str, sp.Expr]]
     comment: str
+    # Takes the axes' sin and cos (a Trig after `q`) instead of computing them: compensate
+    # computes them once per command. A wrapper without it is declared inline.
+    trig: bool = False
+
+    def declaration(self) -> str:
+        if not self.trig:
+            return f"void {self.name}({self.signature}) noexcept"
+        head, rest = self.signature.split("const Axes& q", 1)
+        return f"void {self.name}({head}const Axes& q, const Trig& t{rest}) noexcept"
+
+    def trig_wrapper(self) -> str:
+        args = [a.split()[-1].lstrip("&") for a in self.signature.split(",")]
+        call = ", ".join(args[: args.index("q") + 1] + ["t"] + args[args.index("q") + 1:])
+        return (f"inline void {self.name}({self.signature}) noexcept {{ Trig t; axis_trig<Kinematics>(q, t); "
+                f"{self.name}({call}); }}")
 
 
 class _Hoister:
@@ -123,9 +138,21 @@ def _c_name(sym: sp.Symbol, machine: Machine) -> str:
     return ("q_" if s.role == "axis" else "p_") + s.name
 
 
-def _body(machine: Machine, outputs: list[tuple[str, sp.Expr]], hoisted: bool) -> list[str]:
-    """Statements computing ``outputs`` with one joint CSE; inputs bound to locals first."""
+def _body(machine: Machine, outputs: list[tuple[str, sp.Expr]], hoisted: bool, trig: bool = False) -> list[str]:
+    """Statements computing ``outputs`` with one joint CSE; inputs bound to locals first. With
+    ``trig``, sin and cos of each angular axis come from ``t`` (any other function of an axis
+    is still computed from ``q``)."""
     exprs = [e for _, e in outputs]
+    bound = []
+    if trig:
+        sub = {}
+        for i, a in enumerate(machine.axes):
+            if a.unit.kind == "angle":
+                # sympy names no machine symbol can have (they start with a letter)
+                sub[sp.sin(a.sym)] = sp.Symbol(f"_s_{a.name}")
+                sub[sp.cos(a.sym)] = sp.Symbol(f"_c_{a.name}")
+                bound += [(sub[sp.sin(a.sym)], f"t.s[{i}]"), (sub[sp.cos(a.sym)], f"t.c[{i}]")]
+        exprs = [e.xreplace(sub) for e in exprs]
     repl, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("t"), order="canonical")
     used = set().union(*(e.free_symbols for e in exprs)) if exprs else set()
     axes = {a.sym: i for i, a in enumerate(machine.axes)}
@@ -141,6 +168,14 @@ def _body(machine: Machine, outputs: list[tuple[str, sp.Expr]], hoisted: bool) -
             lines.append(f"const double {rename[sym]} = m.params.{sym.name};")
         elif hoisted and str(sym).startswith("k"):
             lines.append(f"const double {sym} = m.k[{str(sym)[1:]}];")
+    for sym, src in bound:
+        if sym in used:
+            rename[sym] = sp.Symbol(str(sym)[1:])
+            lines.append(f"const double {rename[sym]} = {src};")
+    if trig and not any(sym in used for sym, _ in bound):
+        lines.append("static_cast<void>(t);  // no sin or cos of an axis here")
+    if trig and not any(sym in used for sym in axes):
+        lines.append("static_cast<void>(q);  // the axes enter through t alone")
     for lhs, rhs in repl:
         lines.append(f"const double {lhs} = {ccode(rhs.xreplace(rename))};")
     for (target, _), e in zip(outputs, reduced):
@@ -170,20 +205,20 @@ def generate(machine: Machine, order: int = 2) -> dict[str, str]:
     functions = [
         _Function("pose_exact", "const Model& m, const Axes& q, Pose& out",
                   [(f"out[{i}]", hoist(e)) for i, e in enumerate(exact)],
-                  "Actual tool point (and direction) with every error: the exact chain."),
+                  "Actual tool point (and direction) with every error: the exact chain.", trig=True),
         _Function("pose_nominal", "const Model& m, const Axes& q, Pose& out",
                   [(f"out[{i}]", hoist(e)) for i, e in enumerate(nominal)],
-                  "Nominal tool point (and direction): every error at zero."),
+                  "Nominal tool point (and direction): every error at zero.", trig=True),
         _Function("pose_jacobian", "const Model& m, const Axes& q, Pose& out, Jacobian& J",
                   [(f"out[{i}]", hoist(e)) for i, e in enumerate(exact)]
                   + [(f"J({i}, {j})", hoist(jac[i][j])) for i in range(pose_size) for j in range(n)],
-                  "Actual pose and its exact Jacobian with respect to the axes (one shared CSE)."),
+                  "Actual pose and its exact Jacobian with respect to the axes (one shared CSE).", trig=True),
         _Function("pose_jacobian_gain", "const Model& m, const Axes& q, Pose& out, Jacobian& J, Gain& G",
                   [(f"out[{i}]", hoist(e)) for i, e in enumerate(exact)]
                   + [(f"J({i}, {j})", hoist(jac[i][j])) for i in range(pose_size) for j in range(n)]
                   + [(f"G({i}, {c})", hoist(gain[i][c])) for i in range(pose_size) for c in range(n_err)],
                   "pose_jacobian, and the error gain matrix G = d pose / d error at zero errors (columns: "
-                  "the errors in kParams order)."),
+                  "the errors in kParams order).", trig=True),
     ]
     for k in range(1, order + 1):
         functions.append(_Function(
@@ -224,7 +259,8 @@ def _header(machine, banner, n, pose_size, corr_dir, order, n_pre, src_hash, src
          "using Pose = Eigen::Matrix<double, kPoseSize, 1>;",
          "using Jacobian = Eigen::Matrix<double, kPoseSize, kNumAxes>;",
          f"using Gain = Eigen::Matrix<double, kPoseSize, {max(len(machine.errors), 1)}>;"
-         "  // d pose / d error, one column per error", "",
+         "  // d pose / d error, one column per error",
+         "using Trig = chaincomp::AxisTrig<kNumAxes>;  // sin and cos of the angular axes", "",
          "// Every constant and error by name, in internal units (mm, rad); defaults: nominal, errors 0.",
          "struct Params {"]
     for s in params:
@@ -257,7 +293,7 @@ def _header(machine, banner, n, pose_size, corr_dir, order, n_pre, src_hash, src
           "// depends on it: the errors that vary along an axis, at each evaluation.",
           "void set_errors(Model& m, const double* values) noexcept;", ""]
     for f in functions:
-        L += [f"// {f.comment}", f"void {f.name}({f.signature}) noexcept;"]
+        L += [f"// {f.comment}", f"{f.declaration()};"]
     L += ["", "// The sizes and functions the generic compensation needs.", "struct Kinematics {",
           "  static constexpr int kNumAxes = models::" + name + "::kNumAxes;",
           "  static constexpr int kNumParams = models::" + name + "::kNumParams;",
@@ -267,17 +303,20 @@ def _header(machine, banner, n, pose_size, corr_dir, order, n_pre, src_hash, src
           "  using Model = models::" + name + "::Model;", "  using Axes = models::" + name + "::Axes;",
           "  using Pose = models::" + name + "::Pose;", "  using Jacobian = models::" + name + "::Jacobian;",
           "  using Gain = models::" + name + "::Gain;",
-          "  static void pose_nominal(const Model& m, const Axes& q, Pose& out) noexcept { "
-          "models::" + name + "::pose_nominal(m, q, out); }",
-          "  static void pose_exact(const Model& m, const Axes& q, Pose& out) noexcept { "
-          "models::" + name + "::pose_exact(m, q, out); }",
-          "  static void pose_jacobian(const Model& m, const Axes& q, Pose& out, Jacobian& J) noexcept { "
-          "models::" + name + "::pose_jacobian(m, q, out, J); }",
-          "  static void pose_jacobian_gain(const Model& m, const Axes& q, Pose& out, Jacobian& J, Gain& G) noexcept { "
-          "models::" + name + "::pose_jacobian_gain(m, q, out, J, G); }",
+          "  using Trig = models::" + name + "::Trig;",
+          "  static void pose_nominal(const Model& m, const Axes& q, const Trig& t, Pose& out) noexcept { "
+          "models::" + name + "::pose_nominal(m, q, t, out); }",
+          "  static void pose_exact(const Model& m, const Axes& q, const Trig& t, Pose& out) noexcept { "
+          "models::" + name + "::pose_exact(m, q, t, out); }",
+          "  static void pose_jacobian(const Model& m, const Axes& q, const Trig& t, Pose& out, Jacobian& J) noexcept { "
+          "models::" + name + "::pose_jacobian(m, q, t, out, J); }",
+          "  static void pose_jacobian_gain(const Model& m, const Axes& q, const Trig& t, Pose& out, Jacobian& J, "
+          "Gain& G) noexcept { models::" + name + "::pose_jacobian_gain(m, q, t, out, J, G); }",
           "  static void set_errors(Model& m, const double* values) noexcept { "
           "models::" + name + "::set_errors(m, values); }",
-          "};", "using Workspace = chaincomp::Workspace<Kinematics>;",
+          "};", "", "// The functions above with the axes' sin and cos computed here."]
+    L += [f.trig_wrapper() for f in functions if f.trig]
+    L += ["", "using Workspace = chaincomp::Workspace<Kinematics>;",
           "using Result = chaincomp::Result<Kinematics>;", "",
           "// Corrected axes such that the actual tool pose equals the nominal one at `command`.",
           "inline Status compensate(const Model& m, Workspace& ws, const Axes& command, Result& out) noexcept {",
@@ -303,8 +342,8 @@ def _source(machine, banner, n, pre, functions, order) -> str:
     L += ["}", ""]
     L += _set_errors(machine, params, pre)
     for f in functions:
-        L += [f"void {f.name}({f.signature}) noexcept {{"]
-        L += ["  " + line for line in _body(machine, f.outputs, hoisted=True)]
+        L += [f"{f.declaration()} {{"]
+        L += ["  " + line for line in _body(machine, f.outputs, hoisted=True, trig=f.trig)]
         L += ["}", ""]
     # Type-erased entry points: with varying errors attached, each evaluates them at `axes`
     # first (a model outside a rejecting range gives NaN).

@@ -44,6 +44,7 @@
 namespace {
 
 constexpr int kMaxAxes = 8;
+constexpr int kBaselineSteps = 2;  // full Newton steps: what compensate needs at µm and arcsec
 constexpr double kCheckTolerance = 1e-9;
 #if defined(__clang__)
 const std::string kCompiler = std::string("clang ") + __clang_version__;
@@ -290,8 +291,8 @@ int baseline_compensate(const Chain& actual, const Chain& nominal, const double*
   Eigen::Matrix<double, rows, 1> r;
   Eigen::Matrix<double, rows, Eigen::Dynamic, 0, rows, kMaxAxes> J(rows, N);
   const Eigen::Map<const Eigen::Matrix<double, PS, Eigen::Dynamic, 0, PS, kMaxAxes>> jm(jac, PS, N);
-  for (int step = 0; step <= chaincomp::kNewtonSteps; ++step) {
-    if (step == chaincomp::kNewtonSteps) {
+  for (int step = 0; step <= kBaselineSteps; ++step) {
+    if (step == kBaselineSteps) {
       baseline_pose<PS>(actual, q.data(), pose);
     } else {
       baseline_jacobian<PS>(actual, q.data(), pose, jac);
@@ -302,7 +303,7 @@ int baseline_compensate(const Chain& actual, const Chain& nominal, const double*
     if constexpr (DIR) {
       for (int i = 3; i < 6; ++i) r[i] = chaincomp::kDirectionWeight * (pose[i] - target[i]);
     }
-    if (step == chaincomp::kNewtonSteps) break;
+    if (step == kBaselineSteps) break;
     Square A = J.transpose() * J;
     A.diagonal().array() += 1e-14 * (1.0 + A.diagonal().maxCoeff());
     Eigen::LDLT<Square> ldlt(A);

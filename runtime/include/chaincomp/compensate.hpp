@@ -1,13 +1,12 @@
 // Compensation: corrected axis commands such that the actual tool point (and tool
 // direction, where the machine's rotary axes can correct it) equals the nominal one at the
-// commanded axes. A fixed number of Gauss-Newton steps on the generated exact Jacobian:
-// constant cost per call, no heap, no exceptions. Errors that vary along an axis (tables,
+// commanded axes. Gauss-Newton steps on the generated exact Jacobian until the residual is
+// within tolerance, at most a fixed number: bounded cost per call, no heap, no exceptions. Errors that vary along an axis (tables,
 // polynomials: varying.hpp) are evaluated at the command and at every Newton iterate, and
 // their slopes enter the Jacobian.
 #pragma once
 
 #include <Eigen/Core>
-#include <Eigen/Cholesky>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -39,7 +38,6 @@ inline const char* status_name(Status s) noexcept {
   return "unknown";
 }
 
-constexpr int kNewtonSteps = 2;
 constexpr double kPointTolerance = 1e-7;      // mm: 0.1 nm
 constexpr double kDirectionTolerance = 1e-9;  // rad
 constexpr double kDirectionWeight = 100.0;    // mm per rad: a direction error counts as at 100 mm
@@ -48,10 +46,45 @@ constexpr double kDirectionWeight = 100.0;    // mm per rad: a direction error c
 // the correction is bounded and the rest reported as residual.
 constexpr double kMaxLinearCorrection = 1.0;      // mm
 constexpr double kMaxAngularCorrection = 0.0175;  // rad, about 1 degree
-constexpr int kMaxExtraSteps = 4;  // steps a call near a singular pose may add
-constexpr double kConvergedStep = 1e-3;  // a last step above this fraction of the bound (1 µm, 3.6 arcsec): not converged yet
-// A step larger than this fraction of the bound refreshes the Jacobian.
-constexpr double kChordStepLimit = 0.05;
+// Steps per call: at µm and arcsec errors two reach the tolerance; near a singular pose the
+// chord converges slowly and takes more. Each axis reaching its bound and the switch to
+// point-only add one; the worst-case cost stays known.
+constexpr int kMaxSteps = 6;
+// A step larger than this fraction of the bound (0.25 mm, 0.25 degree) refreshes the
+// Jacobian: below it the chord gains at least two digits per step.
+constexpr double kChordStepLimit = 0.25;
+
+// sin and cos of each angular axis (the entries of linear axes are not used).
+template <int N>
+struct AxisTrig {
+  double s[N];
+  double c[N];
+};
+
+template <class K>
+void axis_trig(const typename K::Axes& q, AxisTrig<K::kNumAxes>& t) noexcept {
+  for (int i = 0; i < K::kNumAxes; ++i) {
+    if (K::kAxisIsAngle[i]) {
+      t.s[i] = std::sin(q[i]);
+      t.c[i] = std::cos(q[i]);
+    }
+  }
+}
+
+// sin and cos at q from those at `base` (the angle-sum formulas): a Newton iterate differs
+// from the command by at most the correction bound, where sin_small and cos_small are a
+// short series and cost less than the library's sin and cos.
+template <class K>
+void axis_trig_near(const typename K::Axes& base, const AxisTrig<K::kNumAxes>& base_trig,
+                    const typename K::Axes& q, AxisTrig<K::kNumAxes>& t) noexcept {
+  for (int i = 0; i < K::kNumAxes; ++i) {
+    if (K::kAxisIsAngle[i]) {
+      const double d = q[i] - base[i], sd = sin_small(d), cd = cos_small(d);
+      t.s[i] = base_trig.s[i] * cd + base_trig.c[i] * sd;
+      t.c[i] = base_trig.c[i] * cd - base_trig.s[i] * sd;
+    }
+  }
+}
 
 template <class K>
 struct Result {
@@ -64,6 +97,7 @@ template <class K>
 struct Workspace {
   typename K::Pose target, pose;
   typename K::Jacobian jacobian;
+  AxisTrig<K::kNumAxes> command_trig, trig;  // at the command, at the current axes
   // With varying errors: the model with their values at the current axes, the error gain
   // matrix, and per varying error its table interval and slope at the current axes.
   typename K::Model model;
@@ -122,6 +156,62 @@ const typename K::Model* model_at(const typename K::Model& m, const typename K::
   return set_varying<K>(*m.varying, scratch, q, nullptr, slope, values) ? &scratch : nullptr;
 }
 
+// LDL^T factorisation of a small symmetric positive definite matrix and its solve, plain
+// loops of compile-time length and no square root: at 5x5, Eigen's LLT (generic triangular
+// solver) cost more than every model evaluation of a call together.
+template <int N>
+class SmallLdlt {
+ public:
+  // Reads the lower triangle of A. False where A is not positive definite (a pivot not > 0,
+  // or NaN). The loops here and in solve are unrolled: gcc keeps such short loops
+  // otherwise, at twice to three times the cost.
+  bool compute(const Eigen::Matrix<double, N, N>& A) noexcept {
+#pragma GCC unroll 8
+    for (int j = 0; j < N; ++j) {
+      double w[N] = {};  // L(j, k) D(k)
+      double d = A(j, j);
+#pragma GCC unroll 8
+      for (int k = 0; k < j; ++k) {
+        w[k] = l_[j][k] * d_[k];
+        d -= l_[j][k] * w[k];
+      }
+      if (!(d > 0)) return false;
+      d_[j] = d;
+      inv_d_[j] = 1.0 / d;
+#pragma GCC unroll 8
+      for (int i = j + 1; i < N; ++i) {
+        double s = A(i, j);
+#pragma GCC unroll 8
+        for (int k = 0; k < j; ++k) s -= l_[i][k] * w[k];
+        l_[i][j] = s * inv_d_[j];
+      }
+    }
+    return true;
+  }
+  // X with A X = B: forward substitution with L, division by D, back substitution with
+  // L^T, on every column of B at once (rows stored contiguously: the columns pipeline).
+  template <int M>
+  Eigen::Matrix<double, N, M> solve(const Eigen::Matrix<double, N, M>& b) const noexcept {
+    Eigen::Matrix<double, N, M, M == 1 ? Eigen::ColMajor : Eigen::RowMajor> x = b;
+#pragma GCC unroll 8
+    for (int i = 1; i < N; ++i) {
+#pragma GCC unroll 8
+      for (int k = 0; k < i; ++k) x.row(i) -= l_[i][k] * x.row(k);
+    }
+#pragma GCC unroll 8
+    for (int i = N - 1; i >= 0; --i) {
+      x.row(i) *= inv_d_[i];
+#pragma GCC unroll 8
+      for (int k = i + 1; k < N; ++k) x.row(i) -= l_[k][i] * x.row(k);
+    }
+    return x;
+  }
+
+ private:
+  double l_[N][N];  // strictly lower triangle of the unit lower triangular L
+  double d_[N], inv_d_[N];
+};
+
 // K: the generated Kinematics of one machine (sizes, Model, pose_nominal, pose_jacobian).
 // The number of linear axes.
 template <class K>
@@ -129,14 +219,6 @@ constexpr int kLinearAxes() noexcept {
   int count = 0;
   for (int i = 0; i < K::kNumAxes; ++i) count += K::kAxisIsAngle[i] ? 0 : 1;
   return count;
-}
-
-// The residual with its direction rows zeroed.
-template <class K, int Rows>
-Eigen::Matrix<double, Rows, 1> point_rows(const Eigen::Matrix<double, Rows, 1>& r) noexcept {
-  Eigen::Matrix<double, Rows, 1> out = r;
-  out.template tail<Rows - 3>().setZero();
-  return out;
 }
 
 // Whether every axis of q lies within its correction bound around the command.
@@ -166,31 +248,37 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
   }
   // The actual pose (and its Jacobian) at q, varying errors evaluated at q. Newton iterates
   // that step past the end of a rejecting table by the correction are evaluated held there.
+  // sin and cos of the angular axes at the command: the library's once per call, the
+  // iterates' from them.
+  axis_trig<K>(command, ws.command_trig);
   auto pose_at = [&](const typename K::Axes& q) {
+    axis_trig_near<K>(command, ws.command_trig, q, ws.trig);
     if (varying == nullptr) {
-      K::pose_exact(model, q, ws.pose);
+      K::pose_exact(model, q, ws.trig, ws.pose);
     } else {
       set_varying<K, false>(*varying, ws.model, q, ws.hint, ws.slope, ws.values);
-      K::pose_exact(ws.model, q, ws.pose);
+      K::pose_exact(ws.model, q, ws.trig, ws.pose);
     }
   };
   auto jacobian_at = [&](const typename K::Axes& q) {
+    axis_trig_near<K>(command, ws.command_trig, q, ws.trig);
     if (varying == nullptr) {
-      K::pose_jacobian(model, q, ws.pose, ws.jacobian);
+      K::pose_jacobian(model, q, ws.trig, ws.pose, ws.jacobian);
     } else {
       set_varying<K>(*varying, ws.model, q, ws.hint, ws.slope, ws.values);
-      K::pose_jacobian_gain(ws.model, q, ws.pose, ws.jacobian, ws.gain);
+      K::pose_jacobian_gain(ws.model, q, ws.trig, ws.pose, ws.jacobian, ws.gain);
       add_slopes<K>(*varying, ws.gain, ws.slope, ws.jacobian);
     }
   };
 
-  K::pose_nominal(model, command, ws.target);
+  K::pose_nominal(model, command, ws.command_trig, ws.target);
   // Chord Newton: the Jacobian at the command serves the following steps as long as they
-  // stay small (µm, arcsec: it then differs from the one at the solution by ~1e-4 relative,
-  // so each step gains about four digits) and one factorisation per call keeps the cost low.
-  // A large step (near a singular pose) takes a fresh Jacobian: the cost stays bounded.
+  // stay small (µm, arcsec: it then differs from the one at the solution by about the
+  // correction in rad, ~1e-3 relative, so each step gains about three digits) and one
+  // factorisation per call keeps the cost low. A large step (near a singular pose) takes a
+  // fresh Jacobian.
   Eigen::Matrix<double, rows, n> J;
-  Eigen::LLT<Eigen::Matrix<double, n, n>> llt;
+  Eigen::Matrix<double, n, rows> step_matrix;  // (J^T J)^-1 J^T: a step is step_matrix * r
   bool at_bound[n] = {};  // axes whose correction reached its bound stay there
   // Near a singular pose (the tool along a rotary axis) the direction cannot be corrected
   // within the trust region: the point alone is corrected then, by the linear axes where
@@ -205,38 +293,62 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
     for (int i = 0; i < n; ++i) {
       if (at_bound[i] || (point_only && K::kAxisIsAngle[i] && kLinearAxes<K>() >= 3)) J.col(i).setZero();
     }
-    Eigen::Matrix<double, n, n> A = J.transpose() * J;
+    Eigen::Matrix<double, n, n> A;  // J^T J, lower triangle: all SmallLdlt reads
+    for (int j = 0; j < n; ++j) {
+      for (int i = j; i < n; ++i) A(i, j) = J.col(i).dot(J.col(j));
+    }
     // A tiny Levenberg term keeps the step defined where an axis has no effect.
     A.diagonal().array() += 1e-14 * (1.0 + A.diagonal().maxCoeff());
-    llt.compute(A);
-    return llt.info() == Eigen::Success;
+    SmallLdlt<n> ldlt;
+    if (!ldlt.compute(A)) return false;
+    step_matrix = ldlt.solve(Eigen::Matrix<double, n, rows>(J.transpose()));
+    return true;
   };
   jacobian_at(command);
   if (!factorise()) return Status::kSingular;
 
   typename K::Axes q = command;
   Eigen::Matrix<double, rows, 1> r;
-  // An axis reaching its bound costs one more step (at most n): the cost stays bounded.
-  int steps = kNewtonSteps;
-  double last_step = 0;  // the last step's largest axis move, as a fraction of its bound
-  for (int step = 0;; ++step) {
+  // Within tolerance: the point, and the direction where it is being corrected.
+  auto converged = [&](const Eigen::Matrix<double, rows, 1>& v, double fraction) {
+    const double point = fraction * kPointTolerance;
+    bool ok = v.template head<3>().squaredNorm() <= point * point;
+    if constexpr (K::kCorrectsDirection) {
+      const double direction = fraction * kDirectionTolerance * kDirectionWeight;
+      ok = ok && (point_only || v.template tail<3>().squaredNorm() <= direction * direction);
+    }
+    return ok;
+  };
+  auto set_residual = [&]() {
     r.template head<3>() = ws.pose.template head<3>() - ws.target.template head<3>();
     if constexpr (K::kCorrectsDirection) {
       r.template tail<3>() = kDirectionWeight * (ws.pose.template tail<3>() - ws.target.template tail<3>());
     }
-    // Near a singular pose the steps are large and the chord converges slowly: a few more
-    // steps (bounded, so the worst-case cost is known) until the point is corrected.
-    if (step == steps && steps < kNewtonSteps + kMaxExtraSteps && last_step > kConvergedStep) ++steps;
-    if (step == steps) break;
-    typename K::Axes delta = llt.solve(J.transpose() * (point_only ? point_rows<K, rows>(r) : r));
-    if (K::kCorrectsDirection && !point_only && !within_bounds<K>(q - delta, command)) {
-      point_only = true;  // one more step for the switch: the cost stays bounded
-      ++steps;
+  };
+  int budget = kMaxSteps;
+  double last_move = std::numeric_limits<double>::infinity();  // the last step's largest axis move, as a fraction of its bound
+  bool slow = false;       // the chord gained less than a digit on the last step
+  for (int step = 0;; ++step) {
+    set_residual();
+    if (step == budget || converged(r, 1.0)) break;
+    if (slow) {  // not converged yet: a fresh Jacobian for the next step
+      jacobian_at(q);
       if (!factorise()) return Status::kSingular;
-      delta = llt.solve(J.transpose() * point_rows<K, rows>(r));
+      set_residual();
     }
-    bool large = false;
-    last_step = 0;
+    // In point-only mode J's direction rows are zero, and so are the step's weights on them.
+    typename K::Axes delta = step_matrix * r;
+    if (K::kCorrectsDirection && !point_only && !within_bounds<K>(q - delta, command)) {
+      point_only = true;
+      ++budget;
+      if (!factorise()) return Status::kSingular;
+      delta = step_matrix * r;
+    }
+    // A step that would move the pose by less than a tenth of the tolerance: what is left
+    // cannot be corrected (fewer correctable DOF than errors, or an axis at its bound).
+    if (converged((J * delta).eval(), 0.1)) break;
+    bool clamped = false;
+    double move = 0;
     for (int i = 0; i < n; ++i) {
       // Keep the total correction within its bound per axis (a trust region near singular
       // poses); an axis that reaches it is held there and the others correct what they can.
@@ -245,12 +357,16 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
       q[i] = std::clamp(wanted, command[i] - bound, command[i] + bound);
       if (q[i] != wanted && !at_bound[i]) {
         at_bound[i] = true;
-        ++steps;
+        ++budget;
       }
-      large = large || q[i] != wanted || std::abs(delta[i]) > kChordStepLimit * bound;
-      last_step = std::max(last_step, std::abs(delta[i]) / bound);
+      clamped = clamped || q[i] != wanted;
+      move = std::max(move, std::abs(delta[i]) * (1.0 / bound));  // constant: no division
     }
-    if (large) {
+    // A fresh Jacobian after a large step.
+    const bool refresh = clamped || move > kChordStepLimit;
+    slow = !refresh && move > 0.1 * last_move;
+    last_move = move;
+    if (refresh) {
       jacobian_at(q);
       if (!factorise()) return Status::kSingular;
     } else {
