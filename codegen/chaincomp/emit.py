@@ -328,7 +328,7 @@ def _header(machine, banner, n, pose_size, corr_dir, order, n_pre, src_hash, src
 def _source(machine, banner, n, pre, functions, order) -> str:
     name = machine.name
     params = [s for s in machine.symbols if s.role != "axis"]
-    L = [banner, f"#include \"{name}.hpp\"", "", "#include <algorithm>", "#include <cmath>", "#include <limits>", "",
+    L = [banner, f"#include \"{name}.hpp\"", "", "#include <algorithm>", "#include <cmath>", "#include <limits>", "#include <new>", "",
          f"namespace chaincomp::models::{name} {{", "",
          "Params params_from_array(const double* v) noexcept {", "  Params p;"]
     L += [f"  p.{s.name} = v[{i}];" for i, s in enumerate(params)]
@@ -394,16 +394,20 @@ def _source(machine, banner, n, pre, functions, order) -> str:
           "  const Model* at = model_at<Kinematics>(m, q, scratch, slope);",
           "  if (at == nullptr) {", f"    Eigen::Map<Pose>(pose).setConstant({nan});", "  } else {",
           "    error_at(*at, q, order, pose);", "  }", "  return true;", "}",
-          "int erased_compensate(const void* model, const double* command, double* corrected,",
+          "int erased_compensate(const void* model, void* workspace, const double* command, double* corrected,",
           "                      double* residual) noexcept {",
-          "  Workspace ws;", "  Result r;",
+          "  Workspace fresh;", "  Workspace& ws = workspace ? *static_cast<Workspace*>(workspace) : fresh;",
+          "  Result r;",
           "  const Status s = compensate(*static_cast<const Model*>(model), ws, Eigen::Map<const Axes>(command), r);",
           "  Eigen::Map<Axes> corrected_out(corrected);", "  corrected_out = r.corrected;",
           "  residual[0] = r.residual_point;", "  residual[1] = r.residual_direction;",
-          "  return static_cast<int>(s);", "}", "", "}  // namespace", "",
+          "  return static_cast<int>(s);", "}",
+          "void erased_init_workspace(void* workspace) noexcept { new (workspace) Workspace(); }", "",
+          "}  // namespace", "",
           "const ModelEntry kEntry = {&kInfo, sizeof(Model), alignof(Model), erased_prepare, erased_pose_exact,",
           "                           erased_pose_nominal, erased_pose_jacobian, erased_error, kOrder,",
-          "                           erased_compensate, kNumErrors, erased_attach_varying,",
+          "                           erased_compensate, sizeof(Workspace), alignof(Workspace),",
+          "                           erased_init_workspace, kNumErrors, erased_attach_varying,",
           "                           erased_pose_jacobian_gain};", "",
           f"}}  // namespace chaincomp::models::{name}", ""]
     return "\n".join(L)

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <memory>
 
 #include "chaincomp/compensate.hpp"
 
@@ -22,7 +23,13 @@ Compensator::Compensator(const ModelEntry& entry, const void* model, const Compe
       config_(config),
       n_(entry.info->num_axes),
       enabled_(config.start_enabled),
-      ramp_(config.start_enabled ? 1.0 : 0.0) {}
+      ramp_(config.start_enabled ? 1.0 : 0.0) {
+  workspace_storage_.assign(entry.workspace_size + entry.workspace_align, 0);
+  void* p = workspace_storage_.data();
+  std::size_t space = workspace_storage_.size();
+  workspace_ = std::align(entry.workspace_align, entry.workspace_size, p, space);
+  entry.init_workspace(workspace_);
+}
 
 bool Compensator::reject(Reject r, Reject* why) noexcept {
   ++counters_.rejected[static_cast<int>(r)];
@@ -66,7 +73,7 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
   // Full correction at this command, in axis units.
   double q[kMaxAxes], corrected[kMaxAxes], residual[2] = {0, 0};
   for (int i = 0; i < n_; ++i) q[i] = cmd[i] * info[i].to_internal;
-  const auto status = static_cast<Status>(entry_.compensate(model_, q, corrected, residual));
+  const auto status = static_cast<Status>(entry_.compensate(model_, workspace_, q, corrected, residual));
   // outside a table whose `outside` is reject: the errors are not known there
   if (status == Status::kOutsideTable) return reject(Reject::kOutOfLimits, why);
   if (status != Status::kOk && status != Status::kResidual) return reject(Reject::kCompensationFailed, why);

@@ -1,7 +1,5 @@
 // chaincomp_replay: runs every command of an lcm-logger log through the daemon's compensator
 // (the same compiled code, the same runtime settings) and writes a corrected log and/or a CSV.
-#include <lcm/eventlog.h>
-
 #include <charconv>
 #include <chrono>
 #include <cmath>
@@ -12,6 +10,7 @@
 
 #include "chaincomp/compensator.hpp"
 #include "chaincomp/daemon_config.hpp"
+#include "chaincomp/event_log.hpp"
 #include "chaincomp/loaded_model.hpp"
 #include "chaincomp/lcm_node.hpp"
 #include "chaincomp/params_io.hpp"
@@ -94,12 +93,11 @@ int main(int argc, char** argv) {
   }
   chaincomp::Compensator comp(*entry, model, config.compensator);
 
-  lcm_eventlog_t* in = lcm_eventlog_create(in_path.c_str(), "r");
-  if (!in) return fail(in_path + ": cannot open the log for reading");
-  lcm_eventlog_t* out = nullptr;
-  if (!out_path.empty() && !(out = lcm_eventlog_create(out_path.c_str(), "w"))) {
-    return fail(out_path + ": cannot create the output log");
-  }
+  chaincomp::LogReader in;
+  if (!in.open(in_path, error)) return fail(error);
+  chaincomp::LogWriter out;
+  const bool write_log = !out_path.empty();
+  if (write_log && !out.open(out_path, error)) return fail(error);
   std::FILE* csv = nullptr;
   if (!csv_path.empty() && !(csv = std::fopen(csv_path.c_str(), "w"))) {
     return fail(csv_path + ": cannot create the CSV file");
@@ -127,16 +125,26 @@ int main(int argc, char** argv) {
   long long events = 0, commands = 0, listed = 0;
   std::vector<double> max_abs(n, 0.0), sum_sq(n, 0.0);
   const auto t0 = std::chrono::steady_clock::now();
-  while (lcm_eventlog_event_t* ev = lcm_eventlog_read_next_event(in)) {
-    ++events;
-    if (out) lcm_eventlog_write_event(out, ev);  // the original record, untouched
-    if (channel != ev->channel) {
-      lcm_eventlog_free_event(ev);
-      continue;
+  chaincomp::LogEvent ev;
+  std::size_t damage_listed = 0;
+  auto list_damage = [&]() {  // damaged stretches of the log, as they are found
+    for (; damage_listed < in.damage().size(); ++damage_listed) {
+      const auto& d = in.damage()[damage_listed];
+      if (damage_listed < 20) {
+        std::fprintf(stderr, "chaincomp replay: bytes %llu-%llu of the log skipped: %s\n",
+                     static_cast<unsigned long long>(d.offset),
+                     static_cast<unsigned long long>(d.offset + d.bytes - 1), d.what);
+      }
     }
+  };
+  while (in.next(ev)) {
+    list_damage();
+    ++events;
+    if (write_log) out.write(ev.timestamp, ev.channel, ev.data, ev.datalen);  // the original record, untouched
+    if (ev.channel != channel) continue;
     ++commands;
     chaincomp::Reject why = chaincomp::Reject::kUndecodable;
-    const bool decoded = chaincomp::decode_command(ev->data, ev->datalen, scratch, cmd);
+    const bool decoded = chaincomp::decode_command(ev.data, ev.datalen, scratch, cmd);
     bool ok = false;
     if (decoded) {
       ok = comp.process(cmd, target, &why);
@@ -149,27 +157,21 @@ int main(int argc, char** argv) {
         max_abs[i] = std::max(max_abs[i], std::abs(target.correction[i]));
         sum_sq[i] += target.correction[i] * target.correction[i];
       }
-      if (out) {
+      if (write_log) {
         chaincomp::to_message(target, msg);
         msg.compute_ns = 0;  // offline: no latency to report
         const int len = msg.encode(buf.data(), 0, static_cast<int>(buf.size()));
-        lcm_eventlog_event_t oe{};
-        oe.timestamp = ev->timestamp;  // original time kept
-        oe.channellen = static_cast<int32_t>(out_channel.size());
-        oe.datalen = len;
-        oe.channel = const_cast<char*>(out_channel.c_str());
-        oe.data = buf.data();
-        lcm_eventlog_write_event(out, &oe);
+        out.write(ev.timestamp, out_channel, buf.data(), len);  // original time kept
       }
     } else if (listed < 20) {
       ++listed;
       std::fprintf(stderr, "chaincomp replay: event %lld (timestamp %lld): rejected: %s\n",
-                   static_cast<long long>(ev->eventnum), static_cast<long long>(ev->timestamp),
+                   static_cast<long long>(ev.eventnum), static_cast<long long>(ev.timestamp),
                    chaincomp::reject_name(why));
     }
     if (csv) {
-      line.num(static_cast<long long>(ev->eventnum));
-      line.num(static_cast<long long>(decoded ? cmd.utime : ev->timestamp));
+      line.num(static_cast<long long>(ev.eventnum));
+      line.num(static_cast<long long>(decoded ? cmd.utime : ev.timestamp));
       if (decoded) line.num(static_cast<long long>(cmd.seq)); else line.skip(1);
       line.text(ok ? "ok" : chaincomp::reject_name(why));
       const bool axes_known = decoded && cmd.num_axes == n;
@@ -188,15 +190,14 @@ int main(int argc, char** argv) {
       }
       line.end(csv);
     }
-    lcm_eventlog_free_event(ev);
     if (!quiet && commands % 1000000 == 0) {
       std::fprintf(stderr, "chaincomp replay: %lld commands...\n", commands);
     }
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  lcm_eventlog_destroy(in);
-  if (out) lcm_eventlog_destroy(out);
-  if (csv) std::fclose(csv);
+  list_damage();
+  if (write_log && !out.close(error)) return fail(error);
+  if (csv && std::fclose(csv) != 0) return fail(csv_path + ": writing the CSV file failed (disk full?)");
 
   const auto& k = comp.counters();
   long long rejected = 0;
@@ -204,6 +205,12 @@ int main(int argc, char** argv) {
   std::fprintf(stderr, "chaincomp replay: %lld events, %lld commands on %s, %lld corrected, %lld rejected "
                "(%.0f commands/s)\n", events, commands, channel.c_str(), static_cast<long long>(k.published),
                rejected, commands / std::max(seconds, 1e-9));
+  if (!in.damage().empty()) {
+    unsigned long long bytes = 0;
+    for (const auto& d : in.damage()) bytes += d.bytes;
+    std::fprintf(stderr, "  damaged: %zu stretches of the log (%llu bytes) skipped, not events\n",
+                 in.damage().size(), bytes);
+  }
   for (int r = 0; r < chaincomp::kNumReasons; ++r) {
     if (k.rejected[r]) {
       std::fprintf(stderr, "  rejected %-20s %lld\n", chaincomp::reject_name(static_cast<chaincomp::Reject>(r)),

@@ -79,7 +79,7 @@ TEST_CASE("commands over memq:// come back corrected, bad payloads are counted",
     // the same correction as the model's own compensate (converted to mm / deg)
     double q[5], corrected[5], residual[2];
     for (int i = 0; i < 5; ++i) q[i] = axes[i] * entry.info->axes[i].to_internal;
-    entry.compensate(model, q, corrected, residual);
+    entry.compensate(model, nullptr, q, corrected, residual);
     for (int i = 0; i < 5; ++i) {
       CHECK(t.correction[i] == Approx((corrected[i] - q[i]) / entry.info->axes[i].to_internal).margin(1e-15));
       CHECK(t.axes[i] == Approx(axes[i] + t.correction[i]).margin(1e-12));

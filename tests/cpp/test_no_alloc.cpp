@@ -72,7 +72,7 @@ TEST_CASE("generated functions and compensate never allocate", "[alloc]") {
       e.pose_nominal(model, axes, out);
       e.pose_jacobian(model, axes, out, jac);
       for (int order = 1; order <= e.max_order; ++order) e.error(model, axes, order, out);
-      e.compensate(model, axes, out, residual);
+      e.compensate(model, nullptr, axes, out, residual);
       sink += out[0] + jac[0];
     }
     CHECK(g_allocations - before == 0);
@@ -104,7 +104,7 @@ TEST_CASE("with 18 tables of 101 points attached, compensate and the poses never
     axes[0] = -350.0 + 700.0 * (k % 1000) / 1000.0;
     axes[1] = -250.0 + 500.0 * (k % 777) / 777.0;
     axes[2] = -390.0 + 380.0 * (k % 555) / 555.0;
-    ok += e->compensate(model, axes, out, residual) == 0;
+    ok += e->compensate(model, nullptr, axes, out, residual) == 0;
     sink += out[0];
     e->pose_exact(model, axes, out);
     e->pose_jacobian(model, axes, out, jac);

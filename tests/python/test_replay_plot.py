@@ -82,6 +82,33 @@ def test_replay_reports_exactly_the_corrupted_records(tmp_path):
     assert "496 corrected, 4 rejected" in proc.stderr
 
 
+def test_replay_skips_and_reports_damaged_stretches_of_a_log(tmp_path):
+    """Framing damage (garbage between events, a broken length, a truncated last event): each
+    stretch is reported with its byte range and the events around it are still replayed."""
+    log, bad = tmp_path / "axes.lcmlog", tmp_path / "bad.lcmlog"
+    run_cli("simulate-log", FIVE, "-o", str(log), "--seconds", "0.1")
+    raw = log.read_bytes()
+    sync = b"\xed\xa1\xda\x01"
+    starts = [i for i in range(len(raw)) if raw.startswith(sync, i)]
+    assert len(starts) == 100
+    size = starts[1] - starts[0]
+    garbage = b"\x00junk\x01" * 3  # 18 bytes without a sync word
+    broken = bytearray(raw[starts[40]:starts[41]])
+    broken[20:24] = struct.pack(">i", -5)  # channel length
+    damaged = (raw[:starts[10]] + garbage + raw[starts[10]:starts[40]] + bytes(broken)
+               + raw[starts[41]:starts[99]] + raw[starts[99]:starts[99] + size // 2])
+    bad.write_bytes(damaged)
+    proc = run_cli("replay", str(bad), "--machine", FIVE, "--params", FIVE_PARAMS, "--config", E2E_CONFIG)
+    g = starts[10]
+    assert f"bytes {g}-{g + len(garbage) - 1} of the log skipped: no sync word" in proc.stderr
+    b = starts[40] + len(garbage)
+    assert f"bytes {b}-{b + size - 1} of the log skipped: invalid channel or data length" in proc.stderr
+    t = len(damaged) - size // 2
+    assert f"bytes {t}-{len(damaged) - 1} of the log skipped: event runs past the end of the log" in proc.stderr
+    assert "98 events, 98 commands on CHAINCOMP_COMMAND, 98 corrected, 0 rejected" in proc.stderr
+    assert "damaged: 3 stretches of the log" in proc.stderr
+
+
 def test_replay_bad_input(tmp_path):
     proc = run_cli("replay", str(tmp_path / "none.lcmlog"), "--machine", FIVE, "--params", FIVE_PARAMS,
                    check=False)

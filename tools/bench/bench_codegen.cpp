@@ -462,7 +462,7 @@ std::string bench_tables(const Options& opt) {
     if (models[m] == nullptr) continue;
     for (int s = 0; s < opt.samples; ++s) {
       double corr[kMaxAxes], res[2], target[6], actual[6];
-      const int st = e->compensate(models[m], q_at(s), corr, res);
+      const int st = e->compensate(models[m], nullptr, q_at(s), corr, res);
       e->pose_nominal(models[m], q_at(s), target);
       e->pose_exact(models[m], corr, actual);
       double d = 0;
@@ -481,7 +481,7 @@ std::string bench_tables(const Options& opt) {
   const int S = opt.samples, B = opt.batches;
   const double ms = opt.batch_ms;
   auto comp = [&](const void* model) {
-    return time_calls([&](int s) { const int st = e->compensate(model, q_at(s), corr, res); escape(corr); return corr[0] + st; },
+    return time_calls([&](int s) { const int st = e->compensate(model, nullptr, q_at(s), corr, res); escape(corr); return corr[0] + st; },
                       S, B, ms);
   };
   auto pose = [&](const void* model) {
@@ -582,7 +582,7 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
   {
     double cg[kMaxAxes], cb[kMaxAxes], rg[2], rb[2];
     for (int s = 0; s < opt.samples; ++s) {
-      const int sg = e.compensate(model, q_at(s), cg, rg);
+      const int sg = e.compensate(model, nullptr, q_at(s), cg, rg);
       const int sb = baseline_compensate<PS, DIR>(spec.actual, spec.nominal, q_at(s), cb, rb);
       status_mismatch += sg != sb;
       gen_ok += sg == 0;
@@ -625,7 +625,7 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
                   time_calls([&](int s) { e.pose_jacobian(model, q_at(s), out, jac); escape(jac); return out[0] + jac[0]; }, S, B, ms),
                   time_calls([&](int s) { baseline_jacobian<PS>(spec.actual, q_at(s), out, jac); escape(jac); return out[0] + jac[0]; }, S, B, ms)});
   rows.push_back({"compensate",
-                  time_calls([&](int s) { const int st = e.compensate(model, q_at(s), corr, res); escape(corr); return corr[0] + st; }, S, B, ms),
+                  time_calls([&](int s) { const int st = e.compensate(model, nullptr, q_at(s), corr, res); escape(corr); return corr[0] + st; }, S, B, ms),
                   time_calls([&](int s) { const int st = baseline_compensate<PS, DIR>(spec.actual, spec.nominal, q_at(s), corr, res); escape(corr); return corr[0] + st; }, S, B, ms)});
 
   std::string j = "{\"machine\":\"" + std::string(info.name) + "\",\"num_axes\":" + std::to_string(N) +

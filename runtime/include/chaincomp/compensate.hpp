@@ -93,10 +93,18 @@ struct Result {
   double residual_direction = 0;  // rad (0 where the direction is not corrected)
 };
 
+// Kept by a caller across the commands of a stream: a command near the last one starts from
+// the last correction with the last factorisation (a warm start), which usually leaves one
+// or two model evaluations. A fresh workspace, or a command far from the last, starts cold.
 template <class K>
 struct Workspace {
+  static constexpr int kRows = K::kCorrectsDirection ? 6 : 3;
   typename K::Pose target, pose;
   typename K::Jacobian jacobian;
+  Eigen::Matrix<double, kRows, K::kNumAxes> weighted;        // the Jacobian as factorised
+  Eigen::Matrix<double, K::kNumAxes, kRows> step_matrix;     // (J^T J)^-1 J^T: a step is step_matrix * r
+  bool warm = false;  // the last call ended corrected (ok), with every axis free
+  typename K::Axes last_command, last_corrected;
   AxisTrig<K::kNumAxes> command_trig, trig;  // at the command, at the current axes
   // With varying errors: the model with their values at the current axes, the error gain
   // matrix, and per varying error its table interval and slope at the current axes.
@@ -221,12 +229,12 @@ constexpr int kLinearAxes() noexcept {
   return count;
 }
 
-// Whether every axis of q lies within its correction bound around the command.
+// Whether every axis of q lies within `fraction` of its correction bound around `command`.
 template <class K>
-bool within_bounds(const typename K::Axes& q, const typename K::Axes& command) noexcept {
+bool within_bounds(const typename K::Axes& q, const typename K::Axes& command, double fraction = 1.0) noexcept {
   for (int i = 0; i < K::kNumAxes; ++i) {
     const double bound = K::kAxisIsAngle[i] ? kMaxAngularCorrection : kMaxLinearCorrection;
-    if (std::abs(q[i] - command[i]) > bound) return false;
+    if (!(std::abs(q[i] - command[i]) <= fraction * bound)) return false;
   }
   return true;
 }
@@ -235,7 +243,9 @@ template <class K>
 Status compensate(const typename K::Model& model, Workspace<K>& ws, const typename K::Axes& command,
                   Result<K>& out) noexcept {
   constexpr int n = K::kNumAxes;
-  constexpr int rows = K::kCorrectsDirection ? 6 : 3;
+  constexpr int rows = Workspace<K>::kRows;
+  const bool warm = ws.warm && within_bounds<K>(command, ws.last_command, kChordStepLimit);
+  ws.warm = false;  // until this call ends corrected
   out.corrected = command;
   out.residual_point = out.residual_direction = 0;
   if (!command.allFinite()) return Status::kNonFiniteInput;
@@ -272,13 +282,13 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
   };
 
   K::pose_nominal(model, command, ws.command_trig, ws.target);
-  // Chord Newton: the Jacobian at the command serves the following steps as long as they
-  // stay small (µm, arcsec: it then differs from the one at the solution by about the
-  // correction in rad, ~1e-3 relative, so each step gains about three digits) and one
-  // factorisation per call keeps the cost low. A large step (near a singular pose) takes a
-  // fresh Jacobian.
-  Eigen::Matrix<double, rows, n> J;
-  Eigen::Matrix<double, n, rows> step_matrix;  // (J^T J)^-1 J^T: a step is step_matrix * r
+  // Chord Newton: the Jacobian at the command (or, warm, at the last command) serves the
+  // following steps as long as they stay small (µm, arcsec: it then differs from the one at
+  // the solution by about the correction in rad, ~1e-3 relative, so each step gains about
+  // three digits) and one factorisation per call, or none, keeps the cost low. A large step
+  // (near a singular pose) takes a fresh Jacobian.
+  auto& J = ws.weighted;
+  auto& step_matrix = ws.step_matrix;
   bool at_bound[n] = {};  // axes whose correction reached its bound stay there
   // Near a singular pose (the tool along a rotary axis) the direction cannot be corrected
   // within the trust region: the point alone is corrected then, by the linear axes where
@@ -304,10 +314,14 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
     step_matrix = ldlt.solve(Eigen::Matrix<double, n, rows>(J.transpose()));
     return true;
   };
-  jacobian_at(command);
-  if (!factorise()) return Status::kSingular;
-
   typename K::Axes q = command;
+  if (warm) {
+    q += ws.last_corrected - ws.last_command;
+    pose_at(q);
+  } else {
+    jacobian_at(command);
+    if (!factorise()) return Status::kSingular;
+  }
   Eigen::Matrix<double, rows, 1> r;
   // Within tolerance: the point, and the direction where it is being corrected.
   auto converged = [&](const Eigen::Matrix<double, rows, 1>& v, double fraction) {
@@ -380,6 +394,9 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
     out.residual_direction = r.template tail<3>().norm() / kDirectionWeight;
   }
   const bool ok = out.residual_point <= kPointTolerance && out.residual_direction <= kDirectionTolerance;
+  ws.warm = ok && !point_only && std::none_of(at_bound, at_bound + n, [](bool b) { return b; });
+  ws.last_command = command;
+  ws.last_corrected = q;
   return ok ? Status::kOk : Status::kResidual;
 }
 

@@ -75,6 +75,8 @@ class Compensator {
  public:
   // `model` must have been filled by entry.prepare(); both must outlive the compensator.
   Compensator(const ModelEntry& entry, const void* model, const CompensatorConfig& config);
+  Compensator(const Compensator&) = delete;  // points into its own workspace storage
+  Compensator& operator=(const Compensator&) = delete;
 
   // true: `out` holds a target to publish; false: rejected (counted, reason in *why).
   bool process(const Command& in, Target& out, Reject* why = nullptr) noexcept;
@@ -93,6 +95,10 @@ class Compensator {
 
   const ModelEntry& entry_;
   const void* model_;
+  // compensate's workspace, kept from command to command: each starts from the last
+  // correction (a warm start); sized and aligned at construction.
+  std::vector<unsigned char> workspace_storage_;
+  void* workspace_;
   CompensatorConfig config_;
   int n_;
   bool enabled_;

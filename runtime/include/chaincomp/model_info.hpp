@@ -56,7 +56,13 @@ struct ModelEntry {
   bool (*error)(const void* model, const double* axes, int order, double* pose) noexcept;
   int max_order;
   // Returns a chaincomp::Status code; residual[0] point (mm), residual[1] direction (rad).
-  int (*compensate)(const void* model, const double* command, double* corrected, double* residual) noexcept;
+  // `workspace`: null (every call starts cold), or one set up by init_workspace and kept
+  // across the commands of a stream (each starts from the last correction: compensate.hpp).
+  int (*compensate)(const void* model, void* workspace, const double* command, double* corrected,
+                    double* residual) noexcept;
+  std::size_t workspace_size;  // bytes of the workspace object init_workspace constructs
+  std::size_t workspace_align;
+  void (*init_workspace)(void* workspace) noexcept;
   int num_errors;  // error parameters (kParams order): the columns of the error gain matrix
   // Errors that vary along an axis (params_io.hpp's load_params), attached after prepare()
   // (which detaches them); they must outlive the model. Every entry point above then
