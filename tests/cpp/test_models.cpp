@@ -255,13 +255,25 @@ TEST_CASE("a stream with a kept workspace corrects every command as a cold start
       INFO("command " << k);
       REQUIRE(sw == sc);
       ok += sw == static_cast<int>(chaincomp::Status::kOk);
-      for (int i = 0; i < na; ++i) CHECK(std::abs(warm[i] - cold[i]) < 1e-8);
+      if (sw == static_cast<int>(chaincomp::Status::kOk)) {
+        // both within tolerance (checked below) of the same solution: a warm start may stop
+        // anywhere inside the tolerance (0.1 nm, 1e-9 rad), so the axes agree to about that
+        for (int i = 0; i < na; ++i) CHECK(std::abs(warm[i] - cold[i]) < 1e-6);
+      } else {  // fewer DOF than the pose: the least-squares optimum may be flat along the axes
+        CHECK(std::abs(rw[0] - rc[0]) < 1e-9);
+        CHECK(std::abs(rw[1] - rc[1]) < 1e-11);
+      }
       e.pose_nominal(buf.bytes, cmd.data(), target.data());
       e.pose_exact(buf.bytes, warm.data(), actual.data());
       double point = 0;
       for (int i = 0; i < 3; ++i) point += (actual[i] - target[i]) * (actual[i] - target[i]);
       CHECK(std::abs(std::sqrt(point) - rw[0]) < 1e-9);  // the residual reported is the true one
-      if (sw == static_cast<int>(chaincomp::Status::kOk)) CHECK(std::sqrt(point) < 1e-6);
+      if (sw == static_cast<int>(chaincomp::Status::kOk)) {
+        CHECK(std::sqrt(point) <= chaincomp::kPointTolerance * (1 + 1e-9));
+        double dir = 0;
+        for (int i = 3; i < ps; ++i) dir += (actual[i] - target[i]) * (actual[i] - target[i]);
+        if (info.corrects_direction) CHECK(std::sqrt(dir) <= chaincomp::kDirectionTolerance * (1 + 1e-6));
+      }
     }
     // where the axes can correct the whole pose, nearly every command is corrected fully
     if (na >= (info.corrects_direction ? 5 : 3)) CHECK(ok > 2900);

@@ -533,6 +533,29 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
     }
   }
   auto q_at = [&](int s) { return axes.data() + static_cast<std::size_t>(s) * N; };
+  // A stream, as chaincompd and replay see one: a closed 5-axis-like path sampled at the
+  // same count (a circle of 50 mm in the first two linear axes, the others swinging by a
+  // tenth of their range around 15% of it off the middle, which keeps a tilted tool away
+  // from the singular pose; one period over the samples: about 0.08 mm and 0.09 deg per step).
+  std::vector<double> path(static_cast<std::size_t>(opt.samples) * N);
+  for (int s = 0; s < opt.samples; ++s) {
+    const double t = 2 * M_PI * s / opt.samples;
+    int linear = 0;
+    for (int i = 0; i < N; ++i) {
+      const auto& a = info.axes[i];
+      const double mid = 0.5 * (a.lower + a.upper), range = a.upper - a.lower;
+      const bool angle = a.kind == chaincomp::UnitKind::kAngle;
+      double v = mid + range * (0.15 + 0.05 * std::sin(t + i));
+      if (!angle && linear < 2) v = mid + 50.0 * (linear++ == 0 ? std::cos(t) : std::sin(t));
+      path[static_cast<std::size_t>(s) * N + i] = v * a.to_internal;
+    }
+  }
+  auto p_at = [&](int s) { return path.data() + static_cast<std::size_t>(s) * N; };
+  std::vector<unsigned char> ws_storage(e.workspace_size + e.workspace_align);
+  void* ws = ws_storage.data();
+  std::size_t ws_space = ws_storage.size();
+  ws = std::align(e.workspace_align, e.workspace_size, ws, ws_space);
+  e.init_workspace(ws);
 
   // ---- checks before timing
   double pose_diff = 0, numpy_diff = 0, numpy_base_diff = 0, err1_diff = 0, err2_diff = 0, err_size = 0;
@@ -628,6 +651,22 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
                   time_calls([&](int s) { const int st = e.compensate(model, nullptr, q_at(s), corr, res); escape(corr); return corr[0] + st; }, S, B, ms),
                   time_calls([&](int s) { const int st = baseline_compensate<PS, DIR>(spec.actual, spec.nominal, q_at(s), corr, res); escape(corr); return corr[0] + st; }, S, B, ms)});
 
+  // the stream with a kept workspace (warm starts) lands where a cold start lands
+  double stream_diff = 0;
+  int stream_mismatch = 0;
+  for (int pass = 0; pass < 2; ++pass) {
+    for (int s = 0; s < opt.samples; ++s) {
+      double cw[kMaxAxes], cc[kMaxAxes], rw[2], rc[2];
+      const int sw = e.compensate(model, ws, p_at(s), cw, rw);
+      const int sc = e.compensate(model, nullptr, p_at(s), cc, rc);
+      stream_mismatch += sw != sc;
+      for (int i = 0; i < N; ++i) stream_diff = std::max(stream_diff, std::abs(cw[i] - cc[i]));
+    }
+  }
+  rows.push_back({"compensate_stream",
+                  time_calls([&](int s) { const int st = e.compensate(model, ws, p_at(s), corr, res); escape(corr); return corr[0] + st; }, S, B, ms),
+                  time_calls([&](int s) { const int st = baseline_compensate<PS, DIR>(spec.actual, spec.nominal, p_at(s), corr, res); escape(corr); return corr[0] + st; }, S, B, ms)});
+
   std::string j = "{\"machine\":\"" + std::string(info.name) + "\",\"num_axes\":" + std::to_string(N) +
                   ",\"pose_size\":" + std::to_string(PS) + ",\"corrects_direction\":" + (DIR ? "true" : "false") +
                   ",\"chain_transforms\":" + std::to_string(spec.actual.elems.size()) +
@@ -647,7 +686,9 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
                   ",\"compensate_ok_generated\":" + std::to_string(gen_ok) +
                   ",\"compensate_ok_baseline\":" + std::to_string(base_ok) +
                   ",\"compensate_max_residual_point_generated\":" + num(comp_res_gen) +
-                  ",\"compensate_max_residual_point_baseline\":" + num(comp_res_base) + "},\"timings\":{";
+                  ",\"compensate_max_residual_point_baseline\":" + num(comp_res_base) +
+                  ",\"stream_max_axis_diff_warm_vs_cold\":" + num(stream_diff) +
+                  ",\"stream_status_mismatches\":" + std::to_string(stream_mismatch) + "},\"timings\":{";
   for (std::size_t i = 0; i < rows.size(); ++i) {
     if (i) j += ",";
     j += "\"" + std::string(rows[i].fn) + "\":{\"generated\":" + stats_json(rows[i].gen) +

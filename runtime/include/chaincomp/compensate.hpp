@@ -65,8 +65,12 @@ template <class K>
 void axis_trig(const typename K::Axes& q, AxisTrig<K::kNumAxes>& t) noexcept {
   for (int i = 0; i < K::kNumAxes; ++i) {
     if (K::kAxisIsAngle[i]) {
-      t.s[i] = std::sin(q[i]);
-      t.c[i] = std::cos(q[i]);
+      // One argument reduction for both (gcc merges the pair into sincos only when they
+      // share a local).
+      const double a = q[i];
+      const double s = std::sin(a), c = std::cos(a);
+      t.s[i] = s;
+      t.c[i] = c;
     }
   }
 }
@@ -105,6 +109,8 @@ struct Workspace {
   Eigen::Matrix<double, K::kNumAxes, kRows> step_matrix;     // (J^T J)^-1 J^T: a step is step_matrix * r
   bool warm = false;  // the last call ended corrected (ok), with every axis free
   typename K::Axes last_command, last_corrected;
+  typename K::Axes last_correction_change = K::Axes::Zero();  // from the command before
+  typename K::Axes jacobian_axes;  // where the factorised Jacobian was taken
   AxisTrig<K::kNumAxes> command_trig, trig;  // at the command, at the current axes
   // With varying errors: the model with their values at the current axes, the error gain
   // matrix, and per varying error its table interval and slope at the current axes.
@@ -244,7 +250,11 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
                   Result<K>& out) noexcept {
   constexpr int n = K::kNumAxes;
   constexpr int rows = Workspace<K>::kRows;
-  const bool warm = ws.warm && within_bounds<K>(command, ws.last_command, kChordStepLimit);
+  // Warm: near the last command, and within the correction bound of where the factorised
+  // Jacobian was taken (the chord still gains about two digits per step; starting from the
+  // extrapolated correction, one step usually reaches the tolerance).
+  const bool warm = ws.warm && within_bounds<K>(command, ws.last_command, kChordStepLimit) &&
+                    within_bounds<K>(command, ws.jacobian_axes);
   ws.warm = false;  // until this call ends corrected
   out.corrected = command;
   out.residual_point = out.residual_direction = 0;
@@ -271,6 +281,7 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
     }
   };
   auto jacobian_at = [&](const typename K::Axes& q) {
+    ws.jacobian_axes = q;
     axis_trig_near<K>(command, ws.command_trig, q, ws.trig);
     if (varying == nullptr) {
       K::pose_jacobian(model, q, ws.trig, ws.pose, ws.jacobian);
@@ -316,7 +327,7 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
   };
   typename K::Axes q = command;
   if (warm) {
-    q += ws.last_corrected - ws.last_command;
+    q += (ws.last_corrected - ws.last_command) + ws.last_correction_change;  // linear extrapolation
     pose_at(q);
   } else {
     jacobian_at(command);
@@ -394,7 +405,15 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
     out.residual_direction = r.template tail<3>().norm() / kDirectionWeight;
   }
   const bool ok = out.residual_point <= kPointTolerance && out.residual_direction <= kDirectionTolerance;
+  // A warm start needs a unique solution to start from (none where fewer DOF than errors
+  // leave a residual: the chord's fixed point there depends on where its Jacobian was taken)
+  // and a factorisation of the whole problem (no axis held at its bound, not point-only).
   ws.warm = ok && !point_only && std::none_of(at_bound, at_bound + n, [](bool b) { return b; });
+  if (warm) {
+    ws.last_correction_change = (q - command) - (ws.last_corrected - ws.last_command);
+  } else {
+    ws.last_correction_change.setZero();
+  }
   ws.last_command = command;
   ws.last_corrected = q;
   return ok ? Status::kOk : Status::kResidual;
