@@ -149,12 +149,13 @@ void clear_values(double* values) noexcept {
 template <class K>
 void add_slopes(const VaryingErrors& v, const typename K::Gain& gain, const double* slope,
                 typename K::Jacobian& J) noexcept {
-  constexpr int rows = K::Jacobian::RowsAtCompileTime;
-  for (int i = 0; i < v.count; ++i) {
-    const VaryingError& e = v.items[i];
-    double* col = J.data() + rows * e.axis;  // column-major, fixed size
-    const double* g = gain.data() + rows * e.column;
-    for (int r = 0; r < rows; ++r) col[r] += slope[i] * g[r];
+  // Summed in registers per run of errors along the same axis (a file lists a slide's errors
+  // together): adding each into J in turn made a chain of stores and reloads.
+  for (int i = 0; i < v.count;) {
+    const int axis = v.items[i].axis;
+    typename K::Pose sum = slope[i] * gain.col(v.items[i].column);
+    for (++i; i < v.count && v.items[i].axis == axis; ++i) sum += slope[i] * gain.col(v.items[i].column);
+    J.col(axis) += sum;
   }
 }
 
