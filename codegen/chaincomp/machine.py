@@ -12,7 +12,7 @@ import sympy as sp
 from . import units
 from .errors import ChaincompError
 from .expressions import RESERVED, ExpressionError, parse
-from .yamlsource import LineDict, LineList, load_yaml
+from .yamlsource import describe, line_of, load_yaml
 
 ROLES = ("axis", "constant", "error")
 SENSES = {"right_hand": 1, "left_hand": -1}
@@ -141,41 +141,22 @@ class _Ctx:
         return ChaincompError(message, self.path, line, fld)
 
 
-def _line_of(node, key=None) -> int | None:
-    if key is not None and isinstance(node, (LineDict, LineList)):
-        try:
-            return node.lines[key]
-        except (KeyError, IndexError):
-            pass
-    return getattr(node, "line", None)
-
-
 def _require_map(ctx: _Ctx, node, fld: str, line, allowed: set[str], required: set[str] = frozenset()):
     if not isinstance(node, dict):
-        raise ctx.fail(f"expected a mapping, got {_describe(node)}", line, fld)
+        raise ctx.fail(f"expected a mapping, got {describe(node)}", line, fld)
     for key in node:
         if key not in allowed:
             raise ctx.fail(f"unknown field {key!r} (expected one of: {', '.join(sorted(allowed))})",
-                           _line_of(node, key), f"{fld}.{key}")
+                           line_of(node, key), f"{fld}.{key}")
     for key in sorted(required):
         if key not in node:
-            raise ctx.fail(f"missing required field {key!r}", _line_of(node) if line is None else line, fld)
+            raise ctx.fail(f"missing required field {key!r}", line_of(node) if line is None else line, fld)
     return node
-
-
-def _describe(value) -> str:
-    if isinstance(value, dict):
-        return "a mapping"
-    if isinstance(value, list):
-        return f"a list of {len(value)} item" + ("" if len(value) == 1 else "s")
-    if value is None:
-        return "nothing"
-    return f"{type(value).__name__} {value!r}"
 
 
 def _number(ctx: _Ctx, value, fld: str, line) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ctx.fail(f"expected a number, got {_describe(value)}", line, fld)
+        raise ctx.fail(f"expected a number, got {describe(value)}", line, fld)
     if not math.isfinite(value):
         raise ctx.fail(f"expected a finite number, got {value!r}", line, fld)
     return float(value)
@@ -188,47 +169,47 @@ def _parse_symbol(ctx: _Ctx, node, i: int, line) -> Symbol:
     name = node["name"]
     if not isinstance(name, str) or not _NAME.match(name):
         raise ctx.fail(f"invalid symbol name {name!r} (letters, digits and '_', starting with a letter)",
-                       _line_of(node, "name"), f"{fld}.name")
+                       line_of(node, "name"), f"{fld}.name")
     if name in RESERVED:
-        raise ctx.fail(f"symbol name {name!r} is reserved", _line_of(node, "name"), f"{fld}.name")
+        raise ctx.fail(f"symbol name {name!r} is reserved", line_of(node, "name"), f"{fld}.name")
     fld = f"symbols.{name}"
     role = node["role"]
     if role not in ROLES:
         raise ctx.fail(f"unknown role {role!r} (expected one of: {', '.join(ROLES)})",
-                       _line_of(node, "role"), f"{fld}.role")
+                       line_of(node, "role"), f"{fld}.role")
     try:
         unit = units.unit(str(node["unit"]))
     except KeyError as exc:
-        raise ctx.fail(exc.args[0], _line_of(node, "unit"), f"{fld}.unit") from None
+        raise ctx.fail(exc.args[0], line_of(node, "unit"), f"{fld}.unit") from None
     meaning = node.get("meaning", "")
     if not isinstance(meaning, str):
-        raise ctx.fail(f"expected text, got {_describe(meaning)}", _line_of(node, "meaning"), f"{fld}.meaning")
+        raise ctx.fail(f"expected text, got {describe(meaning)}", line_of(node, "meaning"), f"{fld}.meaning")
     nominal = None
     if "nominal" in node:
-        nominal = _number(ctx, node["nominal"], f"{fld}.nominal", _line_of(node, "nominal"))
+        nominal = _number(ctx, node["nominal"], f"{fld}.nominal", line_of(node, "nominal"))
         if role == "error":
             raise ctx.fail("an error symbol has no nominal value (its value comes from a params file)",
-                           _line_of(node, "nominal"), f"{fld}.nominal")
+                           line_of(node, "nominal"), f"{fld}.nominal")
     elif role == "constant":
-        raise ctx.fail("a constant needs a 'nominal' value", _line_of(node), fld)
+        raise ctx.fail("a constant needs a 'nominal' value", line_of(node), fld)
     limits = None
     if "limits" in node:
         lim = node["limits"]
-        lline = _line_of(node, "limits")
+        lline = line_of(node, "limits")
         if not isinstance(lim, list) or len(lim) != 2:
-            raise ctx.fail(f"expected [low, high], got {_describe(lim)}", lline, f"{fld}.limits")
+            raise ctx.fail(f"expected [low, high], got {describe(lim)}", lline, f"{fld}.limits")
         lo, hi = (_number(ctx, v, f"{fld}.limits", lline) for v in lim)
         if not lo < hi:
             raise ctx.fail(f"low limit {lo:g} must be below high limit {hi:g}", lline, f"{fld}.limits")
         limits = (lo, hi)
     elif role == "axis":
-        raise ctx.fail("an axis needs 'limits: [low, high]'", _line_of(node), fld)
+        raise ctx.fail("an axis needs 'limits: [low, high]'", line_of(node), fld)
     if nominal is not None and limits is not None and not limits[0] <= nominal <= limits[1]:
-        raise ctx.fail(f"nominal {nominal:g} lies outside limits {list(limits)}", _line_of(node, "nominal"),
+        raise ctx.fail(f"nominal {nominal:g} lies outside limits {list(limits)}", line_of(node, "nominal"),
                        f"{fld}.nominal")
     if role == "axis" and unit.kind == "ratio":
         raise ctx.fail(f"an axis must have a length or angle unit, not {unit.name!r}",
-                       _line_of(node, "unit"), f"{fld}.unit")
+                       line_of(node, "unit"), f"{fld}.unit")
     return Symbol(name, role, unit, meaning, nominal, limits, line or 0)
 
 
@@ -242,7 +223,7 @@ def _expr(ctx: _Ctx, value, symbols, fld: str, line) -> sp.Expr:
 
 def _vector(ctx: _Ctx, value, symbols, fld: str, line) -> tuple[sp.Expr, sp.Expr, sp.Expr]:
     if not isinstance(value, list) or len(value) != 3:
-        raise ctx.fail(f"expected a list of three expressions [x, y, z], got {_describe(value)}", line, fld)
+        raise ctx.fail(f"expected a list of three expressions [x, y, z], got {describe(value)}", line, fld)
     return tuple(_expr(ctx, v, symbols, f"{fld}[{i}]", line) for i, v in enumerate(value))
 
 
@@ -252,7 +233,7 @@ _BLOCK_KEYS = ("dx", "dy", "dz", "ex", "ey", "ez")
 def _parse_element(ctx: _Ctx, node, fld: str, line, symbols, default_sense: int | None,
                    default_order: str | None) -> list[Elementary]:
     if not isinstance(node, dict):
-        raise ctx.fail(f"expected a chain element (rotate / translate / errors), got {_describe(node)}",
+        raise ctx.fail(f"expected a chain element (rotate / translate / errors), got {describe(node)}",
                        line, fld)
     kinds = [k for k in ("rotate", "translate", "errors") if k in node]
     if len(kinds) != 1:
@@ -265,29 +246,29 @@ def _parse_element(ctx: _Ctx, node, fld: str, line, symbols, default_sense: int 
         _require_map(ctx, node, fld, line, common | {"rotate", "angle", "sense"}, {"angle"})
         axis = node["rotate"]
         if axis not in AXES:
-            raise ctx.fail(f"rotation axis must be x, y or z, got {axis!r}", _line_of(node, "rotate"),
+            raise ctx.fail(f"rotation axis must be x, y or z, got {axis!r}", line_of(node, "rotate"),
                            f"{fld}.rotate")
         sense = _sense(ctx, node, fld, default_sense)
-        angle = _expr(ctx, node["angle"], symbols, f"{fld}.angle", _line_of(node, "angle"))
+        angle = _expr(ctx, node["angle"], symbols, f"{fld}.angle", line_of(node, "angle"))
         return [Rotation(axis, sense * angle, line or 0)]
     if kind == "translate":
         _require_map(ctx, node, fld, line, common | {"translate"})
         return [Translation(_vector(ctx, node["translate"], symbols, f"{fld}.translate",
-                                    _line_of(node, "translate")), line or 0)]
+                                    line_of(node, "translate")), line or 0)]
     _require_map(ctx, node, fld, line, common | {"errors", "order", "sense"})
     block = node["errors"]
-    bline = _line_of(node, "errors")
+    bline = line_of(node, "errors")
     _require_map(ctx, block, f"{fld}.errors", bline, set(_BLOCK_KEYS))
     if not block:
         raise ctx.fail(f"an error block needs at least one of {', '.join(_BLOCK_KEYS)}", bline, f"{fld}.errors")
-    vals = {k: _expr(ctx, block[k], symbols, f"{fld}.errors.{k}", _line_of(block, k)) if k in block
+    vals = {k: _expr(ctx, block[k], symbols, f"{fld}.errors.{k}", line_of(block, k)) if k in block
             else sp.Integer(0) for k in _BLOCK_KEYS}
     order = node.get("order", default_order)
     if order is None:
         raise ctx.fail("state the order of the error block's factors, e.g. 'order: txyz' "
                        "(T(dx,dy,dz)·Rx(ex)·Ry(ey)·Rz(ez)), here or as 'error_block_order' at the top",
                        line, f"{fld}.order")
-    order = _block_order(ctx, order, f"{fld}.order", _line_of(node, "order") or line)
+    order = _block_order(ctx, order, f"{fld}.order", line_of(node, "order") or line)
     sense = _sense(ctx, node, fld, default_sense)
     out: list[Elementary] = []
     for factor in order:  # factors the block leaves at zero are identities: left out
@@ -310,20 +291,20 @@ def _sense(ctx: _Ctx, node, fld: str, default: int | None) -> int:
     if "sense" in node:
         if not isinstance(node["sense"], str) or node["sense"] not in SENSES:
             raise ctx.fail(f"sense must be one of {', '.join(SENSES)}, got {node['sense']!r}",
-                           _line_of(node, "sense"), f"{fld}.sense")
+                           line_of(node, "sense"), f"{fld}.sense")
         return SENSES[node["sense"]]
     if default is None:
         raise ctx.fail("no rotation sense: set 'rotation_sense' at the top of the file or 'sense' here",
-                       _line_of(node), fld)
+                       line_of(node), fld)
     return default
 
 
 def _parse_chain(ctx, node, fld, line, symbols, sense, order) -> tuple[Elementary, ...]:
     if not isinstance(node, list) or not node:
-        raise ctx.fail(f"expected a non-empty list of chain elements, got {_describe(node)}", line, fld)
+        raise ctx.fail(f"expected a non-empty list of chain elements, got {describe(node)}", line, fld)
     out: list[Elementary] = []
     for i, el in enumerate(node):
-        out.extend(_parse_element(ctx, el, f"{fld}[{i}]", _line_of(node, i), symbols, sense, order))
+        out.extend(_parse_element(ctx, el, f"{fld}[{i}]", line_of(node, i), symbols, sense, order))
     return tuple(out)
 
 
@@ -340,31 +321,31 @@ def load_machine(path: str) -> Machine:
     name = doc["name"]
     if not isinstance(name, str) or not _NAME.match(name):
         raise ctx.fail(f"machine name must be an identifier (letters, digits, '_'), got {name!r}",
-                       _line_of(doc, "name"), "name")
+                       line_of(doc, "name"), "name")
     length_unit = doc.get("length_unit", "mm")
     if not isinstance(length_unit, str) or length_unit not in units.UNITS or \
             units.UNITS[length_unit].kind != "length":
         raise ctx.fail(f"length_unit must be a length unit, got {length_unit!r}",
-                       _line_of(doc, "length_unit"), "length_unit")
+                       line_of(doc, "length_unit"), "length_unit")
     sense = None
     if "rotation_sense" in doc:
         if not isinstance(doc["rotation_sense"], str) or doc["rotation_sense"] not in SENSES:
             raise ctx.fail(f"rotation_sense must be one of {', '.join(SENSES)}, got {doc['rotation_sense']!r}",
-                           _line_of(doc, "rotation_sense"), "rotation_sense")
+                           line_of(doc, "rotation_sense"), "rotation_sense")
         sense = SENSES[doc["rotation_sense"]]
     order = None
     if "error_block_order" in doc:
         order = _block_order(ctx, doc["error_block_order"], "error_block_order",
-                             _line_of(doc, "error_block_order"))
+                             line_of(doc, "error_block_order"))
 
     raw_symbols = doc["symbols"]
     if not isinstance(raw_symbols, list) or not raw_symbols:
-        raise ctx.fail(f"expected a non-empty list of symbols, got {_describe(raw_symbols)}",
-                       _line_of(doc, "symbols"), "symbols")
+        raise ctx.fail(f"expected a non-empty list of symbols, got {describe(raw_symbols)}",
+                       line_of(doc, "symbols"), "symbols")
     symbols: list[Symbol] = []
     seen: dict[str, int] = {}
     for i, node in enumerate(raw_symbols):
-        s = _parse_symbol(ctx, node, i, _line_of(raw_symbols, i))
+        s = _parse_symbol(ctx, node, i, line_of(raw_symbols, i))
         if s.name in seen:
             raise ctx.fail(f"duplicate symbol name {s.name!r} (first declared on line {seen[s.name]})",
                            s.line, f"symbols[{i}].name")
@@ -375,28 +356,28 @@ def load_machine(path: str) -> Machine:
     if ("chain" in doc) == ("loop" in doc):
         both = "loop" in doc
         raise ctx.fail("give exactly one of 'chain' (a serial chain) or 'loop' (tool and workpiece branches)",
-                       _line_of(doc, "loop") if both else top_line, "loop" if both else "chain")
+                       line_of(doc, "loop") if both else top_line, "loop" if both else "chain")
     if "chain" in doc:
-        tool_chain = _parse_chain(ctx, doc["chain"], "chain", _line_of(doc, "chain"), table, sense, order)
+        tool_chain = _parse_chain(ctx, doc["chain"], "chain", line_of(doc, "chain"), table, sense, order)
         work_chain: tuple[Elementary, ...] = ()
     else:
-        loop = _require_map(ctx, doc["loop"], "loop", _line_of(doc, "loop"), {"tool", "workpiece"},
+        loop = _require_map(ctx, doc["loop"], "loop", line_of(doc, "loop"), {"tool", "workpiece"},
                             {"tool", "workpiece"})
-        tool_chain = _parse_chain(ctx, loop["tool"], "loop.tool", _line_of(loop, "tool"), table, sense, order)
-        work_chain = _parse_chain(ctx, loop["workpiece"], "loop.workpiece", _line_of(loop, "workpiece"),
+        tool_chain = _parse_chain(ctx, loop["tool"], "loop.tool", line_of(loop, "tool"), table, sense, order)
+        work_chain = _parse_chain(ctx, loop["workpiece"], "loop.workpiece", line_of(loop, "workpiece"),
                                   table, sense, order)
 
-    tool = _require_map(ctx, doc["tool"], "tool", _line_of(doc, "tool"), {"point", "direction"}, {"point"})
-    point = _vector(ctx, tool["point"], table, "tool.point", _line_of(tool, "point"))
+    tool = _require_map(ctx, doc["tool"], "tool", line_of(doc, "tool"), {"point", "direction"}, {"point"})
+    point = _vector(ctx, tool["point"], table, "tool.point", line_of(tool, "point"))
     direction = None
     if "direction" in tool:
-        direction = _vector(ctx, tool["direction"], table, "tool.direction", _line_of(tool, "direction"))
+        direction = _vector(ctx, tool["direction"], table, "tool.direction", line_of(tool, "direction"))
         if any(d.free_symbols for d in direction):
-            raise ctx.fail("the tool direction must be a constant vector", _line_of(tool, "direction"),
+            raise ctx.fail("the tool direction must be a constant vector", line_of(tool, "direction"),
                            "tool.direction")
         norm = sp.sqrt(sum(d**2 for d in direction))
         if norm == 0:
-            raise ctx.fail("the tool direction must not be zero", _line_of(tool, "direction"), "tool.direction")
+            raise ctx.fail("the tool direction must not be zero", line_of(tool, "direction"), "tool.direction")
         direction = tuple(sp.nsimplify(d / norm) for d in direction)
     machine = Machine(name, str(doc.get("description", "")), path, length_unit, tuple(symbols),
                       tool_chain, work_chain, point, direction, _read_text(path))

@@ -31,6 +31,7 @@ import numpy as np
 
 from . import units as U
 from .errors import ChaincompError
+from .yamlsource import describe, line_of
 
 MAX_TABLE_KNOTS = 4096            # runtime: kMaxTableKnots
 MAX_POLYNOMIAL_COEFFICIENTS = 16  # runtime: kMaxPolynomialCoefficients
@@ -268,28 +269,9 @@ def varying_errors(values: dict) -> dict[str, Varying]:
 
 # ----------------------------------------------------------------------------- parsing
 
-def _lines(node, key, default):
-    lines = getattr(node, "lines", None)
-    if isinstance(lines, dict):
-        return lines.get(key, default)
-    if isinstance(lines, list) and isinstance(key, int) and 0 <= key < len(lines):
-        return lines[key]
-    return default
-
-
-def _show(value) -> str:
-    if isinstance(value, dict):
-        return "a mapping"
-    if isinstance(value, list):
-        return f"a list of {len(value)} item" + ("" if len(value) == 1 else "s")
-    if value is None:
-        return "nothing"
-    return repr(value)
-
-
 def _number(value, fail) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        fail(f"expected a number, got {_show(value)}")
+        fail(f"expected a number, got {describe(value)}")
     if not math.isfinite(value):
         fail(f"expected finite numbers, got {value!r}")
     return float(value)
@@ -316,9 +298,9 @@ def parse_varying(node, name: str, path: str, line: int, machine=None) -> Varyin
     allowed = TABLE_KEYS if is_table else POLYNOMIAL_KEYS
     for key in node:
         if key not in allowed:
-            fail(f"unknown field {key!r} (expected one of: {', '.join(allowed)})", _lines(node, key, line),
+            fail(f"unknown field {key!r} (expected one of: {', '.join(allowed)})", line_of(node, key, line),
                  f"{base}.{key}")
-    kline = lambda k: _lines(node, k, line)  # noqa: E731
+    kline = lambda k: line_of(node, k, line)  # noqa: E731
 
     if "axis" not in node:
         fail("missing required field 'axis'")
@@ -327,18 +309,18 @@ def parse_varying(node, name: str, path: str, line: int, machine=None) -> Varyin
     if machine is not None:
         names = [a.name for a in machine.axes]
         if not isinstance(axis, str) or axis not in names:
-            shown = repr(axis) if isinstance(axis, str) else _show(axis)
+            shown = repr(axis) if isinstance(axis, str) else describe(axis)
             fail(f"{shown} is not an axis of {machine.name} (axes: {', '.join(names)})", kline("axis"),
                  f"{base}.axis")
         axis_sym = machine.symbol(axis)
     elif not isinstance(axis, str):
-        fail(f"expected an axis name, got {_show(axis)}", kline("axis"), f"{base}.axis")
+        fail(f"expected an axis name, got {describe(axis)}", kline("axis"), f"{base}.axis")
 
     if "units" not in node:
         fail("missing required field 'units' ([position unit, value unit], e.g. [mm, um])")
     raw_units = node["units"]
     if not isinstance(raw_units, list) or len(raw_units) != 2 or not all(isinstance(u, str) for u in raw_units):
-        fail(f"expected [position unit, value unit], e.g. [mm, um], got {_show(raw_units)}", kline("units"),
+        fail(f"expected [position unit, value unit], e.g. [mm, um], got {describe(raw_units)}", kline("units"),
              f"{base}.units")
     try:
         pu, vu = U.unit(raw_units[0]), U.unit(raw_units[1])
@@ -360,7 +342,7 @@ def parse_varying(node, name: str, path: str, line: int, machine=None) -> Varyin
             fail("missing required field 'outside' (hold or reject)")
         outside = node["outside"]
         if outside not in OUTSIDE:
-            fail(f"outside must be hold or reject, got {_show(outside)}", kline("outside"), f"{base}.outside")
+            fail(f"outside must be hold or reject, got {describe(outside)}", kline("outside"), f"{base}.outside")
     elif "outside" in node:
         fail("'outside' applies to a polynomial's 'range' (give range: [low, high] in the position unit)",
              kline("outside"), f"{base}.outside")
@@ -372,11 +354,11 @@ def parse_varying(node, name: str, path: str, line: int, machine=None) -> Varyin
             fail("missing required field 'interpolation' (linear or monotone_cubic)")
         interp = node["interpolation"]
         if interp not in INTERPOLATIONS:
-            fail(f"interpolation must be linear or monotone_cubic, got {_show(interp)}", kline("interpolation"),
+            fail(f"interpolation must be linear or monotone_cubic, got {describe(interp)}", kline("interpolation"),
                  f"{base}.interpolation")
         rows = node["table"]
         if not isinstance(rows, list):
-            fail(f"expected a list of [position, value] rows, got {_show(rows)}", kline("table"), f"{base}.table")
+            fail(f"expected a list of [position, value] rows, got {describe(rows)}", kline("table"), f"{base}.table")
         n = len(rows)
         if n < 2:
             fail(f"a table needs at least 2 points, got {n}", kline("table"), f"{base}.table")
@@ -384,11 +366,11 @@ def parse_varying(node, name: str, path: str, line: int, machine=None) -> Varyin
             fail(f"a table holds at most {MAX_TABLE_KNOTS} points, got {n}", kline("table"), f"{base}.table")
         xs, ys = [], []
         for i, row in enumerate(rows):
-            rline = _lines(rows, i, kline("table"))
+            rline = line_of(rows, i, kline("table"))
             rkey = f"{base}.table[{i}]"
             rfail = lambda msg, rline=rline, rkey=rkey: fail(msg, rline, rkey)  # noqa: E731
             if not isinstance(row, list) or len(row) != 2:
-                rfail(f"expected [position, value], got {_show(row)}")
+                rfail(f"expected [position, value], got {describe(row)}")
             p, v = _number(row[0], rfail), _number(row[1], rfail)
             if xs and p == xs[-1]:
                 rfail(f"duplicate position {row[0]!r}")
@@ -412,8 +394,8 @@ def parse_varying(node, name: str, path: str, line: int, machine=None) -> Varyin
     coeffs = node["polynomial"]
     if not isinstance(coeffs, list) or not 1 <= len(coeffs) <= MAX_POLYNOMIAL_COEFFICIENTS:
         fail(f"expected a list of 1 to {MAX_POLYNOMIAL_COEFFICIENTS} coefficients [c0, c1, ...] "
-             f"(c0 + c1*x + ...), got {_show(coeffs)}", kline("polynomial"), f"{base}.polynomial")
-    c = tuple(_number(v, lambda msg, i=i: fail(msg, _lines(coeffs, i, kline("polynomial")),
+             f"(c0 + c1*x + ...), got {describe(coeffs)}", kline("polynomial"), f"{base}.polynomial")
+    c = tuple(_number(v, lambda msg, i=i: fail(msg, line_of(coeffs, i, kline("polynomial")),
                                                      f"{base}.polynomial[{i}]"))
               for i, v in enumerate(coeffs))
     lower, upper = -math.inf, math.inf
@@ -421,7 +403,7 @@ def parse_varying(node, name: str, path: str, line: int, machine=None) -> Varyin
         r = node["range"]
         rfail = lambda msg: fail(msg, kline("range"), f"{base}.range")  # noqa: E731
         if not isinstance(r, list) or len(r) != 2:
-            rfail(f"expected [low, high] in the position unit, got {_show(r)}")
+            rfail(f"expected [low, high] in the position unit, got {describe(r)}")
         lo, hi = _number(r[0], rfail), _number(r[1], rfail)
         if not lo < hi:
             rfail(f"low {r[0]!r} must be below high {r[1]!r}")

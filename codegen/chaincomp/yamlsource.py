@@ -27,6 +27,29 @@ class LineList(list):
     lines: list
 
 
+def line_of(node, key=None, default=None) -> int | None:
+    """The line of ``node[key]`` where the loader recorded one; otherwise ``default``, or
+    without one the line of ``node`` itself (None for a value that is not from a file)."""
+    lines = getattr(node, "lines", None)
+    if key is not None and lines is not None:
+        try:
+            return lines[key]
+        except (KeyError, IndexError, TypeError):
+            pass
+    return default if default is not None else getattr(node, "line", None)
+
+
+def describe(value) -> str:
+    """A value of the wrong shape or type, as validation messages name it."""
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list):
+        return f"a list of {len(value)} item" + ("" if len(value) == 1 else "s")
+    if value is None:
+        return "nothing"
+    return f"{type(value).__name__} {value!r}"
+
+
 class _Loader(yaml.SafeLoader):
     pass
 

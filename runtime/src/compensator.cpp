@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
-#include <memory>
 
 #include "chaincomp/compensate.hpp"
 
@@ -24,10 +23,7 @@ Compensator::Compensator(const ModelEntry& entry, const void* model, const Compe
       n_(entry.info->num_axes),
       enabled_(config.start_enabled),
       ramp_(config.start_enabled ? 1.0 : 0.0) {
-  workspace_storage_.assign(entry.workspace_size + entry.workspace_align, 0);
-  void* p = workspace_storage_.data();
-  std::size_t space = workspace_storage_.size();
-  workspace_ = std::align(entry.workspace_align, entry.workspace_size, p, space);
+  workspace_ = aligned_slot(workspace_storage_, entry.workspace_size, entry.workspace_align);
   entry.init_workspace(workspace_);
 }
 

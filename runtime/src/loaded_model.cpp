@@ -1,6 +1,5 @@
 #include "chaincomp/loaded_model.hpp"
 
-#include <memory>
 
 namespace chaincomp {
 
@@ -11,10 +10,7 @@ bool load_model(const std::string& machine_path, const std::string& params_path,
   const ModelEntry& e = *out.entry;
   if (!load_params(*e.info, params_path, out.params, out.varying, error)) return false;
   if (!load_daemon_config(*e.info, config_path, out.config, error)) return false;
-  out.storage.assign(e.model_size + e.model_align, 0);
-  void* model = out.storage.data();
-  std::size_t space = out.storage.size();
-  out.model = std::align(e.model_align, e.model_size, model, space);
+  out.model = aligned_slot(out.storage, e.model_size, e.model_align);
   e.prepare(out.params.data(), out.model);
   if (out.varying.count > 0) e.attach_varying(out.model, &out.varying);
   return true;

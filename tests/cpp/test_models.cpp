@@ -4,7 +4,6 @@
 
 #include <cmath>
 #include <fstream>
-#include <memory>
 #include <random>
 #include <sstream>
 #include <string>
@@ -235,10 +234,8 @@ TEST_CASE("a stream with a kept workspace corrects every command as a cold start
     INFO("machine " << info.name);
     ModelBuffer buf;
     e.prepare(read_vectors(info.name, na, info.num_params, ps).front().params.data(), buf.bytes);
-    std::vector<unsigned char> storage(e.workspace_size + e.workspace_align);
-    void* ws = storage.data();
-    std::size_t space = storage.size();
-    REQUIRE(std::align(e.workspace_align, e.workspace_size, ws, space) != nullptr);
+    std::vector<unsigned char> storage;
+    void* ws = chaincomp::aligned_slot(storage, e.workspace_size, e.workspace_align);
     e.init_workspace(ws);
     int ok = 0;
     for (int k = 0; k < 3000; ++k) {

@@ -30,7 +30,6 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
-#include <memory>
 #include <random>
 #include <sstream>
 #include <string>
@@ -53,6 +52,20 @@ const std::string kCompiler = std::string("gcc ") + __VERSION__;
 #else
 const std::string kCompiler = "unknown";
 #endif
+
+// `samples` axis vectors, uniform within the axes' limits (internal units), one after another.
+std::vector<double> random_axes(const chaincomp::MachineInfo& info, int samples, unsigned seed) {
+  std::mt19937_64 rng(seed);
+  std::vector<double> axes(static_cast<std::size_t>(samples) * info.num_axes);
+  for (int s = 0; s < samples; ++s) {
+    for (int i = 0; i < info.num_axes; ++i) {
+      const auto& a = info.axes[i];
+      std::uniform_real_distribution<double> u(a.lower * a.to_internal, a.upper * a.to_internal);
+      axes[static_cast<std::size_t>(s) * info.num_axes + i] = u(rng);
+    }
+  }
+  return axes;
+}
 
 [[noreturn]] void die(const std::string& msg) {
   std::fprintf(stderr, "bench_codegen: %s\n", msg.c_str());
@@ -443,15 +456,7 @@ std::string bench_tables(const Options& opt) {
   e->prepare(constants->params.data(), constants->model.bytes);
   std::fprintf(stderr, "bench_codegen: %s tables: %s\n", info.name, chaincomp::describe_varying(tables->varying).c_str());
 
-  std::mt19937_64 rng(opt.seed);
-  std::vector<double> axes(static_cast<std::size_t>(opt.samples) * N);
-  for (int s = 0; s < opt.samples; ++s) {
-    for (int i = 0; i < N; ++i) {
-      const auto& a = info.axes[i];
-      std::uniform_real_distribution<double> u(a.lower * a.to_internal, a.upper * a.to_internal);
-      axes[static_cast<std::size_t>(s) * N + i] = u(rng);
-    }
-  }
+  const std::vector<double> axes = random_axes(info, opt.samples, opt.seed);
   auto q_at = [&](int s) { return axes.data() + static_cast<std::size_t>(s) * N; };
 
   // checks: with tables, the actual point at the corrected axes is the nominal one
@@ -522,16 +527,7 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
   const int N = info.num_axes;
   std::fprintf(stderr, "bench_codegen: %s (%d axes, pose %d, chain of %zu transforms)\n", info.name, N, PS,
                spec.actual.elems.size());
-  // random axes within the limits, internal units
-  std::mt19937_64 rng(opt.seed);
-  std::vector<double> axes(static_cast<std::size_t>(opt.samples) * N);
-  for (int s = 0; s < opt.samples; ++s) {
-    for (int i = 0; i < N; ++i) {
-      const auto& a = info.axes[i];
-      std::uniform_real_distribution<double> u(a.lower * a.to_internal, a.upper * a.to_internal);
-      axes[static_cast<std::size_t>(s) * N + i] = u(rng);
-    }
-  }
+  const std::vector<double> axes = random_axes(info, opt.samples, opt.seed);
   auto q_at = [&](int s) { return axes.data() + static_cast<std::size_t>(s) * N; };
   // A stream, as chaincompd and replay see one: a closed 5-axis-like path sampled at the
   // same count (a circle of 50 mm in the first two linear axes, the others swinging by a
@@ -551,10 +547,8 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
     }
   }
   auto p_at = [&](int s) { return path.data() + static_cast<std::size_t>(s) * N; };
-  std::vector<unsigned char> ws_storage(e.workspace_size + e.workspace_align);
-  void* ws = ws_storage.data();
-  std::size_t ws_space = ws_storage.size();
-  ws = std::align(e.workspace_align, e.workspace_size, ws, ws_space);
+  std::vector<unsigned char> ws_storage;
+  void* ws = chaincomp::aligned_slot(ws_storage, e.workspace_size, e.workspace_align);
   e.init_workspace(ws);
 
   // ---- checks before timing

@@ -5,6 +5,8 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
+#include <vector>
 
 namespace chaincomp {
 
@@ -74,6 +76,15 @@ struct ModelEntry {
   void (*pose_jacobian_gain)(const void* model, const double* axes, double* pose, double* jacobian,
                              double* gain) noexcept;
 };
+
+// Sizes `storage` for an object of `size` bytes aligned to `align` (a model, a workspace)
+// and returns where it goes. Start-up only: it allocates.
+inline void* aligned_slot(std::vector<unsigned char>& storage, std::size_t size, std::size_t align) {
+  storage.assign(size + align, 0);
+  void* p = storage.data();
+  std::size_t space = storage.size();
+  return std::align(align, size, p, space);
+}
 
 struct UnitInfo {
   const char* name;
