@@ -317,6 +317,7 @@ def _header(machine, banner, n, pose_size, corr_dir, order, n_pre, src_hash, src
           "};", "", "// The functions above with the axes' sin and cos computed here."]
     L += [f.trig_wrapper() for f in functions if f.trig]
     L += ["", "using Workspace = chaincomp::Workspace<Kinematics>;",
+          "static_assert(std::is_trivially_destructible_v<Workspace>, \"init_workspace never destroys one\");",
           "using Result = chaincomp::Result<Kinematics>;", "",
           "// Corrected axes such that the actual tool pose equals the nominal one at `command`.",
           "inline Status compensate(const Model& m, Workspace& ws, const Axes& command, Result& out) noexcept {",

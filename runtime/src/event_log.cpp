@@ -34,6 +34,10 @@ LogReader::~LogReader() {
 }
 
 bool LogReader::open(const std::string& path, std::string& error) {
+  if (data_ != nullptr && size_ > 0) munmap(const_cast<unsigned char*>(data_), size_);
+  data_ = nullptr;
+  size_ = pos_ = 0;
+  damage_.clear();
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) {
     error = path + ": " + (errno == ENOENT ? "no such log file" : std::strerror(errno));
@@ -61,18 +65,23 @@ bool LogReader::open(const std::string& path, std::string& error) {
   return true;
 }
 
-void LogReader::skip_damaged(const char* what) noexcept {
+void LogReader::skip_damaged(const char* what, bool to_end) noexcept {
   const std::size_t start = pos_;
   std::size_t p = pos_ + 1;
-  while (p + 4 <= size_ && be(data_ + p, 4) != kSync) ++p;
-  pos_ = p + 4 <= size_ ? p : size_;
-  damage_.push_back({start, pos_ - start, what});
+  while (!to_end && p + 4 <= size_ && be(data_ + p, 4) != kSync) ++p;
+  pos_ = !to_end && p + 4 <= size_ ? p : size_;
+  // one report per damaged stretch: a stretch that continues the last one extends it
+  if (!damage_.empty() && damage_.back().offset + damage_.back().bytes == start) {
+    damage_.back().bytes += pos_ - start;
+  } else {
+    damage_.push_back({start, pos_ - start, what});
+  }
 }
 
 bool LogReader::next(LogEvent& ev) noexcept {
   while (pos_ < size_) {
     if (size_ - pos_ < kHeader) {
-      skip_damaged("truncated event header at the end of the log");
+      skip_damaged("truncated event at the end of the log", true);
       continue;
     }
     const unsigned char* h = data_ + pos_;
@@ -88,7 +97,7 @@ bool LogReader::next(LogEvent& ev) noexcept {
     }
     const std::size_t total = kHeader + static_cast<std::size_t>(channellen) + static_cast<std::size_t>(datalen);
     if (total > size_ - pos_) {
-      skip_damaged("event runs past the end of the log");
+      skip_damaged("event length runs past the end of the log (a damaged length, or the log was cut short)");
       continue;
     }
     ev.offset = pos_;
@@ -138,6 +147,10 @@ bool LogWriter::append(const void* p, std::size_t n) noexcept {
 
 bool LogWriter::write(std::int64_t timestamp, std::string_view channel, const void* data,
                       std::int32_t datalen) noexcept {
+  if (channel.empty() || channel.size() >= static_cast<std::size_t>(kMaxChannel) || datalen < 0) {
+    invalid_ = true;  // not an event a reader would take: refused, reported by close()
+    return false;
+  }
   unsigned char h[kHeader];
   put_be(h, kSync, 4);
   put_be(h + 4, static_cast<std::uint64_t>(count_++), 8);
@@ -154,7 +167,8 @@ bool LogWriter::close(std::string& error) {
   if (std::fclose(file_) != 0) failed_ = true;
   file_ = nullptr;
   if (failed_) error = path_ + ": writing the log failed (disk full?)";
-  return !failed_;
+  else if (invalid_) error = path_ + ": an event with an empty or too long channel, or a negative length, was refused";
+  return !failed_ && !invalid_;
 }
 
 }  // namespace chaincomp

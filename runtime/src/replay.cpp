@@ -197,7 +197,10 @@ int main(int argc, char** argv) {
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   list_damage();
   if (write_log && !out.close(error)) return fail(error);
-  if (csv && std::fclose(csv) != 0) return fail(csv_path + ": writing the CSV file failed (disk full?)");
+  if (csv) {
+    const bool write_failed = std::ferror(csv) != 0;  // a failed fwrite of any line
+    if (std::fclose(csv) != 0 || write_failed) return fail(csv_path + ": writing the CSV file failed (disk full?)");
+  }
 
   const auto& k = comp.counters();
   long long rejected = 0;

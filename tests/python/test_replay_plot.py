@@ -104,9 +104,31 @@ def test_replay_skips_and_reports_damaged_stretches_of_a_log(tmp_path):
     b = starts[40] + len(garbage)
     assert f"bytes {b}-{b + size - 1} of the log skipped: invalid channel or data length" in proc.stderr
     t = len(damaged) - size // 2
-    assert f"bytes {t}-{len(damaged) - 1} of the log skipped: event runs past the end of the log" in proc.stderr
+    assert f"bytes {t}-{len(damaged) - 1} of the log skipped: event length runs past the end of the log" in proc.stderr
     assert "98 events, 98 commands on CHAINCOMP_COMMAND, 98 corrected, 0 rejected" in proc.stderr
     assert "damaged: 3 stretches of the log" in proc.stderr
+
+
+def test_replay_reports_one_damaged_stretch_once(tmp_path):
+    """Garbage straight before an event with a broken length is one stretch, and a tail that
+    holds sync words but no whole event is one stretch to the end."""
+    log, bad = tmp_path / "axes.lcmlog", tmp_path / "bad.lcmlog"
+    run_cli("simulate-log", FIVE, "-o", str(log), "--seconds", "0.02")
+    raw = log.read_bytes()
+    sync = b"\xed\xa1\xda\x01"
+    starts = [i for i in range(len(raw)) if raw.startswith(sync, i)]
+    broken = bytearray(raw[starts[5]:starts[6]])
+    broken[24:28] = struct.pack(">i", -1)  # data length
+    tail = b"zz" + sync + b"\x00" * 4 + sync + b"\x01"
+    damaged = raw[:starts[5]] + b"junk" + bytes(broken) + raw[starts[6]:] + tail
+    bad.write_bytes(damaged)
+    proc = run_cli("replay", str(bad), "--machine", FIVE, "--params", FIVE_PARAMS, "--config", E2E_CONFIG)
+    a, b = starts[5], starts[6] + 4 - 1
+    assert f"bytes {a}-{b} of the log skipped: no sync word" in proc.stderr
+    t = len(raw) + 4
+    assert f"bytes {t}-{len(damaged) - 1} of the log skipped: truncated event at the end of the log" in proc.stderr
+    assert proc.stderr.count("of the log skipped") == 2
+    assert "19 events, 19 commands" in proc.stderr and "damaged: 2 stretches" in proc.stderr
 
 
 def test_replay_bad_input(tmp_path):

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <type_traits>
 
 #include "chaincomp/varying.hpp"
 
@@ -53,6 +54,9 @@ constexpr int kMaxSteps = 6;
 // A step larger than this fraction of the bound (0.25 mm, 0.25 degree) refreshes the
 // Jacobian: below it the chord gains at least two digits per step.
 constexpr double kChordStepLimit = 0.25;
+// A warm start only where the correction stays within half its bound: nearer a singular
+// pose (a large rotary correction) the answer would depend on where the iteration starts.
+constexpr double kWarmCorrectionLimit = 0.5;
 
 // sin and cos of each angular axis (the entries of linear axes are not used).
 template <int N>
@@ -97,9 +101,11 @@ struct Result {
   double residual_direction = 0;  // rad (0 where the direction is not corrected)
 };
 
-// Kept by a caller across the commands of a stream: a command near the last one starts from
-// the last correction with the last factorisation (a warm start), which usually leaves one
-// or two model evaluations. A fresh workspace, or a command far from the last, starts cold.
+// Kept by a caller across the commands of a stream (of one model): a command near the last
+// one starts from the last correction with the last factorisation (a warm start), which
+// usually leaves one or two model evaluations. A fresh workspace, a command far from the
+// last, or another model starts cold. Trivially destructible: the type-erased entry points
+// construct it in the caller's storage and never destroy it.
 template <class K>
 struct Workspace {
   static constexpr int kRows = K::kCorrectsDirection ? 6 : 3;
@@ -108,6 +114,7 @@ struct Workspace {
   Eigen::Matrix<double, kRows, K::kNumAxes> weighted;        // the Jacobian as factorised
   Eigen::Matrix<double, K::kNumAxes, kRows> step_matrix;     // (J^T J)^-1 J^T: a step is step_matrix * r
   bool warm = false;  // the last call ended corrected (ok), with every axis free
+  const void* warm_model = nullptr;  // the model of that call
   typename K::Axes last_command, last_corrected;
   typename K::Axes last_correction_change = K::Axes::Zero();  // from the command before
   typename K::Axes jacobian_axes;  // where the factorised Jacobian was taken
@@ -246,17 +253,15 @@ bool within_bounds(const typename K::Axes& q, const typename K::Axes& command, d
   return true;
 }
 
+// One compensation from `start` (a warm start: the factorisation in ws is used) or, where
+// null, cold from the command (a Jacobian and a factorisation there). `clean`: the call
+// ended with every axis free and the direction corrected.
 template <class K>
-Status compensate(const typename K::Model& model, Workspace<K>& ws, const typename K::Axes& command,
-                  Result<K>& out) noexcept {
+Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K::Axes& command,
+             const typename K::Axes* start, Result<K>& out, bool& clean) noexcept {
   constexpr int n = K::kNumAxes;
   constexpr int rows = Workspace<K>::kRows;
-  // Warm: near the last command, and within the correction bound of where the factorised
-  // Jacobian was taken (the chord still gains about two digits per step; starting from the
-  // extrapolated correction, one step usually reaches the tolerance).
-  const bool warm = ws.warm && within_bounds<K>(command, ws.last_command, kChordStepLimit) &&
-                    within_bounds<K>(command, ws.jacobian_axes);
-  ws.warm = false;  // until this call ends corrected
+  clean = false;
   out.corrected = command;
   out.residual_point = out.residual_direction = 0;
   if (!command.allFinite()) return Status::kNonFiniteInput;
@@ -327,8 +332,8 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
     return true;
   };
   typename K::Axes q = command;
-  if (warm) {
-    q += (ws.last_corrected - ws.last_command) + ws.last_correction_change;  // linear extrapolation
+  if (start != nullptr) {
+    q = *start;
     pose_at(q);
   } else {
     jacobian_at(command);
@@ -406,18 +411,44 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
     out.residual_direction = r.template tail<3>().norm() / kDirectionWeight;
   }
   const bool ok = out.residual_point <= kPointTolerance && out.residual_direction <= kDirectionTolerance;
-  // A warm start needs a unique solution to start from (none where fewer DOF than errors
-  // leave a residual: the chord's fixed point there depends on where its Jacobian was taken)
-  // and a factorisation of the whole problem (no axis held at its bound, not point-only).
-  ws.warm = ok && !point_only && std::none_of(at_bound, at_bound + n, [](bool b) { return b; });
+  clean = !point_only && std::none_of(at_bound, at_bound + n, [](bool b) { return b; });
+  return ok ? Status::kOk : Status::kResidual;
+}
+
+template <class K>
+Status compensate(const typename K::Model& model, Workspace<K>& ws, const typename K::Axes& command,
+                  Result<K>& out) noexcept {
+  // Warm: the same model, near the last command, within the correction bound of where the
+  // factorised Jacobian was taken (the chord still gains about two digits per step), and the
+  // last correction extrapolated linearly (the start) within kWarmCorrectionLimit of the
+  // bound. A command holding NaN fails these tests and is refused by solve().
+  typename K::Axes start;
+  bool warm = ws.warm && ws.warm_model == &model && within_bounds<K>(command, ws.last_command, kChordStepLimit) &&
+              within_bounds<K>(command, ws.jacobian_axes);
   if (warm) {
-    ws.last_correction_change = (q - command) - (ws.last_corrected - ws.last_command);
+    start = command + (ws.last_corrected - ws.last_command) + ws.last_correction_change;
+    warm = within_bounds<K>(start, command, kWarmCorrectionLimit);
+  }
+  ws.warm = false;
+  bool clean = false;
+  Status s = solve<K>(model, ws, command, warm ? &start : nullptr, out, clean);
+  // A warm start that ends short of the tolerance is redone cold: a residual (fewer DOF than
+  // errors, a singular pose) or a failure never depends on the commands before.
+  const bool warm_result = warm && s == Status::kOk;
+  if (warm && !warm_result) s = solve<K>(model, ws, command, nullptr, out, clean);
+  // The next call may start warm from a unique solution (none where a residual is left: the
+  // chord's fixed point there depends on where its Jacobian was taken) of the whole problem.
+  if (s != Status::kOk || !clean) return s;
+  ws.warm = true;
+  ws.warm_model = &model;
+  if (warm_result) {
+    ws.last_correction_change = (out.corrected - command) - (ws.last_corrected - ws.last_command);
   } else {
     ws.last_correction_change.setZero();
   }
   ws.last_command = command;
-  ws.last_corrected = q;
-  return ok ? Status::kOk : Status::kResidual;
+  ws.last_corrected = out.corrected;
+  return s;
 }
 
 }  // namespace chaincomp

@@ -22,7 +22,8 @@ struct LogEvent {
   std::uint64_t offset = 0;  // byte offset of the event's sync word in the file
 };
 
-// Reads a whole log through a read-only memory map.
+// Reads a whole log through a read-only memory map (a log cut short by another process
+// while it is read ends the reader with SIGBUS, as any mapped reader: replay logs at rest).
 class LogReader {
  public:
   LogReader() = default;
@@ -30,7 +31,8 @@ class LogReader {
   LogReader& operator=(const LogReader&) = delete;
   ~LogReader();
 
-  // False with `error` naming the file when it cannot be opened or mapped.
+  // False with `error` naming the file when it cannot be opened or mapped. Opening again
+  // starts over with the new file.
   bool open(const std::string& path, std::string& error);
   // The next event; false at the end. A damaged stretch (no sync word where one belongs, a
   // length that does not fit) is skipped up to the next sync word and recorded in damage().
@@ -45,7 +47,8 @@ class LogReader {
   const std::vector<Damage>& damage() const noexcept { return damage_; }
 
  private:
-  void skip_damaged(const char* what) noexcept;
+  // Skips from pos_ to the next sync word (or to the end) and records the stretch.
+  void skip_damaged(const char* what, bool to_end = false) noexcept;
 
   const unsigned char* data_ = nullptr;
   std::size_t size_ = 0, pos_ = 0;
@@ -61,7 +64,8 @@ class LogWriter {
   ~LogWriter();
 
   bool open(const std::string& path, std::string& error);
-  // false once a write has failed (the disk is full...): see close().
+  // false once a write has failed (the disk is full...), or for an event no reader would
+  // take (empty or 1000+ byte channel, negative length, refused): see close().
   bool write(std::int64_t timestamp, std::string_view channel, const void* data, std::int32_t datalen) noexcept;
   // Flushes and closes; false with `error` if any write failed.
   bool close(std::string& error);
@@ -75,7 +79,7 @@ class LogWriter {
   std::vector<unsigned char> buffer_;
   std::size_t used_ = 0;
   std::int64_t count_ = 0;
-  bool failed_ = false;
+  bool failed_ = false, invalid_ = false;
 };
 
 }  // namespace chaincomp
