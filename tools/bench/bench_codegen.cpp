@@ -24,6 +24,7 @@
 #include <Eigen/Core>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -347,44 +348,63 @@ struct Stats {
 
 using Clock = std::chrono::steady_clock;
 
-// f(i) runs one call on sample i and returns a value for the sink. Batches of calls over the
-// samples (round robin); per batch the mean ns per call; median, worst and best batch.
-template <class F>
-Stats time_calls(F&& f, int num_samples, int batches, double batch_ms) {
+// f(i) runs one call on sample i and returns a value for the sink. Calls in batches over
+// the samples (round robin); per batch the mean ns per call; median, worst and best batch.
+// Several functions are timed together, their batches interleaved (the order rotating from
+// batch to batch): a drift of the machine's speed during the run (other load, CPU
+// frequency) then moves every figure alike, and their ratios stay fair.
+template <class... F>
+std::array<Stats, sizeof...(F)> time_interleaved(int num_samples, int batches, double batch_ms, F&&... fs) {
+  constexpr std::size_t N = sizeof...(F);
+  std::array<Stats, N> out;
+  std::array<std::vector<double>, N> ns;
+  std::array<int, N> idx{};
   double sink = 0;
-  // warm-up and calibration: at least one pass over the samples and 20 ms
-  long calls = 0;
-  int idx = 0;
-  const auto w0 = Clock::now();
-  double elapsed = 0;
-  while (calls < num_samples || elapsed < 20e6) {
-    for (int k = 0; k < 64; ++k) {
-      sink += f(idx);
-      if (++idx == num_samples) idx = 0;
+  auto run = [&](auto& f, int& i, long calls) {
+    for (long k = 0; k < calls; ++k) {
+      sink += f(i);
+      if (++i == num_samples) i = 0;
     }
-    calls += 64;
-    elapsed = std::chrono::duration<double, std::nano>(Clock::now() - w0).count();
+  };
+  // warm-up and calibration: at least one pass over the samples and 20 ms each
+  auto calibrate = [&](auto& f, std::size_t j) {
+    long calls = 0;
+    const auto w0 = Clock::now();
+    double elapsed = 0;
+    while (calls < num_samples || elapsed < 20e6) {
+      run(f, idx[j], 64);
+      calls += 64;
+      elapsed = std::chrono::duration<double, std::nano>(Clock::now() - w0).count();
+    }
+    out[j].calls_per_batch = std::max<long>(16, static_cast<long>(batch_ms * 1e6 * calls / elapsed));
+    out[j].batches = batches;
+  };
+  {
+    std::size_t j = 0;
+    ((calibrate(fs, j), ++j), ...);
   }
-  const double per_call = elapsed / static_cast<double>(calls);
-  Stats s;
-  s.calls_per_batch = std::max<long>(16, static_cast<long>(batch_ms * 1e6 / per_call));
-  s.batches = batches;
-  std::vector<double> ns(batches);
   for (int b = 0; b < batches; ++b) {
-    const auto t0 = Clock::now();
-    for (long k = 0; k < s.calls_per_batch; ++k) {
-      sink += f(idx);
-      if (++idx == num_samples) idx = 0;
+    for (std::size_t r = 0; r < N; ++r) {
+      const std::size_t which = (static_cast<std::size_t>(b) + r) % N;
+      std::size_t j = 0;
+      auto batch = [&](auto& f) {
+        if (j++ != which) return;
+        const auto t0 = Clock::now();
+        run(f, idx[which], out[which].calls_per_batch);
+        ns[which].push_back(std::chrono::duration<double, std::nano>(Clock::now() - t0).count() /
+                            static_cast<double>(out[which].calls_per_batch));
+      };
+      (batch(fs), ...);
     }
-    const auto t1 = Clock::now();
-    ns[b] = std::chrono::duration<double, std::nano>(t1 - t0).count() / static_cast<double>(s.calls_per_batch);
   }
-  std::sort(ns.begin(), ns.end());
-  s.median_ns = ns[ns.size() / 2];
-  s.worst_ns = ns.back();
-  s.best_ns = ns.front();
+  for (std::size_t j = 0; j < N; ++j) {
+    std::sort(ns[j].begin(), ns[j].end());
+    out[j].median_ns = ns[j][ns[j].size() / 2];
+    out[j].worst_ns = ns[j].back();
+    out[j].best_ns = ns[j].front();
+  }
   g_sink_store += sink;
-  return s;
+  return out;
 }
 
 // ----------------------------------------------------------------------------- JSON
@@ -486,20 +506,20 @@ std::string bench_tables(const Options& opt) {
   const int S = opt.samples, B = opt.batches;
   const double ms = opt.batch_ms;
   auto comp = [&](const void* model) {
-    return time_calls([&](int s) { const int st = e->compensate(model, nullptr, q_at(s), corr, res); escape(corr); return corr[0] + st; },
-                      S, B, ms);
+    return [&, model](int s) { const int st = e->compensate(model, nullptr, q_at(s), corr, res); escape(corr); return corr[0] + st; };
   };
   auto pose = [&](const void* model) {
-    return time_calls([&](int s) { e->pose_exact(model, q_at(s), out); escape(out); return out[0]; }, S, B, ms);
+    return [&, model](int s) { e->pose_exact(model, q_at(s), out); escape(out); return out[0]; };
   };
   auto jacobian = [&](const void* model) {
-    return time_calls([&](int s) { e->pose_jacobian(model, q_at(s), out, jac); escape(jac); return out[0] + jac[0]; },
-                      S, B, ms);
+    return [&, model](int s) { e->pose_jacobian(model, q_at(s), out, jac); escape(jac); return out[0] + jac[0]; };
   };
-  const Stats c_const = comp(constants->model.bytes), c_tab = comp(tables->model.bytes);
-  const Stats c_lin = linear ? comp(linear->model.bytes) : Stats{};
-  const Stats p_const = pose(constants->model.bytes), p_tab = pose(tables->model.bytes);
-  const Stats j_const = jacobian(constants->model.bytes), j_tab = jacobian(tables->model.bytes);
+  const void* lin_model = linear ? linear->model.bytes : constants->model.bytes;  // timed either way
+  const auto c = time_interleaved(S, B, ms, comp(constants->model.bytes), comp(tables->model.bytes), comp(lin_model));
+  const Stats c_const = c[0], c_tab = c[1], c_lin = linear ? c[2] : Stats{};
+  const auto p = time_interleaved(S, B, ms, pose(constants->model.bytes), pose(tables->model.bytes));
+  const auto jt = time_interleaved(S, B, ms, jacobian(constants->model.bytes), jacobian(tables->model.bytes));
+  const Stats p_const = p[0], p_tab = p[1], j_const = jt[0], j_tab = jt[1];
   (void)PS;
   std::string j = "{\"machine\":\"" + std::string(info.name) + "\",\"varying\":" +
                   std::to_string(tables->varying.count) + ",\"knots_min\":" + std::to_string(knots_min) +
@@ -628,22 +648,26 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
   std::vector<Row> rows;
   const int S = opt.samples, B = opt.batches;
   const double ms = opt.batch_ms;
-  rows.push_back({"pose_exact",
-                  time_calls([&](int s) { e.pose_exact(model, q_at(s), out); escape(out); return out[0]; }, S, B, ms),
-                  time_calls([&](int s) { baseline_pose<PS>(spec.actual, q_at(s), out); escape(out); return sum(out, PS); }, S, B, ms)});
-  rows.push_back({"error_order1",
-                  time_calls([&](int s) { e.error(model, q_at(s), 1, out); escape(out); return out[0]; }, S, B, ms),
-                  time_calls([&](int s) { baseline_error<PS>(spec.actual, spec.nominal, q_at(s), out); escape(out); return sum(out, PS); }, S, B, ms)});
-  rows.push_back({"error_order2",
-                  time_calls([&](int s) { e.error(model, q_at(s), 2, out); escape(out); return out[0]; }, S, B, ms),
-                  // the same exact-error baseline, timed again for its own figures
-                  time_calls([&](int s) { baseline_error<PS>(spec.actual, spec.nominal, q_at(s), out); escape(out); return sum(out, PS); }, S, B, ms)});
-  rows.push_back({"pose_jacobian",
-                  time_calls([&](int s) { e.pose_jacobian(model, q_at(s), out, jac); escape(jac); return out[0] + jac[0]; }, S, B, ms),
-                  time_calls([&](int s) { baseline_jacobian<PS>(spec.actual, q_at(s), out, jac); escape(jac); return out[0] + jac[0]; }, S, B, ms)});
-  rows.push_back({"compensate",
-                  time_calls([&](int s) { const int st = e.compensate(model, nullptr, q_at(s), corr, res); escape(corr); return corr[0] + st; }, S, B, ms),
-                  time_calls([&](int s) { const int st = baseline_compensate<PS, DIR>(spec.actual, spec.nominal, q_at(s), corr, res); escape(corr); return corr[0] + st; }, S, B, ms)});
+  auto timed_row = [&](const char* fn, auto&& generated, auto&& baseline) {
+    const auto t = time_interleaved(S, B, ms, generated, baseline);
+    return Row{fn, t[0], t[1]};
+  };
+  rows.push_back(timed_row("pose_exact",
+                           [&](int s) { e.pose_exact(model, q_at(s), out); escape(out); return out[0]; },
+                           [&](int s) { baseline_pose<PS>(spec.actual, q_at(s), out); escape(out); return sum(out, PS); }));
+  rows.push_back(timed_row("error_order1",
+                           [&](int s) { e.error(model, q_at(s), 1, out); escape(out); return out[0]; },
+                           [&](int s) { baseline_error<PS>(spec.actual, spec.nominal, q_at(s), out); escape(out); return sum(out, PS); }));
+  // the same exact-error baseline, timed again for its own figures
+  rows.push_back(timed_row("error_order2",
+                           [&](int s) { e.error(model, q_at(s), 2, out); escape(out); return out[0]; },
+                           [&](int s) { baseline_error<PS>(spec.actual, spec.nominal, q_at(s), out); escape(out); return sum(out, PS); }));
+  rows.push_back(timed_row("pose_jacobian",
+                           [&](int s) { e.pose_jacobian(model, q_at(s), out, jac); escape(jac); return out[0] + jac[0]; },
+                           [&](int s) { baseline_jacobian<PS>(spec.actual, q_at(s), out, jac); escape(jac); return out[0] + jac[0]; }));
+  rows.push_back(timed_row("compensate",
+                           [&](int s) { const int st = e.compensate(model, nullptr, q_at(s), corr, res); escape(corr); return corr[0] + st; },
+                           [&](int s) { const int st = baseline_compensate<PS, DIR>(spec.actual, spec.nominal, q_at(s), corr, res); escape(corr); return corr[0] + st; }));
 
   // the stream with a kept workspace (warm starts) lands where a cold start lands
   double stream_diff = 0;
@@ -657,9 +681,9 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
       for (int i = 0; i < N; ++i) stream_diff = std::max(stream_diff, std::abs(cw[i] - cc[i]));
     }
   }
-  rows.push_back({"compensate_stream",
-                  time_calls([&](int s) { const int st = e.compensate(model, ws, p_at(s), corr, res); escape(corr); return corr[0] + st; }, S, B, ms),
-                  time_calls([&](int s) { const int st = baseline_compensate<PS, DIR>(spec.actual, spec.nominal, p_at(s), corr, res); escape(corr); return corr[0] + st; }, S, B, ms)});
+  rows.push_back(timed_row("compensate_stream",
+                           [&](int s) { const int st = e.compensate(model, ws, p_at(s), corr, res); escape(corr); return corr[0] + st; },
+                           [&](int s) { const int st = baseline_compensate<PS, DIR>(spec.actual, spec.nominal, p_at(s), corr, res); escape(corr); return corr[0] + st; }));
 
   std::string j = "{\"machine\":\"" + std::string(info.name) + "\",\"num_axes\":" + std::to_string(N) +
                   ",\"pose_size\":" + std::to_string(PS) + ",\"corrects_direction\":" + (DIR ? "true" : "false") +
