@@ -5,7 +5,9 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
 
 namespace chaincomp {
@@ -15,7 +17,6 @@ namespace {
 constexpr std::uint32_t kSync = 0xEDA1DA01u;
 constexpr std::size_t kHeader = 4 + 8 + 8 + 4 + 4;
 constexpr std::int32_t kMaxChannel = 1000;  // liblcm refuses longer channel names
-constexpr std::size_t kWriteBuffer = 1 << 20;
 
 std::uint64_t be(const unsigned char* p, int bytes) noexcept {
   std::uint64_t v = 0;
@@ -114,33 +115,95 @@ bool LogReader::next(LogEvent& ev) noexcept {
 
 LogWriter::~LogWriter() {
   std::string ignored;
-  if (file_ != nullptr) close(ignored);
+  if (fd_ >= 0) close(ignored);
 }
 
-bool LogWriter::open(const std::string& path, std::string& error) {
-  file_ = std::fopen(path.c_str(), "wb");
-  if (file_ == nullptr) {
+bool LogWriter::open(const std::string& path, std::string& error, bool direct) {
+  std::string ignored;
+  if (fd_ >= 0) close(ignored);
+  // Direct I/O where the filesystem takes it; plain writes otherwise.
+  fd_ = direct ? ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_DIRECT, 0644) : -1;
+  direct_ = fd_ >= 0;
+  if (fd_ < 0) fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd_ < 0) {
     error = path + ": cannot create the log: " + std::strerror(errno);
     return false;
   }
   path_ = path;
-  buffer_.resize(kWriteBuffer);
+  for (auto& b : buffers_) {
+    if (!b) b.reset(static_cast<unsigned char*>(std::aligned_alloc(kBlock, kWriteBuffer)));
+    if (!b) {
+      error = path + ": no memory for the write buffers";
+      ::close(fd_);
+      fd_ = -1;
+      return false;
+    }
+  }
+  filling_ = 0;
+  used_ = written_ = 0;
+  count_ = 0;
+  failed_ = invalid_ = false;
+  handed_ = -1;
+  stop_ = false;
+  writer_ = std::thread([this] { write_loop(); });
   return true;
 }
 
-bool LogWriter::flush() noexcept {
-  if (used_ > 0 && !failed_ && std::fwrite(buffer_.data(), 1, used_, file_) != used_) failed_ = true;
-  used_ = 0;
+void LogWriter::write_loop() noexcept {
+  std::unique_lock<std::mutex> lock(mutex_);
+  for (;;) {
+    cv_.wait(lock, [this] { return handed_ >= 0 || stop_; });
+    if (handed_ < 0) return;  // stopped, nothing left
+    const unsigned char* p = buffers_[handed_].get();
+    const std::size_t n = handed_len_;
+    lock.unlock();
+    write_all(p, n);
+    lock.lock();
+    handed_ = -1;
+    cv_.notify_all();
+  }
+}
+
+void LogWriter::hand_over(std::size_t n) noexcept {
+  std::unique_lock<std::mutex> lock(mutex_);
+  cv_.wait(lock, [this] { return handed_ < 0; });  // the writer is done with the other buffer
+  handed_ = filling_;
+  handed_len_ = n;
+  cv_.notify_all();
+  filling_ ^= 1;
+}
+
+bool LogWriter::write_all(const unsigned char* p, std::size_t n) noexcept {
+  while (n > 0 && !failed_) {
+    const ssize_t k = ::write(fd_, p, n);
+    if (k < 0 && errno == EINTR) continue;
+    if (k < 0 && errno == EINVAL && direct_) {  // the filesystem refuses direct writes after all
+      direct_ = fcntl(fd_, F_SETFL, fcntl(fd_, F_GETFL) & ~O_DIRECT) != 0;
+      if (!direct_) continue;
+    }
+    if (k <= 0) {
+      failed_ = true;
+      break;
+    }
+    p += k;
+    n -= static_cast<std::size_t>(k);
+  }
   return !failed_;
 }
 
-bool LogWriter::append(const void* p, std::size_t n) noexcept {
-  if (used_ + n > buffer_.size() && !flush()) return false;
-  if (n > buffer_.size()) {  // larger than the buffer: straight through
-    failed_ = std::fwrite(p, 1, n, file_) != n;
-  } else if (n > 0) {
-    std::memcpy(buffer_.data() + used_, p, n);
-    used_ += n;
+bool LogWriter::append(const void* data, std::size_t n) noexcept {
+  const auto* p = static_cast<const unsigned char*>(data);
+  while (n > 0 && !failed_) {
+    const std::size_t take = std::min(n, kWriteBuffer - used_);
+    std::memcpy(buffers_[filling_].get() + used_, p, take);
+    used_ += take;
+    p += take;
+    n -= take;
+    if (used_ == kWriteBuffer) {  // whole blocks: fine for direct I/O
+      hand_over(kWriteBuffer);
+      written_ += kWriteBuffer;
+      used_ = 0;
+    }
   }
   return !failed_;
 }
@@ -162,10 +225,22 @@ bool LogWriter::write(std::int64_t timestamp, std::string_view channel, const vo
 }
 
 bool LogWriter::close(std::string& error) {
-  if (file_ == nullptr) return true;
-  flush();
-  if (std::fclose(file_) != 0) failed_ = true;
-  file_ = nullptr;
+  if (fd_ < 0) return true;
+  // direct I/O writes whole blocks: the last one padded, the file then cut to its length
+  const std::size_t padded = direct_ ? (used_ + kBlock - 1) / kBlock * kBlock : used_;
+  if (padded > 0) {
+    std::memset(buffers_[filling_].get() + used_, 0, padded - used_);
+    hand_over(padded);
+  }
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stop_ = true;
+  }
+  cv_.notify_all();
+  writer_.join();
+  if (!failed_ && padded != used_ && ftruncate(fd_, static_cast<off_t>(written_ + used_)) != 0) failed_ = true;
+  if (::close(fd_) != 0) failed_ = true;
+  fd_ = -1;
   if (failed_) error = path_ + ": writing the log failed (disk full?)";
   else if (invalid_) error = path_ + ": an event with an empty or too long channel, or a negative length, was refused";
   return !failed_ && !invalid_;

@@ -7,7 +7,12 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <cstdio>
+#include <atomic>
+#include <condition_variable>
+#include <cstdlib>
+#include <memory>
+#include <mutex>
+#include <thread>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -55,7 +60,11 @@ class LogReader {
   std::vector<Damage> damage_;
 };
 
-// Appends events through one large buffer; event numbers count from 0, as lcm-logger's.
+// Appends events through two large buffers, one filled while a thread of its own writes the
+// other out, so the device's time overlaps the caller's work; event numbers count from 0,
+// as lcm-logger's. Writes whole 4 KiB blocks with direct I/O where the filesystem takes it:
+// on this project's VM the page cache took 0.3-5 GB/s depending on its dirty pages, direct
+// writes a steady 2 GB/s (dd, 389 MiB), and replay writes its log once, never reads it.
 class LogWriter {
  public:
   LogWriter() = default;
@@ -63,23 +72,41 @@ class LogWriter {
   LogWriter& operator=(const LogWriter&) = delete;
   ~LogWriter();
 
-  bool open(const std::string& path, std::string& error);
+  // `direct`: try direct I/O first (tests turn it off to cover the plain path).
+  bool open(const std::string& path, std::string& error, bool direct = true);
   // false once a write has failed (the disk is full...), or for an event no reader would
   // take (empty or 1000+ byte channel, negative length, refused): see close().
   bool write(std::int64_t timestamp, std::string_view channel, const void* data, std::int32_t datalen) noexcept;
-  // Flushes and closes; false with `error` if any write failed.
+  // Writes what is buffered and closes; false with `error` if any write failed.
   bool close(std::string& error);
 
  private:
-  bool flush() noexcept;
+  static constexpr std::size_t kBlock = 4096, kWriteBuffer = 4 << 20;
+  struct Free {
+    void operator()(unsigned char* p) const noexcept { std::free(p); }
+  };
   bool append(const void* p, std::size_t n) noexcept;
+  void hand_over(std::size_t n) noexcept;  // the filled buffer to the writer thread
+  void write_loop() noexcept;              // the writer thread
+  bool write_all(const unsigned char* p, std::size_t n) noexcept;
 
-  std::FILE* file_ = nullptr;
+  int fd_ = -1;
+  std::atomic<bool> direct_{false};  // the writer thread may fall back to plain writes
   std::string path_;
-  std::vector<unsigned char> buffer_;
-  std::size_t used_ = 0;
+  std::unique_ptr<unsigned char, Free> buffers_[2];  // kWriteBuffer bytes each, block-aligned
+  int filling_ = 0;            // the buffer being filled
+  std::size_t used_ = 0;       // bytes in it
+  std::uint64_t written_ = 0;  // bytes handed over before it
   std::int64_t count_ = 0;
-  bool failed_ = false, invalid_ = false;
+  std::atomic<bool> failed_{false};
+  bool invalid_ = false;
+  // the hand-over: the buffer the writer thread is to write (-1: none) and its length
+  std::thread writer_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  int handed_ = -1;
+  std::size_t handed_len_ = 0;
+  bool stop_ = false;
 };
 
 }  // namespace chaincomp
