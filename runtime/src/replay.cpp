@@ -1,5 +1,7 @@
 // chaincomp_replay: runs every command of an lcm-logger log through the daemon's compensator
 // (the same compiled code, the same runtime settings) and writes a corrected log and/or a CSV.
+#include <sys/stat.h>
+
 #include <charconv>
 #include <chrono>
 #include <cmath>
@@ -54,6 +56,12 @@ struct Line {
   }
 };
 
+// Whether both paths name one existing file (links and other spellings included).
+bool same_file(const std::string& a, const std::string& b) {
+  struct stat sa {}, sb {};
+  return stat(a.c_str(), &sa) == 0 && stat(b.c_str(), &sb) == 0 && sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -95,6 +103,12 @@ int main(int argc, char** argv) {
 
   chaincomp::LogReader in;
   if (!in.open(in_path, error)) return fail(error);
+  // Writing over the log being read would destroy it (and, mapped, crash the reader).
+  for (const std::string* out_file : {&out_path, &csv_path}) {
+    if (!out_file->empty() && same_file(in_path, *out_file)) {
+      return fail(*out_file + ": is the input log itself; choose another output file");
+    }
+  }
   chaincomp::LogWriter out;
   const bool write_log = !out_path.empty();
   if (write_log && !out.open(out_path, error)) return fail(error);

@@ -131,6 +131,17 @@ def test_replay_reports_one_damaged_stretch_once(tmp_path):
     assert "19 events, 19 commands" in proc.stderr and "damaged: 2 stretches" in proc.stderr
 
 
+def test_replay_refuses_to_write_over_its_input(tmp_path):
+    log = tmp_path / "axes.lcmlog"
+    run_cli("simulate-log", FIVE, "-o", str(log), "--seconds", "0.01")
+    before = log.read_bytes()
+    os.symlink(log, tmp_path / "link.lcmlog")
+    for flag, target in (("-o", log), ("--csv", tmp_path / "link.lcmlog")):
+        proc = run_cli("replay", str(log), "--machine", FIVE, "--params", FIVE_PARAMS, flag, str(target), check=False)
+        assert proc.returncode == 2 and f"{target}: is the input log itself" in proc.stderr
+    assert log.read_bytes() == before
+
+
 def test_replay_bad_input(tmp_path):
     proc = run_cli("replay", str(tmp_path / "none.lcmlog"), "--machine", FIVE, "--params", FIVE_PARAMS,
                    check=False)
