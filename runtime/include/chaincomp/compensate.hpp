@@ -1,9 +1,10 @@
 // Compensation: corrected axis commands such that the actual tool point (and tool
 // direction, where the machine's rotary axes can correct it) equals the nominal one at the
 // commanded axes. Gauss-Newton steps on the generated exact Jacobian until the residual is
-// within tolerance, at most a fixed number: bounded cost per call, no heap, no exceptions. Errors that vary along an axis (tables,
-// polynomials: varying.hpp) are evaluated at the command and at every Newton iterate, and
-// their slopes enter the Jacobian.
+// within tolerance, at most a fixed number: bounded cost per call, no heap, no exceptions.
+// A workspace kept across a stream of commands lets a call start from the last correction
+// (a warm start). Errors that vary along an axis (tables, polynomials: varying.hpp) are
+// evaluated at the command and at every Newton iterate, and their slopes enter the Jacobian.
 #pragma once
 
 #include <Eigen/Core>
