@@ -18,6 +18,22 @@ bool room(const VaryingErrors& v, std::string& why) {
   return true;
 }
 
+// The fields a table and a polynomial share; its data goes at the end of the storage.
+VaryingError item(const VaryingErrors& v, int param, int column, int axis, VaryingKind kind, Outside outside,
+                  int count, double lower, double upper) {
+  VaryingError e;
+  e.param = param;
+  e.column = column;
+  e.axis = axis;
+  e.kind = kind;
+  e.outside = outside;
+  e.count = count;
+  e.offset = static_cast<int>(v.storage.size());
+  e.lower = lower;
+  e.upper = upper;
+  return e;
+}
+
 std::string number(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.10g", v);
@@ -82,17 +98,8 @@ bool add_table(VaryingErrors& v, int param, int column, int axis, const double* 
       return false;
     }
   }
-  VaryingError e;
-  e.param = param;
-  e.column = column;
-  e.axis = axis;
-  e.kind = VaryingKind::kTable;
+  VaryingError e = item(v, param, column, axis, VaryingKind::kTable, outside, n, x[0], x[n - 1]);
   e.interpolation = interpolation;
-  e.outside = outside;
-  e.count = n;
-  e.offset = static_cast<int>(v.storage.size());
-  e.lower = x[0];
-  e.upper = x[n - 1];
   // Equally spaced knots (to rounding) are located by one division instead of a search.
   const double step = (x[n - 1] - x[0]) / (n - 1);
   bool equal = true;
@@ -142,16 +149,7 @@ bool add_polynomial(VaryingErrors& v, int param, int column, int axis, const dou
     why = "the range needs low < high";
     return false;
   }
-  VaryingError e;
-  e.param = param;
-  e.column = column;
-  e.axis = axis;
-  e.kind = VaryingKind::kPolynomial;
-  e.outside = outside;
-  e.count = n;
-  e.offset = static_cast<int>(v.storage.size());
-  e.lower = lower;
-  e.upper = upper;
+  VaryingError e = item(v, param, column, axis, VaryingKind::kPolynomial, outside, n, lower, upper);
   e.scale_in = scale_in;
   e.scale_out = scale_out;
   v.storage.insert(v.storage.end(), c, c + n);
