@@ -30,14 +30,16 @@ void put_be(unsigned char* p, std::uint64_t v, int bytes) noexcept {
 
 }  // namespace
 
-LogReader::~LogReader() {
-  if (data_ != nullptr && size_ > 0) munmap(const_cast<unsigned char*>(data_), size_);
-}
+LogReader::~LogReader() { unmap(); }
 
-bool LogReader::open(const std::string& path, std::string& error) {
+void LogReader::unmap() noexcept {
   if (data_ != nullptr && size_ > 0) munmap(const_cast<unsigned char*>(data_), size_);
   data_ = nullptr;
   size_ = pos_ = 0;
+}
+
+bool LogReader::open(const std::string& path, std::string& error) {
+  unmap();
   damage_.clear();
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) {

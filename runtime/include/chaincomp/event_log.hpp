@@ -52,6 +52,7 @@ class LogReader {
   const std::vector<Damage>& damage() const noexcept { return damage_; }
 
  private:
+  void unmap() noexcept;
   // Skips from pos_ to the next sync word (or to the end) and records the stretch.
   void skip_damaged(const char* what, bool to_end = false) noexcept;
 
