@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 
 from ..errors import ChaincompError
@@ -52,3 +53,30 @@ def values_for(machine: Machine, params_path: str | None, sets: list[str]) -> tu
 
 def load(path: str) -> Machine:
     return load_machine(path)
+
+
+def _same_file(a: str, b: str) -> bool:
+    """Whether paths a and b name one file (links and other spellings too)."""
+    try:
+        sa, sb = os.stat(a), os.stat(b)
+    except OSError:
+        return os.path.abspath(a) == os.path.abspath(b)
+    return (sa.st_dev, sa.st_ino) == (sb.st_dev, sb.st_ino)
+
+
+def check_output(output: str | None, *inputs: str | None, option: str = "-o") -> None:
+    """Refuse, before anything is written, an output that is one of the inputs, or whose
+    folder does not exist or cannot be written to."""
+    if not output:
+        return
+    for path in inputs:
+        if path and _same_file(output, path):
+            raise ChaincompError(f"{option} {output}: is also an input ({path}); "
+                                 f"refusing to overwrite it")
+    folder = os.path.dirname(os.path.abspath(output))
+    if not os.path.isdir(folder):
+        raise ChaincompError(f"{option} {output}: folder {folder} does not exist")
+    if os.path.isdir(output):
+        raise ChaincompError(f"{option} {output}: is a folder, expected a file name")
+    if not os.access(folder, os.W_OK) or (os.path.exists(output) and not os.access(output, os.W_OK)):
+        raise ChaincompError(f"{option} {output}: not writable")
