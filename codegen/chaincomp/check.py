@@ -21,15 +21,14 @@ import sympy as sp
 from . import series
 from .derive import COMPONENTS, Derivation, derive
 from .errors import ChaincompError
-from .expressions import RESERVED, ExpressionError, parse
+from .expressions import NAME, RESERVED, ExpressionError, parse
 from .machine import Machine
 from .yamlsource import LineDict, LineList, load_yaml
 
 # Which product of the branches the formulas describe. T: reference -> tool, W: reference ->
 # workpiece (identity for a serial chain). The machine's own model is inv(W)*T.
 CHAINS = ("inv(W)*T", "inv(T)*W", "W*inv(T)", "T*inv(W)")
-_OF = re.compile(r"^(d?)(k?)([xyz])(?:/([A-Za-z][A-Za-z0-9_]*))?$")
-_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+_OF = re.compile(r"(d?)(k?)([xyz])(?:/([A-Za-z][A-Za-z0-9_]*))?\Z")
 
 
 # ----------------------------------------------------------------------------- the file
@@ -74,7 +73,7 @@ def _parse_where(path, node, fld, line, table: dict) -> list[Substitution]:
     out = []
     for key, value in node.items():
         kline = _line(node, key, line)
-        if not isinstance(key, str) or not _NAME.match(key) or key in RESERVED:
+        if not isinstance(key, str) or not NAME.match(key) or key in RESERVED:
             raise ChaincompError(f"{key!r} is not a usable name", path, kline, f"{fld}.{key}")
         expr = _expr(path, value, table, kline, f"{fld}.{key}")
         new = key not in table

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, field
 from typing import Union
 
@@ -11,15 +10,14 @@ import sympy as sp
 
 from . import units
 from .errors import ChaincompError
-from .expressions import RESERVED, ExpressionError, parse
-from .yamlsource import describe, line_of, load_yaml
+from .expressions import MAX_LITERAL, NAME, RESERVED, ExpressionError, parse
+from .yamlsource import describe, line_of, load_yaml, read_text
 
 ROLES = ("axis", "constant", "error")
 SENSES = {"right_hand": 1, "left_hand": -1}
 AXES = ("x", "y", "z")
 # The coordinates a rotation about each axis mixes: i' = c·i − s·j, j' = s·i + c·j.
 ROT_PLANE = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}
-_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
 
 @dataclass(frozen=True)
@@ -136,6 +134,8 @@ class _Ctx:
 
     def __init__(self, path: str):
         self.path = path
+        self.at: dict = {}        # every symbol at its nominal value (axes: default position)
+        self.errors: set = set()  # the error symbols
 
     def fail(self, message: str, line: int | None, fld: str) -> ChaincompError:
         return ChaincompError(message, self.path, line, fld)
@@ -157,8 +157,11 @@ def _require_map(ctx: _Ctx, node, fld: str, line, allowed: set[str], required: s
 def _number(ctx: _Ctx, value, fld: str, line) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ctx.fail(f"expected a number, got {describe(value)}", line, fld)
-    if not math.isfinite(value):
+    if isinstance(value, float) and not math.isfinite(value):
         raise ctx.fail(f"expected a finite number, got {value!r}", line, fld)
+    if abs(value) > MAX_LITERAL:
+        shown = str(value) if len(str(value)) <= 24 else str(value)[:20] + "..."
+        raise ctx.fail(f"{shown} is larger than {MAX_LITERAL:g} in magnitude", line, fld)
     return float(value)
 
 
@@ -167,7 +170,7 @@ def _parse_symbol(ctx: _Ctx, node, i: int, line) -> Symbol:
     _require_map(ctx, node, fld, line, {"name", "role", "unit", "meaning", "nominal", "limits"},
                  {"name", "role", "unit"})
     name = node["name"]
-    if not isinstance(name, str) or not _NAME.match(name):
+    if not isinstance(name, str) or not NAME.match(name):
         raise ctx.fail(f"invalid symbol name {name!r} (letters, digits and '_', starting with a letter)",
                        line_of(node, "name"), f"{fld}.name")
     if name in RESERVED:
@@ -216,9 +219,58 @@ def _parse_symbol(ctx: _Ctx, node, i: int, line) -> Symbol:
 def _expr(ctx: _Ctx, value, symbols, fld: str, line) -> sp.Expr:
     try:
         expr = parse(value, symbols)
+        _check_at_nominal(expr, ctx.at, ctx.errors)
     except ExpressionError as exc:
         raise ctx.fail(str(exc), line, fld) from None
     return expr
+
+
+def _numeric(expr: sp.Expr, at: dict) -> complex | None:
+    """The value of ``expr`` at ``at`` (every symbol), or None where it is not finite."""
+    value = sp.N(expr.xreplace(at), 17)
+    if not value.is_number or value.has(sp.zoo, sp.nan, sp.oo, -sp.oo):
+        return None
+    c = complex(value)
+    return c if math.isfinite(c.real) and math.isfinite(c.imag) else None
+
+
+def _check_at_nominal(expr: sp.Expr, at: dict, errors: set) -> None:
+    """An expression must be finite and real at the nominal values (axes at their default
+    positions, errors zero), and analytic in the errors there: the truncated series are its
+    Taylor expansion about zero error, which a division by an error or the square root of
+    one does not have."""
+    where = ", ".join(f"{s} = {float(at[s]):g}" for s in sorted(expr.free_symbols, key=str) if s not in errors)
+    where = f" ({where}, errors zero)" if where else " (errors zero)"
+    value = _numeric(expr, at)
+    if value is None:
+        raise ExpressionError(f"{expr} is not finite at the nominal values{where}")
+    if abs(value.imag) > 1e-12 * max(1.0, abs(value.real)):
+        raise ExpressionError(f"{expr} is not real at the nominal values{where}")
+    for node in sp.preorder_traversal(expr):
+        if not (node.free_symbols & errors):
+            continue
+        names = ", ".join(sorted(str(e) for e in node.free_symbols & errors))
+        arg, bad = None, None
+        if node.is_Pow and not (node.exp.is_Integer and node.exp >= 0):
+            arg = _numeric(node.base, at)
+            if arg is not None and abs(arg) < 1e-300:
+                bad = "divides by" if node.exp.is_negative else f"takes a power {node.exp} of"
+        elif isinstance(node, (sp.asin, sp.acos)):
+            arg = _numeric(node.args[0], at)
+            if arg is not None and abs(abs(arg.real) - 1) < 1e-12:
+                bad = f"takes {node.func.__name__} at ±1 of"
+        elif isinstance(node, sp.tan):
+            arg = _numeric(sp.cos(node.args[0]), at)
+            if arg is not None and abs(arg) < 1e-15:
+                bad = "takes tan at ±90° of"
+        elif isinstance(node, sp.atan2):
+            y, x = (_numeric(a, at) for a in node.args)
+            if y is not None and x is not None and abs(y) < 1e-300 and abs(x) < 1e-300:
+                bad = "takes atan2(0, 0) of"
+        if bad:
+            raise ExpressionError(f"{expr} is not analytic in the errors at zero: it {bad} an expression "
+                                  f"that vanishes with {names}{where}; errors must enter through sums, "
+                                  f"products and smooth functions of them")
 
 
 def _vector(ctx: _Ctx, value, symbols, fld: str, line) -> tuple[sp.Expr, sp.Expr, sp.Expr]:
@@ -319,7 +371,7 @@ def load_machine(path: str) -> Machine:
     top_line = getattr(doc, "line", 1)
     _require_map(ctx, doc, "(top level)", top_line, _TOP, {"name", "symbols", "tool"})
     name = doc["name"]
-    if not isinstance(name, str) or not _NAME.match(name):
+    if not isinstance(name, str) or not NAME.match(name):
         raise ctx.fail(f"machine name must be an identifier (letters, digits, '_'), got {name!r}",
                        line_of(doc, "name"), "name")
     length_unit = doc.get("length_unit", "mm")
@@ -352,6 +404,9 @@ def load_machine(path: str) -> Machine:
         seen[s.name] = s.line
         symbols.append(s)
     table = {s.name: s.sym for s in symbols}
+    ctx.errors = {s.sym for s in symbols if s.role == "error"}
+    ctx.at = {s.sym: sp.Float(s.to_internal(s.default_position if s.role == "axis" else s.nominal or 0.0))
+              for s in symbols}
 
     if ("chain" in doc) == ("loop" in doc):
         both = "loop" in doc
@@ -380,14 +435,9 @@ def load_machine(path: str) -> Machine:
             raise ctx.fail("the tool direction must not be zero", line_of(tool, "direction"), "tool.direction")
         direction = tuple(sp.nsimplify(d / norm) for d in direction)
     machine = Machine(name, str(doc.get("description", "")), path, length_unit, tuple(symbols),
-                      tool_chain, work_chain, point, direction, _read_text(path))
+                      tool_chain, work_chain, point, direction, read_text(path))
     _check_usage(ctx, machine)
     return machine
-
-
-def _read_text(path: str) -> str:
-    with open(path, encoding="utf-8") as f:
-        return f.read()
 
 
 def _check_usage(ctx: _Ctx, machine: Machine) -> None:

@@ -9,11 +9,12 @@ import re
 
 from . import units
 from .errors import ChaincompError
+from .expressions import MAX_LITERAL
 from .machine import Machine, Symbol
 from .varying import MAX_VARYING_ERRORS, Varying, parse_varying
 from .yamlsource import load_yaml
 
-_VALUE = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([^\s\d].*)?$")
+_VALUE = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([^\s\d].*?)?\s*\Z")
 
 
 def parse_value(sym: Symbol, raw) -> float:
@@ -41,7 +42,10 @@ def parse_value(sym: Symbol, raw) -> float:
     if unit.kind != sym.unit.kind:
         raise ValueError(f"unit {unit.name!r} is a {unit.kind} unit but {sym.name} is declared in "
                          f"{sym.unit.name!r} ({sym.unit.kind})")
-    return value * unit.to_internal
+    internal = value * unit.to_internal
+    if not abs(internal) <= MAX_LITERAL:
+        raise ValueError(f"{raw!r} is larger than {MAX_LITERAL:g} {units.INTERNAL[unit.kind]} in magnitude")
+    return internal
 
 
 def load_params(path: str, machine: Machine) -> dict[str, float | Varying]:

@@ -6,6 +6,7 @@ returns dicts and lists that know where each of their entries came from.
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import yaml
@@ -50,8 +51,59 @@ def describe(value) -> str:
     return f"{type(value).__name__} {value!r}"
 
 
+MAX_FILE_BYTES = 16 * 1024 * 1024  # a machine, params, check or tolerance file
+MAX_DEPTH = 64                     # nesting of mappings and lists, aliases expanded
+MAX_EXPANSION = 10                 # nodes after alias expansion, per node written (plus _SLACK)
+_SLACK = 10_000
+
+
 class _Loader(yaml.SafeLoader):
-    pass
+    """SafeLoader that refuses nesting deeper than MAX_DEPTH while it composes (the composer
+    recurses, so a deep document would otherwise end in RecursionError)."""
+
+    _depth = 0
+    nodes = 0
+
+    def compose_node(self, parent, index):
+        self._depth += 1
+        self.nodes += 1
+        try:
+            if self._depth > MAX_DEPTH:
+                raise ChaincompError(f"nested more than {MAX_DEPTH} levels deep", self.name,
+                                     self.peek_event().start_mark.line + 1)
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+
+def _check_expansion(root, written: int, path: str) -> None:
+    """Refuse a document whose aliases expand it far beyond what was written (an alias bomb),
+    or nest it deeper than MAX_DEPTH, before anything is constructed from it."""
+    limit = MAX_EXPANSION * written + _SLACK
+    size: dict[int, int] = {}
+    depth: dict[int, int] = {}
+    stack = [(root, False)]
+    while stack:  # post-order, iterative: aliases can make the expanded tree deep
+        node, done = stack.pop()
+        if id(node) in size:
+            continue
+        children = []
+        if isinstance(node, yaml.SequenceNode):
+            children = node.value
+        elif isinstance(node, yaml.MappingNode):
+            children = [n for pair in node.value for n in pair]
+        if not done:
+            stack.append((node, True))
+            stack.extend((c, False) for c in children if id(c) not in size)
+            continue
+        size[id(node)] = 1 + sum(size[id(c)] for c in children)
+        depth[id(node)] = 1 + max((depth[id(c)] for c in children), default=0)
+        if size[id(node)] > limit:
+            raise ChaincompError(f"aliases expand the document beyond {limit} nodes "
+                                 f"({written} written)", path, node.start_mark.line + 1)
+        if depth[id(node)] > MAX_DEPTH:
+            raise ChaincompError(f"nested more than {MAX_DEPTH} levels deep (aliases expanded)",
+                                 path, node.start_mark.line + 1)
 
 
 def _construct_mapping(loader: _Loader, node: yaml.MappingNode) -> LineDict:
@@ -84,16 +136,27 @@ _Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _constru
 _Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_sequence)
 
 
-def load_yaml(path: str) -> Any:
-    """Parse ``path``; syntax errors become a ChaincompError with file and line."""
+def read_text(path: str, limit: int = MAX_FILE_BYTES) -> str:
+    """The text of an input file: a regular file of at most ``limit`` bytes, UTF-8."""
+    if os.path.exists(path) and not os.path.isfile(path):
+        raise ChaincompError("not a regular file", path)
     try:
-        with open(path, encoding="utf-8") as f:
-            text = f.read()
+        with open(path, "rb") as f:
+            data = f.read(limit + 1)
     except OSError as exc:
         raise ChaincompError(f"cannot read file: {exc.strerror}", path) from None
+    if len(data) > limit:
+        raise ChaincompError(f"larger than {limit // (1024 * 1024)} MiB", path)
+    try:
+        return data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        line = exc.object[:exc.start].count(b"\n") + 1
-        raise ChaincompError(f"not UTF-8 text (byte {exc.object[exc.start]:#04x})", path, line) from None
+        line = data[:exc.start].count(b"\n") + 1
+        raise ChaincompError(f"not UTF-8 text (byte {data[exc.start]:#04x})", path, line) from None
+
+
+def load_yaml(path: str) -> Any:
+    """Parse ``path``; syntax errors become a ChaincompError with file and line."""
+    text = read_text(path)
     try:
         loader = _Loader(text)
     except yaml.reader.ReaderError as exc:
@@ -102,7 +165,11 @@ def load_yaml(path: str) -> Any:
                              path, line) from None
     loader.name = path
     try:
-        return loader.get_single_data()
+        root = loader.get_single_node()
+        if root is None:
+            return None
+        _check_expansion(root, loader.nodes, path)
+        return loader.construct_document(root)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = mark.line + 1 if mark else None
