@@ -19,6 +19,7 @@ from . import budget  # noqa: E402
 VERBS += (budget,)
 from . import simulate_calibration  # noqa: E402
 VERBS += (simulate_calibration,)
+from . import build; VERBS += (build,)  # noqa: E402,E702
 
 
 def build_parser() -> argparse.ArgumentParser:
