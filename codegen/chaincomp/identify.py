@@ -1,11 +1,14 @@
 """Error values from measured tool-tip coordinates: nonlinear least squares on the exact model.
 
 Measurements are a CSV file (see ``read_table``): one row per set-up, one column per axis
-and per measured coordinate. The fit is Gauss-Newton on the exact chain with a central-
-difference Jacobian, evaluated for all rows and all perturbed parameter sets in one
+and per measured coordinate. The fit is Gauss-Newton on the exact chain. Its Jacobian is
+taken by the complex step (the derivative is the imaginary part of the chain evaluated at
+an imaginary error, free of the cancellation that makes a difference quotient of 500 mm
+coordinates lose eight digits and blur the rank), for all rows and all errors in one
 broadcast call. Errors that these set-ups cannot separate (the first-order Jacobian, its
 columns scaled to unit norm, has a null space touching them) stay out of the fit's
-parameter space and are reported, not given a value.
+parameter space and are reported, not given a value; a fit in which no error is left, or
+without the redundancy to estimate its own uncertainty, is refused.
 """
 
 from __future__ import annotations
@@ -21,9 +24,12 @@ from .errors import ChaincompError
 from .machine import Machine
 from .numeric import ExactModel
 from .units import UNITS
+from .yamlsource import read_text
 
-_STEP = 1e-6      # central-difference step, internal units (mm, rad)
+_CSTEP = 1e-20    # complex step, internal units (mm, rad): any tiny value gives the same digits
+_STEP = 1e-6      # central-difference step, where the chain cannot take complex values
 _RANK_TOL = 1e-9  # singular values below this, relative to the largest, are zero
+MAX_ROWS = 20_000  # set-ups in a file or a --setups spec: bounds the fit's memory (rows x errors)
 
 
 @dataclass
@@ -40,28 +46,33 @@ class Table:
         return [c for i, c in enumerate(COMPONENTS) if not np.isnan(self.coords[:, i]).all()]
 
 
+def coordinate_named_axes(machine: Machine) -> list:
+    """Axes named like a measured coordinate (x, y, z): a column of that name would mean both."""
+    return [s for s in machine.axes if s.name in COMPONENTS]
+
+
 def read_table(path: str, machine: Machine, coords_required: bool = True) -> Table:
     """Read a CSV: '#' comments and blank lines skipped; a header naming every axis of the
     machine (values in each axis' declared unit) and any of x, y, z (tool-tip coordinates in
-    the machine's length unit; an empty cell is a coordinate not measured in that row)."""
+    the machine's length unit; an empty cell is a coordinate not measured in that row).
+    Names are matched exactly as spelt: axis X and coordinate x are different columns."""
     axes = [s.name for s in machine.axes]
     length = UNITS[machine.length_unit].to_internal
-    try:
-        with open(path, newline="", encoding="utf-8") as f:
-            text = f.read().splitlines()
-    except OSError as exc:
-        raise ChaincompError(f"cannot read measurements: {exc.strerror}", path) from None
+    text = read_text(path).removeprefix("\ufeff")     # the byte-order mark spreadsheets write
     header, rows, lines = None, [], []
-    for lineno, raw in enumerate(text, 1):
+    for lineno, raw in enumerate(text.split("\n"), 1):
+        raw = raw.rstrip("\r")
         if not raw.strip() or raw.lstrip().startswith("#"):
             continue
         cells = [c.strip() for c in next(csv.reader([raw]))]
         if header is None:
-            header = _header(cells, axes, coords_required, path, lineno)
+            header = _header(cells, machine, coords_required, path, lineno)
             continue
         if len(cells) != len(header):
             raise ChaincompError(f"expected {len(header)} values ({', '.join(header)}), got {len(cells)}",
                                  path, lineno)
+        if len(rows) == MAX_ROWS:
+            raise ChaincompError(f"more than {MAX_ROWS} rows", path, lineno)
         row = {}
         for name, cell in zip(header, cells):
             if cell == "" and name in COMPONENTS:
@@ -86,16 +97,23 @@ def read_table(path: str, machine: Machine, coords_required: bool = True) -> Tab
     return table
 
 
-def _header(cells, axes, coords_required, path, lineno) -> list[str]:
+def _header(cells, machine, coords_required, path, lineno) -> list[str]:
+    axes = [s.name for s in machine.axes]
     header = []
     for cell in cells:
-        name = cell.lower() if cell.lower() in COMPONENTS else cell
-        if name not in axes and name not in COMPONENTS:
+        if cell in axes and cell in COMPONENTS:
+            raise ChaincompError(f"column {cell!r} is ambiguous: it is both the axis {cell} "
+                                 f"({machine.file}:{machine.symbol(cell).line}) and the measured tool-tip "
+                                 f"coordinate {cell}; rename the axis in the machine file", path, lineno, "header")
+        if cell not in axes and cell not in COMPONENTS:
+            near = [n for n in axes + list(COMPONENTS) if n.lower() == cell.lower()]
             raise ChaincompError(f"unknown column {cell!r} (expected the axes {', '.join(axes)} and "
-                                 f"measured coordinates x, y, z)", path, lineno, "header")
-        if name in header:
+                                 f"measured coordinates x, y, z)"
+                                 + (f"; names are case-sensitive: did you mean {near[0]!r}?" if near else ""),
+                                 path, lineno, "header")
+        if cell in header:
             raise ChaincompError(f"column {cell!r} appears twice", path, lineno, "header")
-        header.append(name)
+        header.append(cell)
     for a in axes:
         if a not in header:
             raise ChaincompError(f"missing column for axis {a} (every axis of the machine needs one)",
@@ -150,8 +168,10 @@ class Fit:
     fitted: list[str]                      # errors in the fit (not assumed zero), machine order
     assumed_zero: list[str]
     estimates: dict[str, float]            # identifiable errors, internal units
-    uncertainties: dict[str, float]        # standard uncertainties, internal units (NaN: no redundancy)
+    uncertainties: dict[str, float]        # standard uncertainties, internal units
     unidentifiable: dict[str, str]         # error -> reason
+    suggested_zero: list[str]              # assumed zero as well, these leave every other one identifiable
+    rank: int                              # independent combinations of the errors the data see
     condition: float
     correlations: list[tuple[str, str, float]]
     rms: float                             # rms residual, internal length
@@ -166,48 +186,69 @@ class Fit:
 def identify(machine: Machine, table: Table, assume_zero=(), sigma: float | None = None,
              max_iterations: int = 50, model: ExactModel | None = None) -> Fit:
     """Fit the errors of ``machine`` (all but ``assume_zero``) to the measured tool tips.
-    ``model``: the machine's ExactModel, to reuse its compiled functions across fits."""
+    ``model``: the machine's ExactModel, to reuse its compiled functions across fits.
+    Raises ChaincompError when the data identify no error, leave no redundancy to estimate
+    the uncertainty (without ``sigma``), or give non-finite values."""
     model = model or ExactModel(machine)
     free = [s.name for s in machine.errors if s.name not in assume_zero]
+    if not free:
+        raise ChaincompError("--assume-zero: every error is assumed zero, nothing is left to fit")
     mask = ~np.isnan(table.coords)
     y = table.coords[mask]
     n, m = len(free), int(mask.sum())
-    eye = np.eye(n) * _STEP
+    measured = [c for i, c in enumerate(COMPONENTS) if mask[:, i].any()]
+    data = f"{m} coordinates ({', '.join(measured)}) at {len(table.lines)} set-ups"
 
     def predict(P: np.ndarray) -> np.ndarray:            # (k, n) parameter sets -> (k, m)
         errs = {name: P[:, j:j + 1] for j, name in enumerate(free)}
         return pose_points(machine, model, table.axes, errs)[:, mask]
 
-    def jacobian(p: np.ndarray) -> np.ndarray:
-        f = predict(np.vstack([p + eye, p - eye]))
-        return ((f[:n] - f[n:]) / (2 * _STEP)).T        # (m, n)
+    def jacobian(p: np.ndarray) -> np.ndarray:           # (m, n)
+        try:
+            return predict(p + 1j * _CSTEP * np.eye(n)).imag.T / _CSTEP
+        except TypeError:      # numpy has no complex arctan2: an error inside atan2
+            f = predict(np.vstack([p + _STEP * np.eye(n), p - _STEP * np.eye(n)]))
+            return ((f[:n] - f[n:]) / (2 * _STEP)).T
 
     p = np.zeros(n)
     j0 = jacobian(p)                                      # first-order gains at these set-ups
     scale = np.linalg.norm(j0, axis=0)
     visible = scale > 1e-12 * max(scale.max(initial=0.0), 1e-300)
     unidentifiable = {}
-    measured = [c for i, c in enumerate(COMPONENTS) if mask[:, i].any()]
     for j in np.flatnonzero(~visible):
         unidentifiable[free[j]] = (f"does not move the measured coordinates ({', '.join(measured)}) "
                                    f"at any of these set-ups")
     cols = np.flatnonzero(visible)
     d = np.zeros(n)
     d[cols] = 1.0 / scale[cols]
+    scaled = j0[:, cols] * d[cols]
     s, vt = np.zeros(0), np.zeros((0, 0))
     if len(cols):
-        _, s, vt = np.linalg.svd(j0[:, cols] * d[cols], full_matrices=False)
+        _, s, vt = np.linalg.svd(scaled, full_matrices=False)
     rank = int((s > _RANK_TOL * s[0]).sum()) if len(s) else 0
+    if rank == 0:
+        raise ChaincompError(f"none of the {n} errors fitted moves the {data}: nothing to identify", table.file)
     null = vt[rank:]
     proj = null.T @ null        # projector on the null space: its blocks do not depend on the basis
     for k, j in enumerate(cols):
         if proj[k, k] > 1e-12:
             unidentifiable[free[j]] = _inseparable_reason(machine, free, cols, proj, k, d)
+    ident = [j for j in range(n) if free[j] not in unidentifiable]
+    if not ident:
+        raise ChaincompError(f"no error can be identified from these {data}: they see the {n} errors "
+                             f"fitted only in {rank} combination{'s' if rank > 1 else ''} of several; "
+                             f"measure more coordinates or set-ups, or assume errors zero (--assume-zero)",
+                             table.file)
+    if sigma is None and m <= rank:
+        raise ChaincompError(f"{data} for {rank} independent unknowns leave no redundancy to estimate "
+                             f"the uncertainty from: measure more, or give --sigma", table.file)
+    kept = set(cols[_spanning(scaled, rank)])
+    suggested = [free[j] for j in cols if j not in kept]
     basis = np.zeros((n, rank))                           # p = basis @ z: the identifiable subspace
     basis[cols] = d[cols, None] * vt[:rank].T
 
-    iterations, converged = 0, rank == 0
-    for iterations in range(1, max_iterations + 1 if rank else 1):
+    iterations, converged = 0, False
+    for iterations in range(1, max_iterations + 1):
         r = y - predict(p[None])[0]
         jz = jacobian(p) @ basis
         dz = np.linalg.lstsq(jz, r, rcond=None)[0]
@@ -222,10 +263,9 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma: float | None
     jz = jacobian(p) @ basis
     rss = float(r @ r)
     dof = m - rank
-    var = sigma ** 2 if sigma is not None else (rss / dof if dof > 0 else math.nan)
+    var = sigma ** 2 if sigma is not None else rss / dof
     sv = np.linalg.svd(jz, compute_uv=False)
-    cov = var * basis @ np.linalg.pinv(jz.T @ jz) @ basis.T if rank else np.zeros((n, n))
-    ident = [j for j in range(n) if free[j] not in unidentifiable]
+    cov = var * basis @ np.linalg.pinv(jz.T @ jz) @ basis.T
     std = np.sqrt(np.abs(np.diag(cov)))
     corr = []
     for a_, b_ in ((a, b) for i, a in enumerate(ident) for b in ident[i + 1:]):
@@ -233,11 +273,28 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma: float | None
             c = cov[a_, b_] / (std[a_] * std[b_])
             if abs(c) > 0.9:
                 corr.append((free[a_], free[b_], float(c)))
-    return Fit(machine, free, [s.name for s in machine.errors if s.name in assume_zero],
-               {free[j]: float(p[j]) for j in ident}, {free[j]: float(std[j]) for j in ident},
-               unidentifiable, float(sv[0] / sv[-1]) if rank else math.inf, corr,
-               math.sqrt(rss / m) if m else math.nan, m, len(table.lines), dof, iterations, converged,
-               measured)
+    fit = Fit(machine, free, [s.name for s in machine.errors if s.name in assume_zero],
+              {free[j]: float(p[j]) for j in ident}, {free[j]: float(std[j]) for j in ident},
+              unidentifiable, suggested, rank, float(sv[0] / sv[-1]), corr,
+              math.sqrt(rss / m), m, len(table.lines), dof, iterations, converged, measured)
+    if not all(math.isfinite(v) for v in [*fit.estimates.values(), *fit.uncertainties.values(),
+                                          fit.condition, fit.rms]):
+        raise ChaincompError(f"the fit gave non-finite values from these {data} (coordinates in "
+                             f"{machine.length_unit}? axes in their declared units?)", table.file)
+    return fit
+
+
+def _spanning(a: np.ndarray, rank: int) -> list[int]:
+    """``rank`` columns of ``a`` that span its column space, picked greedily, each time the one
+    least explained by those already picked (QR with column pivoting)."""
+    a = a.copy()
+    picked = []
+    for _ in range(rank):
+        j = int(np.argmax(np.linalg.norm(a, axis=0)))
+        q = a[:, j] / np.linalg.norm(a[:, j])
+        a -= np.outer(q, q @ a)
+        picked.append(j)
+    return picked
 
 
 def _inseparable_reason(machine, free, cols, proj, k, d) -> str:
@@ -251,7 +308,7 @@ def _inseparable_reason(machine, free, cols, proj, k, d) -> str:
              for o, x in pairs]
     return (f"cannot be told apart from {', '.join(o.name for o in others)} at these set-ups: "
             f"a change of 1 {me.unit.name} in {me.name} with {', '.join(parts)} moves no measured "
-            f"coordinate (to first order); assume all but one of them zero to give it a value")
+            f"coordinate (to first order)")
 
 
 # ----------------------------------------------------------------------------- reports
@@ -269,6 +326,7 @@ def to_json(fit: Fit, source: str) -> dict:
         "estimates": {n: {"value": _declared(m, n, v), "uncertainty": _declared(m, n, fit.uncertainties[n]),
                           "unit": m.symbol(n).unit.name} for n, v in fit.estimates.items()},
         "unidentifiable": fit.unidentifiable,
+        "suggested_assume_zero": fit.suggested_zero, "rank": fit.rank,
         "condition_number": fit.condition,
         "correlations": [{"errors": [a, b], "value": c} for a, b, c in fit.correlations],
         "rms_residual": fit.rms / lu, "length_unit": m.length_unit,
@@ -281,6 +339,8 @@ def to_text(fit: Fit, source: str) -> str:
     lu = UNITS[m.length_unit].to_internal
     lines = [f"identify {m.name} from {source}: {fit.observations} coordinates "
              f"({', '.join(fit.measured)}) at {fit.setups} set-ups; {len(fit.fitted)} errors fitted"
+             + (f" (the data see {fit.rank} independent combinations of them)"
+                if fit.rank < len(fit.fitted) else "")
              + (f", assumed zero: {', '.join(fit.assumed_zero)}" if fit.assumed_zero else ""),
              f"{'converged' if fit.converged else 'NOT converged'} after {fit.iterations} Gauss-Newton "
              f"iterations on the exact model; rms residual {fit.rms / lu:.4g} {m.length_unit}; "
@@ -296,6 +356,9 @@ def to_text(fit: Fit, source: str) -> str:
     if fit.unidentifiable:
         lines.append("not identifiable from these set-ups (no value given):")
         lines += [f"  {n}: {why}" for n, why in fit.unidentifiable.items()]
+    if fit.suggested_zero:
+        lines.append("to give every other error a value, assume these zero as well (one choice of many): "
+                     "--assume-zero " + ",".join(fit.assumed_zero + fit.suggested_zero))
     return "\n".join(lines)
 
 

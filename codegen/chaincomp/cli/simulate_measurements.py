@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import itertools
+import math
 import sys
 
 import numpy as np
 
 from ..errors import ChaincompError
-from ..identify import read_table, simulate, write_table
+from ..identify import MAX_ROWS, coordinate_named_axes, read_table, simulate, write_table
 from ..params import load_params, parse_sets
-from .common import add_machine_argument, load
+from .common import add_machine_argument, check_output, load
 from .identify import length
 from .protocol import names
+
+_SPECS = "'auto', 'grid:A,B,...', 'random:N' or a CSV file of set-ups"
 
 
 def add_parser(sub) -> None:
@@ -24,73 +27,114 @@ def add_parser(sub) -> None:
                                    "coordinates (the machine's length unit).")
     add_machine_argument(p)
     p.add_argument("--params", metavar="P.yaml", help="error values (errors not given are zero)")
-    p.add_argument("--setups", default="grid:0,90,180,270", metavar="SPEC",
-                   help="'grid:A,B,...' every rotary axis over these values (other axes at 0, or "
-                        "mid-range, or --set), 'random:N' N set-ups uniform within the axis limits, "
-                        "or a CSV file with a column per axis (default grid:0,90,180,270)")
+    p.add_argument("--setups", default="auto", metavar="SPEC",
+                   help="'auto': every axis at its two limits and mid-range (a rotary axis whose limits "
+                        "span a turn at 0, 90, 180, 270 deg instead), all combinations; 'grid:A,B,...': "
+                        "every rotary axis over these values, other axes at 0 (or mid-range, or --set); "
+                        "'random:N': N set-ups uniform within the axis limits; or a CSV file with a "
+                        "column per axis (default auto)")
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="AXIS=VALUE",
-                   help="value of an axis not on the grid")
+                   help="hold an axis at this value (within its limits) in every set-up")
     p.add_argument("--noise", default="0", metavar="LENGTH",
                    help="standard deviation of the noise on each coordinate, e.g. 1um (default 0)")
     p.add_argument("--measure", default="x,y,z", metavar="X,Y,Z", help="coordinates written (default x,y,z)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("-o", "--output", required=True, metavar="MEAS.csv", help="CSV file to write")
+    p.add_argument("--seed", default="0", help="random seed, a whole number >= 0 (default 0)")
+    p.add_argument("-o", "--output", required=True, metavar="MEAS.csv",
+                   help="CSV file to write (never one of the inputs)")
     p.set_defaults(run=run)
+
+
+def _levels(s) -> list[float]:
+    """auto's values of one axis (internal units): both limits and the middle, or for a rotary
+    axis that can make a turn the four quarter turns (each moved by a turn into the limits)."""
+    lo, hi = s.to_internal(s.limits[0]), s.to_internal(s.limits[1])
+    if s.unit.kind == "angle" and hi - lo >= 2 * math.pi * (1 - 1e-12):
+        return [v if v <= hi else v - 2 * math.pi for v in (0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi)]
+    return [lo, 0.5 * (lo + hi), hi] if hi > lo else [lo]
 
 
 def setups(machine, spec: str, sets: list[str], rng) -> dict[str, np.ndarray]:
     """Axis values (internal units) per set-up."""
     fixed = parse_sets(sets, machine)
-    for name in fixed:
-        if machine.symbol(name).role != "axis":
+    for name, value in fixed.items():
+        s = machine.symbol(name)
+        if s.role != "axis":
             raise ChaincompError(f"--set: {name!r} is not an axis (constants and errors go in --params)")
-    kind, _, arg = spec.partition(":")
-    if kind == "grid" and arg:
+        lo, hi = s.limits
+        if not lo <= s.from_internal(value) <= hi:
+            raise ChaincompError(f"--set {name}: {s.from_internal(value):g} {s.unit.name} is outside the "
+                                 f"axis' limits [{lo:g}, {hi:g}]")
+    free = [s for s in machine.axes if s.name not in fixed]
+    kind, colon, arg = spec.partition(":")
+    levels = None
+    if kind == "auto" and not colon:
+        levels = {s.name: _levels(s) for s in free}
+    elif kind == "grid" and arg:
         try:
             values = [float(v) for v in names(arg)]
         except ValueError:
-            raise ChaincompError(f"--setups: expected grid:A,B,... with numbers, got {spec!r}") from None
-        rotary = [s for s in machine.axes if s.unit.kind == "angle" and s.name not in fixed]
-        lists = []
+            values = []
+        if not values or not all(math.isfinite(v) for v in values):
+            raise ChaincompError(f"--setups: expected grid:A,B,... with finite numbers, got {spec!r}")
+        rotary = [s for s in free if s.unit.kind == "angle"]
+        if not rotary:
+            raise ChaincompError(f"--setups {spec}: a grid turns the rotary axes, and {machine.name} has none "
+                                 f"{'left free of --set ' if fixed else ''}(axes "
+                                 f"{', '.join(s.name for s in machine.axes)}): use auto or random:N")
+        levels = {}
         for s in rotary:
             lo, hi = s.limits
             inside = [v for v in values if lo <= v <= hi]
+            if not inside:
+                raise ChaincompError(f"--setups {spec}: no value within {s.name}'s limits [{lo:g}, {hi:g}]")
             if len(inside) < len(values):
                 print(f"chaincomp simulate-measurements: note: {s.name} values outside [{lo:g}, {hi:g}] "
                       f"left out", file=sys.stderr)
-            lists.append([s.to_internal(v) for v in inside])
-        rows = list(itertools.product(*lists))
-        out = {s.name: np.array([r[i] for r in rows]) for i, s in enumerate(rotary)}
+            levels[s.name] = [s.to_internal(v) for v in inside]
     elif kind == "random" and arg:
-        try:
-            n = int(arg)
-        except ValueError:
-            n = 0
-        if n < 1:
-            raise ChaincompError(f"--setups: expected random:N with N >= 1, got {spec!r}")
-        out = {s.name: s.to_internal(rng.uniform(*s.limits, n)) for s in machine.axes if s.name not in fixed}
+        n = int(arg) if arg.isdigit() else 0
+        if not 1 <= n <= MAX_ROWS:
+            raise ChaincompError(f"--setups: expected random:N with 1 <= N <= {MAX_ROWS}, got {spec!r}")
+        out = {s.name: s.to_internal(rng.uniform(*s.limits, n)) for s in free}
+    elif kind in ("auto", "grid", "random"):
+        raise ChaincompError(f"--setups: expected {_SPECS}, got {spec!r}")
     else:
         out = read_table(spec, machine, coords_required=False).axes
         out = {k: v for k, v in out.items() if k not in fixed}
+    if levels is not None:
+        count = math.prod(len(v) for v in levels.values())
+        if count > MAX_ROWS:
+            raise ChaincompError(f"--setups {spec}: {count} set-ups, more than {MAX_ROWS}: use random:N")
+        rows = list(itertools.product(*levels.values()))
+        out = {name: np.array([r[i] for r in rows]) for i, name in enumerate(levels)}
     count = len(next(iter(out.values()))) if out else 1
     for s in machine.axes:
         if s.name not in out:
-            default = s.to_internal(s.default_position)
-            out[s.name] = np.full(count, fixed.get(s.name, default))
+            out[s.name] = np.full(count, fixed.get(s.name, s.to_internal(s.default_position)))
     return out
 
 
 def run(args) -> int:
     machine = load(args.machine)
+    for s in coordinate_named_axes(machine):
+        raise ChaincompError(f"axis {s.name!r} has the name of the measured coordinate {s.name}: the "
+                             f"measurement file's column {s.name!r} would mean either; rename the axis",
+                             machine.file, s.line, "symbols")
+    is_file = args.setups.partition(":")[0] not in ("auto", "grid", "random")
+    check_output(args.output, args.machine, args.params, args.setups if is_file else None)
     measure = [c.lower() for c in names(args.measure)]
-    for c in measure:
+    for i, c in enumerate(measure):
         if c not in ("x", "y", "z"):
             raise ChaincompError(f"--measure: unknown coordinate {c!r} (expected x, y, z)")
+        if c in measure[:i]:
+            raise ChaincompError(f"--measure: {c!r} named twice")
     if not measure:
         raise ChaincompError("--measure: name at least one coordinate (x, y, z)")
     noise = length(machine, "--noise", args.noise)
+    if not args.seed.isdigit():
+        raise ChaincompError(f"--seed: expected a whole number >= 0, got {args.seed!r}")
     values = load_params(args.params, machine) if args.params else {}
-    rng = np.random.default_rng(args.seed)
+    rng = np.random.default_rng(int(args.seed))
     axes = setups(machine, args.setups, args.sets, rng)
     # simulate at the axis values exactly as written (15 digits, declared units), so that
     # identify, reading them back, evaluates the model at the same angles
