@@ -1,0 +1,163 @@
+"""Models built at run time (design §10): a machine's generated C++ compiled into a shared
+library with one C entry point (``chaincomp_model_library``, runtime's model_library.hpp),
+cached by content hash for chaincompd and replay to ``dlopen``.
+
+The compiler, flags and ABI come from the C++ build's ``model_build.json`` (written by
+runtime/CMakeLists.txt, which also compiles them into the loader), so this module and the
+loader compute the same cache key: the machine file's content, the ABI version, the
+compiler's ``--version`` line and the flags.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+
+from .buildtree import build_dir
+from .emit import fnv1a64, generate, library
+from .errors import ChaincompError
+from .machine import load_machine
+
+
+@dataclass(frozen=True)
+class Toolchain:
+    compiler: str
+    version: str            # first line of `compiler --version`
+    flags: list[str]
+    link_flags: list[str]
+    include_dirs: list[str]
+    abi: int
+
+    def key(self) -> str:
+        """The text the loader's model_toolchain() builds (open_model.cpp), line for line."""
+        return f"chaincomp model abi {self.abi}\n{self.version}\n{' '.join(self.flags)}"
+
+
+def toolchain() -> Toolchain:
+    path = os.path.join(build_dir(), "model_build.json")
+    try:
+        with open(path, encoding="utf-8") as f:
+            cfg = json.load(f)
+    except OSError:
+        raise ChaincompError(f"{path} is missing: configure the C++ build first (tools/setup)") from None
+    compiler = cfg["compiler"]
+    if not os.access(compiler, os.X_OK):
+        raise ChaincompError(f"no C++ compiler ({compiler} is missing): install the Debian package g++ "
+                             f"(apt-get install g++)")
+    proc = subprocess.run([compiler, "--version"], capture_output=True, text=True)
+    if proc.returncode != 0 or not proc.stdout.strip():
+        raise ChaincompError(f"{compiler} --version failed: reinstall the Debian package g++")
+    return Toolchain(compiler, proc.stdout.splitlines()[0].rstrip("\r"), list(cfg["flags"]),
+                     list(cfg["link_flags"]), list(cfg["include_dirs"]), int(cfg["abi"]))
+
+
+def cache_root() -> str:
+    """$XDG_CACHE_HOME/chaincomp (a relative XDG_CACHE_HOME is ignored, as XDG says), else
+    ~/.cache/chaincomp."""
+    xdg = os.environ.get("XDG_CACHE_HOME", "")
+    if xdg.startswith("/"):
+        return os.path.join(xdg, "chaincomp")
+    home = os.environ.get("HOME", "")
+    if not home:
+        raise ChaincompError("neither XDG_CACHE_HOME nor HOME is set: no cache folder for built models")
+    return os.path.join(home, ".cache", "chaincomp")
+
+
+def cache_path(root: str, name: str, source: bytes, key: str) -> str:
+    """ROOT/NAME-HASH-TOOLCHAINHASH/NAME.so, as the loader's model_cache_path()."""
+    return os.path.join(root, f"{name}-{fnv1a64(source):016x}-{fnv1a64(key.encode('utf-8')):016x}", f"{name}.so")
+
+
+def _say(text: str) -> None:
+    print(f"chaincomp build: {text}", file=sys.stderr, flush=True)
+
+
+def build(machine_path: str) -> tuple[str, bool]:
+    """The cached library of the machine file at ``machine_path``, built first when the
+    cache has none. Returns its path and whether it was cached. Concurrent builds of one
+    machine are safe: one compiles (under a lock), the others wait and reuse its result,
+    and a result appears only whole (built in a temporary folder, then renamed)."""
+    try:
+        with open(machine_path, "rb") as f:
+            source = f.read()
+    except OSError as exc:
+        raise ChaincompError(f"{machine_path}: cannot read file ({exc.strerror})") from None
+    machine = load_machine(machine_path)
+    if fnv1a64(machine.source_text.encode("utf-8")) != fnv1a64(source):
+        raise ChaincompError(f"{machine_path}: changed while it was read")
+    tc = toolchain()
+    root = cache_root()
+    path = cache_path(root, machine.name, source, tc.key())
+    if os.path.exists(path):
+        return path, True
+    try:
+        os.makedirs(root, exist_ok=True)
+        lock = open(os.path.dirname(path) + ".lock", "w")
+    except OSError as exc:
+        raise ChaincompError(f"cannot write the model cache {root}: {exc.strerror}") from None
+    with lock:
+        if not _try_lock(lock):
+            _say(f"{machine.name}: another build of this model is running; waiting for it")
+            fcntl.flock(lock, fcntl.LOCK_EX)
+        if os.path.exists(path):
+            return path, True
+        tmp = tempfile.mkdtemp(dir=root, prefix="." + os.path.basename(os.path.dirname(path)) + "-")
+        try:
+            _compile(machine, source, tc, tmp)
+            os.rename(tmp, os.path.dirname(path))  # atomic: the folder appears complete
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+    return path, False
+
+
+def _try_lock(lock) -> bool:
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        return True
+    except BlockingIOError:
+        return False
+
+
+def _compile(machine, source: bytes, tc: Toolchain, folder: str) -> None:
+    name = machine.name
+    _say(f"{name}: no cached model for {os.path.basename(machine.file)} (hash {fnv1a64(source):016x}): "
+         f"generating its C++")
+    start = time.monotonic()
+    files = generate(machine)  # order 2, as the compiled-in models
+    files["library.cpp"] = library(machine, source, tc.key())
+    for fname, text in files.items():
+        with open(os.path.join(folder, fname), "w", encoding="utf-8", newline="\n") as f:
+            f.write(text)
+    generated = time.monotonic() - start
+    _say(f"{name}: generated in {generated:.1f} s; compiling with {tc.compiler} {' '.join(tc.flags)}")
+    cmd = [tc.compiler, *tc.flags, *(f"-I{d}" for d in tc.include_dirs), f"-I{folder}",
+           f"{name}.cpp", "library.cpp", *tc.link_flags, "-o", f"{name}.so"]
+    proc = subprocess.run(cmd, cwd=folder, capture_output=True, text=True)
+    if proc.returncode != 0:
+        lines = proc.stderr.splitlines()
+        first = next((ln for ln in lines if "error" in ln), lines[0] if lines else "no message")
+        raise ChaincompError(f"{tc.compiler} failed on the generated code of {name}: {first}")
+    _say(f"{name}: compiled in {time.monotonic() - start - generated:.1f} s")
+
+
+def copy_to(path: str, folder: str) -> str:
+    """A copy of the library at ``path`` in ``folder`` (for --model on another computer),
+    written under a temporary name and renamed, so a reader never sees half of it."""
+    try:
+        os.makedirs(folder, exist_ok=True)
+        target = os.path.join(folder, os.path.basename(path))
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix="." + os.path.basename(path) + "-")
+        with os.fdopen(fd, "wb") as out, open(path, "rb") as src:
+            shutil.copyfileobj(src, out)
+        os.chmod(tmp, 0o755)
+        os.replace(tmp, target)
+    except OSError as exc:
+        raise ChaincompError(f"-o {folder}: cannot write ({exc.strerror})") from None
+    return target

@@ -1,0 +1,30 @@
+"""``chaincomp build``: a machine's model as a shared library for chaincompd and replay."""
+
+from __future__ import annotations
+
+import sys
+
+from ..build import build, copy_to
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("build", help="compile a machine's model into a shared library (models built at run time)",
+                       description="Generate the machine's C++ and compile it with the C++ build's compiler and "
+                                   "flags into a shared library that chaincompd and chaincomp replay load at "
+                                   "start-up (they build it themselves when needed; this verb does it ahead). "
+                                   "The library is cached by the file's content hash, the ABI version, the "
+                                   "compiler and the flags under $XDG_CACHE_HOME/chaincomp (default "
+                                   "~/.cache/chaincomp); a cached one is reused. Prints the library's path.")
+    p.add_argument("machine", metavar="MACHINE.yaml", help="machine description (any folder)")
+    p.add_argument("-o", "--output", metavar="DIR",
+                   help="also copy the library to DIR/NAME.so (for --model LIB.so on a computer without a "
+                        "compiler)")
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    path, cached = build(args.machine)
+    if cached:
+        print(f"chaincomp build: {args.machine}: cached", file=sys.stderr)
+    print(copy_to(path, args.output) if args.output else path)
+    return 0
