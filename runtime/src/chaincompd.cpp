@@ -25,9 +25,11 @@ std::atomic<bool> g_stop{false};
 void on_signal(int) { g_stop = true; }
 
 const char* kUsage =
-    "usage: chaincompd --machine M.yaml --params P.yaml [--config R.yaml]\n"
+    "usage: chaincompd --machine M.yaml --params P.yaml [--config R.yaml] [--model LIB.so]\n"
     "Subscribes to commanded axis positions over LCM and publishes corrected targets.\n"
-    "  --machine M.yaml  machine description (its model must be compiled in: configs/machines/)\n"
+    "  --machine M.yaml  machine description: its compiled-in model, else one built at start-up\n"
+    "                    (chaincomp build; cached in $XDG_CACHE_HOME/chaincomp)\n"
+    "  --model LIB.so    a model library made by chaincomp build for exactly this machine file\n"
     "  --params P.yaml   error values of the machine (configs/params/)\n"
     "  --config R.yaml   runtime settings (configs/runtime/default.yaml documents every key)\n";
 
@@ -67,15 +69,16 @@ int fail(const std::string& msg) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string machine_path, params_path, config_path;
+  std::string machine_path, params_path, config_path, model_path;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "-h" || a == "--help") {
       std::fputs(kUsage, stdout);
       return 0;
     }
-    if ((a == "--machine" || a == "--params" || a == "--config") && i + 1 < argc) {
-      (a == "--machine" ? machine_path : a == "--params" ? params_path : config_path) = argv[++i];
+    if ((a == "--machine" || a == "--params" || a == "--config" || a == "--model") && i + 1 < argc) {
+      (a == "--machine" ? machine_path : a == "--params" ? params_path : a == "--model" ? model_path : config_path) =
+          argv[++i];
     } else {
       std::fputs(kUsage, stderr);
       return fail("unexpected argument '" + a + "'");
@@ -88,7 +91,7 @@ int main(int argc, char** argv) {
 
   std::string error;
   chaincomp::LoadedModel loaded;
-  if (!chaincomp::load_model(machine_path, params_path, config_path, loaded, error)) return fail(error);
+  if (!chaincomp::load_model(machine_path, model_path, params_path, config_path, loaded, error)) return fail(error);
   const chaincomp::ModelEntry* entry = loaded.entry;
   const chaincomp::DaemonConfig& config = loaded.config;
   void* model = loaded.model;

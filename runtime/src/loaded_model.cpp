@@ -1,11 +1,12 @@
 #include "chaincomp/loaded_model.hpp"
 
+#include "chaincomp/open_model.hpp"
 
 namespace chaincomp {
 
-bool load_model(const std::string& machine_path, const std::string& params_path,
+bool load_model(const std::string& machine_path, const std::string& model_path, const std::string& params_path,
                 const std::string& config_path, LoadedModel& out, std::string& error) {
-  out.entry = open_machine(machine_path, error);
+  out.entry = open_model(machine_path, model_path, error);
   if (out.entry == nullptr) return false;
   const ModelEntry& e = *out.entry;
   if (!load_params(*e.info, params_path, out.params, out.varying, error)) return false;

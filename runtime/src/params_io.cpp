@@ -294,25 +294,35 @@ std::string file_hash_hex(const std::string& path) {
   return hash_hex(fnv1a64(reinterpret_cast<const unsigned char*>(text.data()), text.size()));
 }
 
-const ModelEntry* open_machine(const std::string& path, std::string& error) {
-  std::string text;
+bool read_machine_file(const std::string& path, std::string& text, std::string& name, std::string& error) {
   YAML::Node doc;
-  if (!read_file(path, text, error) || !load_yaml(path, text, doc, error)) return nullptr;
+  if (!read_file(path, text, error) || !load_yaml(path, text, doc, error)) return false;
   if (!doc.IsMap() || !doc["name"] || !doc["name"].IsScalar()) {
     error = path + ": name: missing machine name";
-    return nullptr;
+    return false;
   }
-  const std::string name = doc["name"].as<std::string>();
+  name = doc["name"].as<std::string>();
+  return true;
+}
+
+const ModelEntry* find_compiled_model(const std::string& name, const std::string& text) noexcept {
+  const ModelEntry* entry = find_model(name.c_str());
+  const auto hash = fnv1a64(reinterpret_cast<const unsigned char*>(text.data()), text.size());
+  return entry != nullptr && entry->info->source_hash == hash ? entry : nullptr;
+}
+
+const ModelEntry* open_machine(const std::string& path, std::string& error) {
+  std::string text, name;
+  if (!read_machine_file(path, text, name, error)) return nullptr;
   const ModelEntry* entry = find_model(name.c_str());
   if (entry == nullptr) {
-    error = where(path, doc["name"], "name") + "no compiled model for machine '" + name +
-            "' (models are generated from configs/machines/ at build time: add the file there and rebuild)";
+    error = path + ": name: no compiled model for machine '" + name + "' (build one with chaincomp build)";
     return nullptr;
   }
   const auto hash = fnv1a64(reinterpret_cast<const unsigned char*>(text.data()), text.size());
   if (hash != entry->info->source_hash) {
     error = path + ": the machine file changed since its model was compiled (hash " + hash_hex(hash) +
-            " differs from the compiled " + entry->info->source_file + "); rebuild with tools/setup";
+            " differs from the compiled " + entry->info->source_file + ")";
     return nullptr;
   }
   return entry;

@@ -21,7 +21,7 @@ namespace {
 
 const char* kUsage =
     "usage: chaincomp_replay --machine M.yaml --params P.yaml --in IN.lcmlog [--out OUT.lcmlog]\n"
-    "                        [--csv OUT.csv] [--config R.yaml] [--channel NAME] [--quiet]\n";
+    "                        [--csv OUT.csv] [--config R.yaml] [--channel NAME] [--model LIB.so] [--quiet]\n";
 
 int fail(const std::string& msg) {
   std::fprintf(stderr, "chaincomp replay: error: %s\n", msg.c_str());
@@ -65,14 +65,16 @@ bool same_file(const std::string& a, const std::string& b) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string machine_path, params_path, config_path, in_path, out_path, csv_path, channel = "CHAINCOMP_COMMAND";
+  std::string machine_path, params_path, config_path, in_path, out_path, csv_path, model_path,
+      channel = "CHAINCOMP_COMMAND";
   bool quiet = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     std::string* dst = a == "--machine" ? &machine_path : a == "--params" ? &params_path
                      : a == "--config"  ? &config_path  : a == "--in"     ? &in_path
                      : a == "--out"     ? &out_path     : a == "--csv"    ? &csv_path
-                     : a == "--channel" ? &channel      : nullptr;
+                     : a == "--channel" ? &channel      : a == "--model"  ? &model_path
+                                                        : nullptr;
     if (a == "-h" || a == "--help") {
       std::fputs(kUsage, stdout);
       return 0;
@@ -91,7 +93,7 @@ int main(int argc, char** argv) {
   }
   std::string error;
   chaincomp::LoadedModel loaded;
-  if (!chaincomp::load_model(machine_path, params_path, config_path, loaded, error)) return fail(error);
+  if (!chaincomp::load_model(machine_path, model_path, params_path, config_path, loaded, error)) return fail(error);
   const chaincomp::ModelEntry* entry = loaded.entry;
   const chaincomp::DaemonConfig& config = loaded.config;
   const chaincomp::VaryingErrors& varying = loaded.varying;

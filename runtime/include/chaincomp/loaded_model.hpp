@@ -23,9 +23,10 @@ struct LoadedModel {
   LoadedModel& operator=(const LoadedModel&) = delete;
 };
 
-// Opens the machine's compiled model, loads the params and the runtime config (empty path:
+// Opens the machine's model (open_model.hpp: compiled in, cached or built now, or the library
+// `model_path` when not empty), loads the params and the runtime config (empty path:
 // defaults) and prepares the model. On failure returns false with `error` naming the file.
-bool load_model(const std::string& machine_path, const std::string& params_path,
+bool load_model(const std::string& machine_path, const std::string& model_path, const std::string& params_path,
                 const std::string& config_path, LoadedModel& out, std::string& error);
 
 }  // namespace chaincomp

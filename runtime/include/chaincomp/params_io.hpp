@@ -16,9 +16,18 @@ std::string hash_hex(std::uint64_t hash);
 // The content hash of a file (FNV-1a 64), in hex; empty when it cannot be read.
 std::string file_hash_hex(const std::string& path);
 
-// The compiled model for the machine file at `path`: reads its `name`, finds the model in
-// the registry and checks the file's content hash against the one it was generated from.
-// On failure returns nullptr and sets `error` to a message naming the file.
+// The content of the machine file at `path` and its `name` (parsed as YAML); false with
+// `error` naming the file.
+bool read_machine_file(const std::string& path, std::string& text, std::string& name, std::string& error);
+
+// The compiled-in model of machine `name` when it was generated from exactly `text` (by
+// content hash), else nullptr.
+const ModelEntry* find_compiled_model(const std::string& name, const std::string& text) noexcept;
+
+// The compiled-in model for the machine file at `path`: reads its `name`, finds the model
+// in the registry and checks the file's content hash against the one it was generated from.
+// On failure returns nullptr and sets `error` to a message naming the file. (chaincompd and
+// replay use open_model, which also takes models built at run time: open_model.hpp.)
 const ModelEntry* open_machine(const std::string& path, std::string& error);
 
 // Parameter values (internal units, kParams order) from a params file: nominal values for
