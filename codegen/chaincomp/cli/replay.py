@@ -18,7 +18,9 @@ def add_parser(sub) -> None:
                                    "event, utime, seq, result, commanded, corrected, correction, residuals, "
                                    "flags, status. Rejected records are listed and counted by reason.")
     p.add_argument("input", metavar="IN.lcmlog")
-    p.add_argument("--machine", required=True, metavar="M.yaml")
+    p.add_argument("--machine", required=True, metavar="M.yaml",
+                   help="machine description: its compiled-in model, else one built at start-up (chaincomp build)")
+    p.add_argument("--model", metavar="LIB.so", help="a model library made by chaincomp build for this machine file")
     p.add_argument("--params", required=True, metavar="P.yaml")
     p.add_argument("--config", metavar="R.yaml", help="runtime settings (default: built-in defaults)")
     p.add_argument("-o", "--output", metavar="OUT.lcmlog", help="corrected log")
@@ -32,7 +34,8 @@ def run(args) -> int:
         raise ChaincompError(f"{args.input}: no such log file")
     cmd = [binary("chaincomp_replay"), "--machine", args.machine, "--params", args.params, "--in", args.input,
            "--channel", args.channel]
-    for flag, value in (("--config", args.config), ("--out", args.output), ("--csv", args.csv)):
+    for flag, value in (("--config", args.config), ("--out", args.output), ("--csv", args.csv),
+                        ("--model", args.model)):
         if value:
             cmd += [flag, value]
     return subprocess.run(cmd).returncode
