@@ -241,11 +241,6 @@ def _check_at_nominal(expr: sp.Expr, at: dict, errors: set) -> None:
     one does not have."""
     where = ", ".join(f"{s} = {float(at[s]):g}" for s in sorted(expr.free_symbols, key=str) if s not in errors)
     where = f" ({where}, errors zero)" if where else " (errors zero)"
-    value = _numeric(expr, at)
-    if value is None:
-        raise ExpressionError(f"{expr} is not finite at the nominal values{where}")
-    if abs(value.imag) > 1e-12 * max(1.0, abs(value.real)):
-        raise ExpressionError(f"{expr} is not real at the nominal values{where}")
     for node in sp.preorder_traversal(expr):
         if not (node.free_symbols & errors):
             continue
@@ -271,6 +266,11 @@ def _check_at_nominal(expr: sp.Expr, at: dict, errors: set) -> None:
             raise ExpressionError(f"{expr} is not analytic in the errors at zero: it {bad} an expression "
                                   f"that vanishes with {names}{where}; errors must enter through sums, "
                                   f"products and smooth functions of them")
+    value = _numeric(expr, at)
+    if value is None:
+        raise ExpressionError(f"{expr} is not finite at the nominal values{where}")
+    if abs(value.imag) > 1e-12 * max(1.0, abs(value.real)):
+        raise ExpressionError(f"{expr} is not real at the nominal values{where}")
 
 
 def _vector(ctx: _Ctx, value, symbols, fld: str, line) -> tuple[sp.Expr, sp.Expr, sp.Expr]:
@@ -374,6 +374,9 @@ def load_machine(path: str) -> Machine:
     if not isinstance(name, str) or not NAME.match(name):
         raise ctx.fail(f"machine name must be an identifier (letters, digits, '_'), got {name!r}",
                        line_of(doc, "name"), "name")
+    if name in RESERVED:
+        raise ctx.fail(f"machine name {name!r} is reserved (a C++ or Python word, or a name the generated "
+                       f"code uses)", line_of(doc, "name"), "name")
     length_unit = doc.get("length_unit", "mm")
     if not isinstance(length_unit, str) or length_unit not in units.UNITS or \
             units.UNITS[length_unit].kind != "length":
