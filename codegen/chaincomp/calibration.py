@@ -21,6 +21,7 @@ Shapes (each a random draw from the seed):
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,7 +29,7 @@ import sympy as sp
 
 from .errors import ChaincompError
 from .machine import Machine, Rotation, Translation
-from .varying import Varying
+from .varying import MAX_TABLE_KNOTS, MAX_VARYING_ERRORS, Varying
 
 ARCSEC = math.pi / 648000.0
 # The table's value unit per error kind (values written with 4 decimals: 0.1 nm, 0.0001")
@@ -123,12 +124,16 @@ def _smooth(rng, s: np.ndarray, cycles: tuple[float, float], waves: int = 3, bow
 def simulate(machine: Machine, knots: int, seed: int) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
     """{error: (axis, positions in the axis' declared unit, values in VALUE_UNIT)} for every
     slide's component errors."""
-    if knots < 2:
-        raise ChaincompError(f"--knots must be at least 2, got {knots}")
+    if not 2 <= knots <= MAX_TABLE_KNOTS:   # the loaders' bound (runtime: kMaxTableKnots)
+        raise ChaincompError(f"--knots must be between 2 and {MAX_TABLE_KNOTS}, got {knots}")
     slides = find_slides(machine)
     if not slides:
         raise ChaincompError(f"{machine.name} has no slide followed by an error block (a translation along "
                              "one linear axis, then 'errors: {...}') to tabulate", machine.file)
+    n_tables = sum(len(s.components) for s in slides)
+    if n_tables > MAX_VARYING_ERRORS:
+        raise ChaincompError(f"{machine.name}'s slides have {n_tables} component errors, more tables than a "
+                             f"params file may hold ({MAX_VARYING_ERRORS})", machine.file)
     rng = np.random.default_rng(seed)
     out = {}
     for slide in slides:
@@ -199,8 +204,26 @@ def write(path: str, machine: Machine, tables: dict, constants: dict, header: li
                 raise ChaincompError(f"--base gives {s.name} as a table or polynomial: give constants for the "
                                      "errors that are not tabulated")
             lines.append(f"  {s.name}: {s.from_internal(v):.10g} {s.unit.name}   # {s.meaning}")
+    _write_loadable(path, "\n".join(lines) + "\n", machine)
+
+
+def _write_loadable(path: str, text: str, machine: Machine) -> None:
+    """Write text to path only once the product's own loader reads it back: written beside
+    it first, loaded, then renamed over it (an old file at path stays whole until then)."""
+    from .params import load_params
+    tmp = f"{path}.{os.getpid()}.tmp"
     try:
-        with open(path, "w", encoding="utf-8") as f:
-            f.write("\n".join(lines) + "\n")
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)   # the umask applies, as to open()
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        try:
+            load_params(tmp, machine)
+        except ChaincompError as exc:
+            raise ChaincompError(f"refusing to write a file that would not load back: {exc.message}", path,
+                                 exc.line, exc.field) from None
+        os.replace(tmp, path)
     except OSError as exc:
         raise ChaincompError(f"cannot write: {exc.strerror}", path) from None
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)

@@ -38,7 +38,7 @@ def test_generated_header_names_its_source_and_hash(tmp_path):
 
 def test_generate_bad_input(tmp_path):
     proc = run_cli("generate", machine_path("me220_xz"), "-o", str(tmp_path), "--order", "0", check=False)
-    assert proc.returncode == 2 and "--order must be between 1 and 6, got 0" in proc.stderr
+    assert proc.returncode == 2 and "--order: must be between 1 and 4, got 0" in proc.stderr
     blocker = tmp_path / "file"
     blocker.write_text("")
     proc = run_cli("generate", machine_path("me220_xz"), "-o", str(blocker / "sub"), check=False)

@@ -121,7 +121,7 @@ def test_unwritable_output_exits_2(tmp_path):
     target = tmp_path / "missing" / "r.md"
     proc = run_cli("report", machine_path("angle_head"), "-o", str(target), check=False)
     assert proc.returncode == 2
-    assert proc.stderr.startswith(f"chaincomp report: error: {target}: cannot write the report")
+    assert proc.stderr.startswith(f"chaincomp report: error: -o {target}: folder {target.parent} does not exist")
 
 
 def test_report_appends_the_protocol(tmp_path):

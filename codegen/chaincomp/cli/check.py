@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import json
-
 from ..check import Result, check, load_formulas
-from .common import add_machine_argument, check_order, load
+from .common import add_machine_argument, add_order_argument, load, to_json
 
 
 def add_parser(sub) -> None:
@@ -17,7 +15,7 @@ def add_parser(sub) -> None:
                                    "2 on bad input.")
     add_machine_argument(p)
     p.add_argument("formulas", metavar="FORMULAS.yaml", help="hand-derived formulas (configs/checks/*.yaml)")
-    p.add_argument("--order", type=int, default=1, help="highest total degree in the errors compared (default 1)")
+    add_order_argument(p, 1, "highest total degree in the errors compared")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.set_defaults(run=run)
 
@@ -61,9 +59,9 @@ def as_text(machine, ff, order: int, results: list[Result]) -> str:
 
 def run(args) -> int:
     machine = load(args.machine)
-    order = check_order(args.order)
+    order = args.order
     ff = load_formulas(args.formulas, machine)
     results = check(machine, ff, order, progress=True)
-    print(json.dumps(as_json(machine, ff, order, results), indent=2) if args.json
+    print(to_json(as_json(machine, ff, order, results)) if args.json
           else as_text(machine, ff, order, results))
     return 0 if all(r.equal for r in results) else 1

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import argparse
+import json
+import math
 import os
+import re
 import sys
 
 from ..errors import ChaincompError
@@ -19,12 +23,6 @@ def add_values_arguments(p) -> None:
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="NAME=VALUE",
                    help="set a symbol (axis, constant or error) in its declared unit, or as "
                         "'VALUE UNIT'; repeatable, applied after --params")
-
-
-def check_order(order: int) -> int:
-    if order < 1 or order > 6:
-        raise ChaincompError(f"--order must be between 1 and 6, got {order}")
-    return order
 
 
 def values_for(machine: Machine, params_path: str | None, sets: list[str]) -> tuple[dict, bool]:
@@ -80,3 +78,109 @@ def check_output(output: str | None, *inputs: str | None, option: str = "-o") ->
         raise ChaincompError(f"{option} {output}: is a folder, expected a file name")
     if not os.access(folder, os.W_OK) or (os.path.exists(output) and not os.access(output, os.W_OK)):
         raise ChaincompError(f"{option} {output}: not writable")
+
+
+def check_image(output: str | None, *inputs: str | None, option: str = "-o") -> None:
+    """check_output, and a file type matplotlib can write (it would fail only after the work)."""
+    check_output(output, *inputs, option=option)
+    ext = os.path.splitext(output or "")[1].lower().lstrip(".")
+    if output and ext:
+        from matplotlib.backend_bases import FigureCanvasBase
+        kinds = FigureCanvasBase.get_supported_filetypes()
+        if ext not in kinds:
+            raise ChaincompError(f"{option} {output}: cannot write .{ext} images (use one of "
+                                 f"{', '.join('.' + k for k in sorted(kinds))})")
+
+
+# Option values: argparse `type=` functions, so that every verb refuses a bad value the same
+# way, before any work, in argparse's one line naming the option.
+
+MAX_SEED = 2**32 - 1   # numpy's and Python's seeders both take any value in [0, 2^32)
+
+
+def integer(lo: int, hi: int):
+    """An integer in [lo, hi], written as plain digits (no '1e3', '0x10', '1_000')."""
+    def parse(text: str) -> int:
+        if not re.fullmatch(r"[+-]?[0-9]{1,19}", text.strip()):
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}")
+        value = int(text)
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be between {lo} and {hi}, got {value}")
+        return value
+    return parse
+
+
+def number(lo: float = -math.inf, hi: float = math.inf, above: bool = False):
+    """A finite number in [lo, hi] (in (lo, hi] with above=True): nan and inf refused."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+        if value < lo or value > hi or (above and value == lo):
+            want = (f"above {lo:g}" if above else f"at least {lo:g}") + (f" and at most {hi:g}" if hi < math.inf
+                                                                          else "")
+            raise argparse.ArgumentTypeError(f"must be {want}, got {text!r}")
+        return value
+    return parse
+
+
+seed = integer(0, MAX_SEED)
+
+# Time grows steeply with the order: derive five_axis_ac takes 10 s at order 3, 32 s at 4,
+# 135 s at 5 (2 cores, 2026-12): 4 keeps every verb within a minute.
+MAX_ORDER = 4
+
+
+def add_order_argument(p, default: int, what: str = "highest total degree in the errors") -> None:
+    p.add_argument("--order", type=integer(1, MAX_ORDER), default=default,
+                   help=f"{what} (1 to {MAX_ORDER}, default {default})")
+
+
+def number_list(option: str, text: str) -> list[float]:
+    """'0, 90,180' -> [0.0, 90.0, 180.0]: finite numbers separated by commas, none empty."""
+    out = []
+    for item in (t.strip() for t in text.split(",")):
+        try:
+            value = float(item)
+        except ValueError:
+            raise ChaincompError(f"{option}: expected numbers separated by commas, got {item!r}") from None
+        if not math.isfinite(value):
+            raise ChaincompError(f"{option}: expected finite numbers, got {item!r}")
+        out.append(value)
+    return out
+
+
+def _non_finite(obj, path: str):
+    """The path and value of the first non-finite number in a nest of dicts and lists."""
+    if isinstance(obj, dict):
+        items = ((f"{path}.{k}" if path else str(k), v) for k, v in obj.items())
+    elif isinstance(obj, (list, tuple)):
+        items = ((f"{path}[{i}]", v) for i, v in enumerate(obj))
+    else:
+        try:
+            return None if math.isfinite(obj) else (path, obj)
+        except TypeError:
+            return None   # strings, None, booleans are not numbers that can overflow
+    for p, v in items:
+        found = _non_finite(v, p)
+        if found:
+            return found
+    return None
+
+
+def check_finite(doc) -> None:
+    """Refuse a result holding nan or inf, naming the quantity (e.g. 'error.exact[2]')."""
+    found = _non_finite(doc, "")
+    if found:
+        raise ChaincompError(f"the result {found[0]} is not finite ({found[1]}): the machine's expressions "
+                             "or the values given leave their domain here (e.g. acos of more than 1, a division "
+                             "by zero)")
+
+
+def to_json(doc) -> str:
+    """Valid JSON always: a non-finite number is refused (check_finite), never printed as NaN."""
+    check_finite(doc)
+    return json.dumps(doc, indent=2, allow_nan=False)

@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import json
-
 import sympy as sp
 
 from ..derive import COMPONENTS, Derivation, derive
 from ..machine import Rotation
-from .common import add_machine_argument, check_order, load
+from .common import add_machine_argument, add_order_argument, load, to_json
 
 
 def add_parser(sub) -> None:
@@ -18,7 +16,7 @@ def add_parser(sub) -> None:
                                    "the first-order error gain matrix and the Jacobian of the tool point "
                                    "with respect to the axes.")
     add_machine_argument(p)
-    p.add_argument("--order", type=int, default=1, help="highest total degree in the errors (default 1)")
+    add_order_argument(p, 1)
     p.add_argument("--format", choices=("text", "latex", "json"), default="text", help="output format")
     p.set_defaults(run=run)
 
@@ -66,7 +64,7 @@ def _walk(obj, fn):
 
 def run(args) -> int:
     machine = load(args.machine)
-    d = derive(machine, check_order(args.order), progress=True)
+    d = derive(machine, args.order, progress=True)
     rep = report(d)
     if args.format == "json":
         doc = {"machine": machine.name, "file": machine.file, "order": d.order,
@@ -75,7 +73,7 @@ def run(args) -> int:
                "chain": chain_text(machine),
                "units": {"internal": "mm and rad: every symbol enters the formulas in internal units"}}
         doc.update(_walk(rep, str))
-        print(json.dumps(doc, indent=2))
+        print(to_json(doc))
     elif args.format == "latex":
         print(_latex(machine, rep))
     else:

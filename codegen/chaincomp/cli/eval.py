@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import json
-
 from ..derive import derive
 from ..numeric import ExactModel, TruncatedModel
 from ..units import UNITS
 from ..varying import check_inside, resolve, varying_errors
-from .common import add_machine_argument, add_values_arguments, load, values_for
+from .common import add_machine_argument, add_values_arguments, check_finite, load, to_json, values_for
 
 
 def add_parser(sub) -> None:
@@ -62,7 +60,8 @@ def run(args) -> int:
     values, with_errors = values_for(machine, args.params, args.sets)
     check_inside(values)
     out = evaluate(machine, values, with_errors)
-    print(json.dumps(out, indent=2) if args.json else _text(out))
+    check_finite(out)   # the table too: a NaN tool point is no answer
+    print(to_json(out) if args.json else _text(out))
     return 0
 
 

@@ -8,7 +8,7 @@ import time
 
 from ..emit import generate, registry
 from ..errors import ChaincompError
-from .common import check_order, load
+from .common import add_order_argument, check_output, load
 
 
 def add_parser(sub) -> None:
@@ -18,7 +18,7 @@ def add_parser(sub) -> None:
                                    "compensate, in namespace chaincomp::models::NAME. Output is "
                                    "byte-identical for the same input and sympy version.")
     p.add_argument("machines", nargs="+", metavar="MACHINE.yaml", help="machine descriptions")
-    p.add_argument("--order", type=int, default=2, help="highest error_order<k> function (default 2)")
+    add_order_argument(p, 2, "highest error_order<k> function")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder (created)")
     p.add_argument("--registry", action="store_true",
                    help="also write registry.cpp mapping each machine name to its functions")
@@ -28,12 +28,20 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    order = check_order(args.order)
+    order = args.order
+    if os.path.exists(args.output) and not os.path.isdir(args.output):
+        raise ChaincompError(f"-o {args.output}: exists and is not a folder")
     machines = [load(path) for path in args.machines]
     names = [m.name for m in machines]
     dup = {n for n in names if names.count(n) > 1}
     if dup:
         raise ChaincompError(f"two machine files share the name {sorted(dup)[0]!r}")
+    written = [] if args.registry_only else [f"{n}.{ext}" for n in names for ext in ("hpp", "cpp")]
+    written += ["registry.cpp"] if args.registry or args.registry_only else []
+    for fname in written:   # before anything is written: no machine file is overwritten
+        path = os.path.join(args.output, fname)
+        if os.path.exists(path):
+            check_output(path, *args.machines)
     try:
         os.makedirs(args.output, exist_ok=True)
     except OSError as exc:

@@ -1,9 +1,13 @@
-"""Entry point: dispatches to the verb modules; user errors exit 2 with one clear line."""
+"""Entry point: dispatches to the verb modules; user errors exit 2 with one clear line, and
+anything unexpected exits 3 with one line too (CHAINCOMP_DEBUG=1 shows the traceback)."""
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+
+import numpy as np
 
 from ..errors import ChaincompError
 from . import derive, eval as eval_, generate, testvectors
@@ -22,8 +26,15 @@ VERBS += (simulate_calibration,)
 from . import build; VERBS += (build,)  # noqa: E402,E702
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's errors as one line, like every other error (argparse prints the usage first)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="chaincomp",
         description="Geometric error models of machine tools: derive, evaluate and generate "
                     "compensation code from a machine description.")
@@ -35,7 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 # Options whose values may start with '-' (e.g. --range -60:60), which argparse would
 # otherwise take for an option.
-_SIGNED_VALUE_OPTIONS = ("--range", "--range2")
+_SIGNED_VALUE_OPTIONS = ("--range", "--range2", "--angles")
 
 
 def _join_signed_values(argv: list[str]) -> list[str]:
@@ -48,19 +59,44 @@ def _join_signed_values(argv: list[str]) -> list[str]:
     return out
 
 
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(_join_signed_values(sys.argv[1:] if argv is None else argv))
     try:
-        return args.run(args) or 0
+        args = parser.parse_args(_join_signed_values(sys.argv[1:] if argv is None else argv))
+    except SystemExit as exc:   # --help, or a bad option (already reported in one line)
+        return exc.code if isinstance(exc.code, int) else 0
+    debug = os.environ.get("CHAINCOMP_DEBUG") == "1"
+    try:
+        # numpy's warnings on nan and overflow would print formulas on stderr: the verbs
+        # check their results and name what is not finite instead
+        with np.errstate(all="ignore"):
+            return args.run(args) or 0
     except ChaincompError as exc:
-        print(f"chaincomp {args.verb}: error: {exc}", file=sys.stderr)
+        print(f"chaincomp {args.verb}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"chaincomp {args.verb}: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:
         return 0
+    except (MemoryError, RecursionError) as exc:
+        if debug:
+            raise
+        # numpy's "cannot allocate" is a MemoryError too; both mean an input beyond this machine
+        print(f"chaincomp {args.verb}: error: the input is too large or too deeply nested to process "
+              f"({type(exc).__name__}); give smaller grids, counts or files", file=sys.stderr)
+        return 2
+    except Exception as exc:   # a bug: one line, not a stack, for the user; the stack for developers
+        if debug:
+            raise
+        print(f"chaincomp {args.verb}: internal error: {type(exc).__name__}: {_one_line(exc)} "
+              "(please report this with the command line; CHAINCOMP_DEBUG=1 shows the traceback)",
+              file=sys.stderr)
+        return 3
 
 
 if __name__ == "__main__":

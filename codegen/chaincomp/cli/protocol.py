@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import json
-
 from ..errors import ChaincompError
 from ..params import parse_sets
-from ..protocol import build_protocol, to_json, to_text
-from .common import add_machine_argument, load
+from ..protocol import build_protocol, to_text
+from ..protocol import to_json as protocol_json
+from .common import MAX_ORDER, add_machine_argument, integer, load, number_list, to_json
 
 
 def names(text: str | None) -> list[str]:
@@ -34,7 +33,7 @@ def add_parser(sub) -> None:
                    help="when several errors can be isolated, take these first, in this order")
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="AXIS=VALUE",
                    help="value of a non-rotary axis during the tests (default 0, or mid-range)")
-    p.add_argument("--order", type=int, default=1,
+    p.add_argument("--order", type=integer(1, MAX_ORDER), default=1,
                    help="order of the equations: 1 (the tests are linear in the errors)")
     p.add_argument("--format", choices=("text", "json"), default="text", help="output format")
     p.set_defaults(run=run)
@@ -44,18 +43,10 @@ def run(args) -> int:
     if args.order != 1:
         raise ChaincompError(f"--order {args.order}: protocol equations are first order (--order 1): "
                              f"sums and differences isolate errors only when the equations are linear")
-    angles = []
-    for item in names(args.angles):
-        try:
-            angles.append(float(item))
-        except ValueError:
-            raise ChaincompError(f"--angles: expected numbers separated by commas, got {item!r}") from None
-    if not angles:
-        raise ChaincompError("--angles: give at least one value")
-    angles = list(dict.fromkeys(angles))
+    angles = list(dict.fromkeys(number_list("--angles", args.angles)))
     machine = load(args.machine)
     fixed = {n: machine.symbol(n).from_internal(v) for n, v in parse_sets(args.sets, machine).items()}
     proto = build_protocol(machine, angles, names(",".join(args.assume_zero)), names(args.measure),
                            fixed, names(",".join(args.prefer)))
-    print(json.dumps(to_json(proto), indent=2) if args.format == "json" else to_text(proto))
+    print(to_json(protocol_json(proto)) if args.format == "json" else to_text(proto))
     return 0

@@ -7,7 +7,7 @@ import sys
 from .. import report
 from ..derive import derive
 from ..errors import ChaincompError
-from .common import add_machine_argument, check_order, load
+from .common import add_machine_argument, add_order_argument, check_output, load
 
 
 def add_parser(sub) -> None:
@@ -16,7 +16,7 @@ def add_parser(sub) -> None:
                                    "the error formulas collected by error and axis factor, and the error "
                                    "gain matrix, as Markdown (default) or LaTeX.")
     add_machine_argument(p)
-    p.add_argument("--order", type=int, default=1, help="highest total degree in the errors (default 1)")
+    add_order_argument(p, 1)
     p.add_argument("-o", "--output", metavar="FILE", help="write here (default: standard output)")
     p.add_argument("--format", choices=("markdown", "latex"),
                    help="output format (default: latex for a .tex output, else markdown)")
@@ -28,16 +28,17 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    check_output(args.output, args.machine)
+    if args.assume_zero and not args.protocol:
+        raise ChaincompError("--assume-zero goes with --protocol")
     machine = load(args.machine)
-    d = derive(machine, check_order(args.order), progress=True)
+    d = derive(machine, args.order, progress=True)
     fmt = args.format or ("latex" if (args.output or "").endswith(".tex") else "markdown")
     proto = None
     if args.protocol:
         from ..protocol import build_protocol, to_text
         zero = [n.strip() for item in args.assume_zero for n in item.split(",") if n.strip()]
         proto = to_text(build_protocol(machine, assume_zero=zero))
-    elif args.assume_zero:
-        raise ChaincompError("--assume-zero goes with --protocol")
     text = report.latex(d, proto) if fmt == "latex" else report.markdown(d, proto)
     if not args.output:
         sys.stdout.write(text)

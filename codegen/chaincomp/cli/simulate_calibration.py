@@ -9,8 +9,8 @@ import numpy as np
 
 from .. import calibration
 from ..params import load_params
-from ..varying import INTERPOLATIONS, OUTSIDE
-from .common import add_machine_argument, load
+from ..varying import INTERPOLATIONS, MAX_TABLE_KNOTS, OUTSIDE
+from .common import add_machine_argument, check_output, integer, load, seed
 
 # Plausible sizes of the errors that are not tabulated, without --base (internal units).
 _CONSTANT_SCALE = {"length": 3e-3, "angle": 5 * calibration.ARCSEC, "ratio": 5e-6}
@@ -28,8 +28,9 @@ def add_parser(sub) -> None:
                                    "synthetic.")
     add_machine_argument(p)
     p.add_argument("-o", "--output", required=True, metavar="P.yaml", help="params file to write")
-    p.add_argument("--knots", type=int, default=101, help="points per table, over the axis limits (default 101)")
-    p.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    p.add_argument("--knots", type=integer(2, MAX_TABLE_KNOTS), default=101,
+                   help=f"points per table, over the axis limits (2 to {MAX_TABLE_KNOTS}, default 101)")
+    p.add_argument("--seed", type=seed, default=1, help="random seed (0 to 2^32-1, default 1)")
     p.add_argument("--base", metavar="P.yaml", help="constants for the errors that are not tabulated")
     p.add_argument("--interpolation", default="monotone_cubic", choices=INTERPOLATIONS,
                    help="interpolation written into each table (default monotone_cubic)")
@@ -39,12 +40,13 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    check_output(args.output, args.machine, args.base)
     machine = load(args.machine)
     tables = calibration.simulate(machine, args.knots, args.seed)
     if args.base:
         constants = load_params(args.base, machine)
     else:
-        rng = np.random.default_rng(args.seed + 1)
+        rng = np.random.default_rng((args.seed + 1) % 2**32)
         constants = {s.name: float(np.round(rng.uniform(-1, 1) * _CONSTANT_SCALE[s.unit.kind]
                                             / s.unit.to_internal, 3)) * s.unit.to_internal
                      for s in machine.errors}
