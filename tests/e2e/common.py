@@ -23,13 +23,14 @@ def toolpath(n: int) -> np.ndarray:
                      30 + 10 * np.sin(t), -45 + 40 * np.sin(t)], axis=1)
 
 
-def exact_check(commands: np.ndarray, targets: np.ndarray) -> tuple[float, float]:
+def exact_check(commands: np.ndarray, targets: np.ndarray, machine: str = MACHINE,
+                params: str = PARAMS) -> tuple[float, float]:
     """Largest point (mm) and direction (rad) difference between the actual pose at the
     targets and the nominal pose at the commands, by the independent exact chain."""
-    m = load_machine(MACHINE)
+    m = load_machine(machine)
     exact = ExactModel(m)
     base = m.nominal_values()
-    base.update(load_params(PARAMS, m))
+    base.update(load_params(params, m))
     nominal = {k: (0.0 if m.symbol(k).role == "error" else v) for k, v in base.items()}
     def pose(values, axes):
         v = dict(values)

@@ -28,13 +28,18 @@ def require_namespace() -> None:
         sys.exit("lcm_harness: run through tests/e2e/netns.sh (network namespace only)")
 
 
-def start_daemon(machine: str, params: str, config: str, preload: bool = False) -> subprocess.Popen:
+def start_daemon(machine: str, params: str, config: str, preload: bool = False,
+                 model: str | None = None) -> subprocess.Popen:
+    """chaincompd, once it says ready; the lines of a model build before that are printed."""
     env = dict(os.environ)
     if preload:
         env["LD_PRELOAD"] = os.path.join(BUILD, "runtime", "libchaincomp_alloc_counter.so")
-    proc = subprocess.Popen([os.path.join(BUILD, "bin", "chaincompd"), "--machine", machine, "--params", params,
-                             "--config", config], stderr=subprocess.PIPE, text=True, env=env)
+    cmd = [os.path.join(BUILD, "bin", "chaincompd"), "--machine", machine, "--params", params, "--config", config]
+    proc = subprocess.Popen(cmd + (["--model", model] if model else []), stderr=subprocess.PIPE, text=True, env=env)
     line = proc.stderr.readline()
+    while line.startswith("chaincomp build:"):
+        print(line, end="")
+        line = proc.stderr.readline()
     if "ready" not in line:
         proc.kill()
         raise RuntimeError(f"chaincompd did not start: {line}{proc.stderr.read()}")
