@@ -14,6 +14,8 @@ from .expressions import MAX_LITERAL, NAME, RESERVED, ExpressionError, parse
 from .yamlsource import describe, line_of, load_yaml, read_text
 
 ROLES = ("axis", "constant", "error")
+MAX_SYMBOLS = 256          # declared symbols of one machine
+MAX_CHAIN_ELEMENTS = 256   # elements written in one chain or loop branch
 SENSES = {"right_hand": 1, "left_hand": -1}
 AXES = ("x", "y", "z")
 # The coordinates a rotation about each axis mixes: i' = c·i − s·j, j' = s·i + c·j.
@@ -354,6 +356,8 @@ def _sense(ctx: _Ctx, node, fld: str, default: int | None) -> int:
 def _parse_chain(ctx, node, fld, line, symbols, sense, order) -> tuple[Elementary, ...]:
     if not isinstance(node, list) or not node:
         raise ctx.fail(f"expected a non-empty list of chain elements, got {describe(node)}", line, fld)
+    if len(node) > MAX_CHAIN_ELEMENTS:
+        raise ctx.fail(f"{len(node)} chain elements (at most {MAX_CHAIN_ELEMENTS})", line, fld)
     out: list[Elementary] = []
     for i, el in enumerate(node):
         out.extend(_parse_element(ctx, el, f"{fld}[{i}]", line_of(node, i), symbols, sense, order))
@@ -397,6 +401,8 @@ def load_machine(path: str) -> Machine:
     if not isinstance(raw_symbols, list) or not raw_symbols:
         raise ctx.fail(f"expected a non-empty list of symbols, got {describe(raw_symbols)}",
                        line_of(doc, "symbols"), "symbols")
+    if len(raw_symbols) > MAX_SYMBOLS:
+        raise ctx.fail(f"{len(raw_symbols)} symbols (at most {MAX_SYMBOLS})", line_of(doc, "symbols"), "symbols")
     symbols: list[Symbol] = []
     seen: dict[str, int] = {}
     for i, node in enumerate(raw_symbols):

@@ -309,3 +309,15 @@ def test_huge_integer_nominal(tmp_path):
     text = edit(MACHINE, ("nominal: 50,", "nominal: " + "9" * 401 + ","))
     _cli_refuses(tmp_path, text, "larger than 1e+15", line=line_of(text, "nominal: 999"),
                  field="symbols.Y1.nominal")
+
+
+def test_chain_and_symbol_counts_bounded(tmp_path):
+    from chaincomp.machine import MAX_CHAIN_ELEMENTS, MAX_SYMBOLS
+    T = "  - {translate: [X, Y1, 0], label: component 1 (X slide)}\n"
+    text = edit(MACHINE, (T, T * (MAX_CHAIN_ELEMENTS + 1)))
+    _cli_refuses(tmp_path, text, f"{MAX_CHAIN_ELEMENTS + 4} chain elements (at most {MAX_CHAIN_ELEMENTS})",
+                 line=line_of(text, "chain:"), field="chain")
+    S = "  - {name: tz, role: constant, unit: mm, nominal: 40, meaning: Point z on component 2}\n"
+    extra = "".join(f"  - {{name: k{i}, role: constant, unit: mm, nominal: 1}}\n" for i in range(MAX_SYMBOLS))
+    text = edit(MACHINE, (S, S + extra))
+    _cli_refuses(tmp_path, text, f"at most {MAX_SYMBOLS}", line=line_of(text, "symbols:"), field="symbols")
