@@ -21,6 +21,7 @@ import numpy as np
 
 from .derive import COMPONENTS
 from .errors import ChaincompError
+from .expressions import MAX_LITERAL
 from .machine import Machine
 from .numeric import ExactModel
 from .units import UNITS
@@ -82,8 +83,10 @@ def read_table(path: str, machine: Machine, coords_required: bool = True) -> Tab
                 value = float(cell)
             except ValueError:
                 value = math.nan
-            if not math.isfinite(value):
-                raise ChaincompError(f"expected a number, got {cell!r}", path, lineno, name)
+            if not abs(value) <= MAX_LITERAL:
+                raise ChaincompError(f"expected a number of magnitude at most {MAX_LITERAL:g}, got {cell!r}"
+                                     if math.isfinite(value) else f"expected a number, got {cell!r}",
+                                     path, lineno, name)
             row[name] = value
         rows.append(row)
         lines.append(lineno)
@@ -197,11 +200,16 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma: float | None
     y = table.coords[mask]
     n, m = len(free), int(mask.sum())
     measured = [c for i, c in enumerate(COMPONENTS) if mask[:, i].any()]
-    data = f"{m} coordinates ({', '.join(measured)}) at {len(table.lines)} set-ups"
+    data = f"{_count(m, 'coordinate')} ({', '.join(measured)}) at {_count(len(table.lines), 'set-up')}"
+    nonfinite = ChaincompError(f"the fit went to non-finite values on these {data} (coordinates in "
+                               f"{machine.length_unit}? axes in their declared units?)", table.file)
 
     def predict(P: np.ndarray) -> np.ndarray:            # (k, n) parameter sets -> (k, m)
         errs = {name: P[:, j:j + 1] for j, name in enumerate(free)}
-        return pose_points(machine, model, table.axes, errs)[:, mask]
+        f = pose_points(machine, model, table.axes, errs)[:, mask]
+        if not np.isfinite(f).all():
+            raise nonfinite
+        return f
 
     def jacobian(p: np.ndarray) -> np.ndarray:           # (m, n)
         try:
@@ -236,12 +244,12 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma: float | None
     ident = [j for j in range(n) if free[j] not in unidentifiable]
     if not ident:
         raise ChaincompError(f"no error can be identified from these {data}: they see the {n} errors "
-                             f"fitted only in {rank} combination{'s' if rank > 1 else ''} of several; "
+                             f"fitted only in {_count(rank, 'combination')} of several; "
                              f"measure more coordinates or set-ups, or assume errors zero (--assume-zero)",
                              table.file)
     if sigma is None and m <= rank:
-        raise ChaincompError(f"{data} for {rank} independent unknowns leave no redundancy to estimate "
-                             f"the uncertainty from: measure more, or give --sigma", table.file)
+        raise ChaincompError(f"no redundancy: {data} for {_count(rank, 'independent unknown')}, nothing "
+                             f"left to estimate the uncertainty from; measure more, or give --sigma", table.file)
     kept = set(cols[_spanning(scaled, rank)])
     suggested = [free[j] for j in cols if j not in kept]
     basis = np.zeros((n, rank))                           # p = basis @ z: the identifiable subspace
@@ -279,9 +287,12 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma: float | None
               math.sqrt(rss / m), m, len(table.lines), dof, iterations, converged, measured)
     if not all(math.isfinite(v) for v in [*fit.estimates.values(), *fit.uncertainties.values(),
                                           fit.condition, fit.rms]):
-        raise ChaincompError(f"the fit gave non-finite values from these {data} (coordinates in "
-                             f"{machine.length_unit}? axes in their declared units?)", table.file)
+        raise nonfinite
     return fit
+
+
+def _count(k: int, what: str) -> str:
+    return f"{k} {what}{'' if k == 1 else 's'}"
 
 
 def _spanning(a: np.ndarray, rank: int) -> list[int]:

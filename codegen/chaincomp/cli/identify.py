@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import json
-
 from ..errors import ChaincompError
 from ..identify import identify, params_yaml, read_table, to_json, to_text
 from ..machine import Symbol
 from ..params import parse_value
 from ..protocol import check_errors
 from ..units import UNITS
-from .common import add_machine_argument, check_output, load
+from .common import add_machine_argument, check_output, load, to_json as json_text
 from .protocol import names
 
 
@@ -63,7 +61,7 @@ def run(args) -> int:
         raise ChaincompError(f"the fit did not converge in {fit.iterations} Gauss-Newton iterations "
                              f"(rms residual {fit.rms / UNITS[machine.length_unit].to_internal:.4g} "
                              f"{machine.length_unit}); no values given", args.measurements)
-    print(json.dumps(to_json(fit, args.measurements), indent=2, allow_nan=False) if args.format == "json"
+    print(json_text(to_json(fit, args.measurements)) if args.format == "json"
           else to_text(fit, args.measurements))
     if args.output:
         try:

@@ -11,7 +11,7 @@ import numpy as np
 from ..errors import ChaincompError
 from ..identify import MAX_ROWS, coordinate_named_axes, read_table, simulate, write_table
 from ..params import load_params, parse_sets
-from .common import add_machine_argument, check_output, load
+from .common import add_machine_argument, check_output, load, number_list, seed
 from .identify import length
 from .protocol import names
 
@@ -38,7 +38,7 @@ def add_parser(sub) -> None:
     p.add_argument("--noise", default="0", metavar="LENGTH",
                    help="standard deviation of the noise on each coordinate, e.g. 1um (default 0)")
     p.add_argument("--measure", default="x,y,z", metavar="X,Y,Z", help="coordinates written (default x,y,z)")
-    p.add_argument("--seed", default="0", help="random seed, a whole number >= 0 (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="random seed, 0 to 2^32-1 (default 0)")
     p.add_argument("-o", "--output", required=True, metavar="MEAS.csv",
                    help="CSV file to write (never one of the inputs)")
     p.set_defaults(run=run)
@@ -70,12 +70,7 @@ def setups(machine, spec: str, sets: list[str], rng) -> dict[str, np.ndarray]:
     if kind == "auto" and not colon:
         levels = {s.name: _levels(s) for s in free}
     elif kind == "grid" and arg:
-        try:
-            values = [float(v) for v in names(arg)]
-        except ValueError:
-            values = []
-        if not values or not all(math.isfinite(v) for v in values):
-            raise ChaincompError(f"--setups: expected grid:A,B,... with finite numbers, got {spec!r}")
+        values = number_list("--setups", arg)
         rotary = [s for s in free if s.unit.kind == "angle"]
         if not rotary:
             raise ChaincompError(f"--setups {spec}: a grid turns the rotary axes, and {machine.name} has none "
@@ -131,10 +126,8 @@ def run(args) -> int:
     if not measure:
         raise ChaincompError("--measure: name at least one coordinate (x, y, z)")
     noise = length(machine, "--noise", args.noise)
-    if not args.seed.isdigit():
-        raise ChaincompError(f"--seed: expected a whole number >= 0, got {args.seed!r}")
     values = load_params(args.params, machine) if args.params else {}
-    rng = np.random.default_rng(int(args.seed))
+    rng = np.random.default_rng(args.seed)
     axes = setups(machine, args.setups, args.sets, rng)
     # simulate at the axis values exactly as written (15 digits, declared units), so that
     # identify, reading them back, evaluates the model at the same angles
