@@ -50,7 +50,12 @@ def values_for(machine: Machine, params_path: str | None, sets: list[str]) -> tu
 
 
 def load(path: str) -> Machine:
-    return load_machine(path)
+    """The machine, with chaincomp.lint's warnings on stderr (``chaincomp lint`` shows them too)."""
+    machine = load_machine(path)
+    from ..lint import lint
+    for f in lint(machine):
+        print(f"chaincomp: {f.level}: {machine.file}:{f}", file=sys.stderr)
+    return machine
 
 
 def _same_file(a: str, b: str) -> bool:
@@ -101,7 +106,7 @@ MAX_SEED = 2**32 - 1   # numpy's and Python's seeders both take any value in [0,
 def integer(lo: int, hi: int):
     """An integer in [lo, hi], written as plain digits (no '1e3', '0x10', '1_000')."""
     def parse(text: str) -> int:
-        if not re.fullmatch(r"[+-]?[0-9]{1,19}", text.strip()):
+        if not re.fullmatch(r"[+-]?[0-9]{1,30}", text.strip()):
             raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}")
         value = int(text)
         if not lo <= value <= hi:

@@ -2,14 +2,27 @@
 
 from __future__ import annotations
 
+import argparse
 import sys
 
 import lcm
 
 from ..buildtree import import_lcmtypes
 from ..errors import ChaincompError
-from ..toolpath import toolpath
-from .common import add_machine_argument, load
+from ..toolpath import MAX_SAMPLES, toolpath
+from .common import add_machine_argument, check_output, integer, load, number
+
+
+MAX_CHANNEL = 63           # liblcm: LCM_MAX_CHANNEL_NAME_LENGTH
+MAX_AXES = 8               # lcmt_axis_command.axes, runtime kMaxAxes
+MAX_UTIME = 2**62          # int64 µs, with room for any duration after it
+
+
+def channel(text: str) -> str:
+    if not 1 <= len(text.encode()) <= MAX_CHANNEL or not text.isprintable() or text.strip() != text:
+        raise argparse.ArgumentTypeError(f"expected 1 to {MAX_CHANNEL} printable characters without leading or "
+                                         f"trailing spaces, got {text!r}")
+    return text
 
 
 def add_parser(sub) -> None:
@@ -19,17 +32,24 @@ def add_parser(sub) -> None:
                                    "tool tilted and turning), sampled at --rate.")
     add_machine_argument(p)
     p.add_argument("-o", "--output", required=True, metavar="OUT.lcmlog")
-    p.add_argument("--rate", type=float, default=1000.0, help="samples per second (default 1000)")
-    p.add_argument("--seconds", type=float, default=10.0, help="duration (default 10 s)")
-    p.add_argument("--channel", default="CHAINCOMP_COMMAND", help="channel (default CHAINCOMP_COMMAND)")
-    p.add_argument("--start-utime", type=int, default=1_700_000_000_000_000, help="first timestamp, µs")
+    # timestamps are whole µs: above 1 MHz two samples would share one
+    p.add_argument("--rate", type=number(0, 1e6, above=True), default=1000.0,
+                   help="samples per second (up to 1e6, default 1000)")
+    p.add_argument("--seconds", type=number(0, 1e9, above=True), default=10.0,
+                   help=f"duration (default 10 s; at most {MAX_SAMPLES} samples in all)")
+    p.add_argument("--channel", type=channel, default="CHAINCOMP_COMMAND",
+                   help=f"channel, 1 to {MAX_CHANNEL} characters (default CHAINCOMP_COMMAND)")
+    p.add_argument("--start-utime", type=integer(0, MAX_UTIME), default=1_700_000_000_000_000,
+                   help="first timestamp, µs since 1970 (0 to 2^62)")
     p.set_defaults(run=run)
 
 
 def run(args) -> int:
-    if args.rate <= 0 or args.seconds <= 0:
-        raise ChaincompError("--rate and --seconds must be positive")
+    check_output(args.output, args.machine)
     machine = load(args.machine)
+    if len(machine.axes) > MAX_AXES:
+        raise ChaincompError(f"{machine.name} has {len(machine.axes)} axes; lcmt_axis_command carries {MAX_AXES}",
+                             machine.file)
     types = import_lcmtypes()
     path = toolpath(machine, args.rate, args.seconds)
     try:
