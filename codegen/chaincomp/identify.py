@@ -232,7 +232,7 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma: float | None
     scaled = j0[:, cols] * d[cols]
     s, vt = np.zeros(0), np.zeros((0, 0))
     if len(cols):
-        _, s, vt = np.linalg.svd(scaled, full_matrices=False)
+        _, s, vt = np.linalg.svd(scaled)   # full: with fewer data than errors the null space is wider than vt[rank:m]
     rank = int((s > _RANK_TOL * s[0]).sum()) if len(s) else 0
     if rank == 0:
         raise ChaincompError(f"none of the {n} errors fitted moves the {data}: nothing to identify", table.file)
@@ -243,8 +243,9 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma: float | None
             unidentifiable[free[j]] = _inseparable_reason(machine, free, cols, proj, k, d)
     ident = [j for j in range(n) if free[j] not in unidentifiable]
     if not ident:
-        raise ChaincompError(f"no error can be identified from these {data}: they see the {n} errors "
-                             f"fitted only in {_count(rank, 'combination')} of several; "
+        raise ChaincompError(f"no error can be identified from these {data}: the {n} errors fitted "
+                             f"move them only in {_count(rank, 'combination')} that isolate{'s' if rank == 1 else ''} "
+                             f"none of them; "
                              f"measure more coordinates or set-ups, or assume errors zero (--assume-zero)",
                              table.file)
     if sigma is None and m <= rank:
