@@ -24,6 +24,7 @@ ROT_PLANE = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}
 
 @dataclass(frozen=True)
 class Symbol:
+    """A declared symbol: an axis (commanded), a constant (nominal geometry) or an error (small)."""
     name: str
     role: str                  # "axis" | "constant" | "error"
     unit: units.Unit
@@ -31,6 +32,7 @@ class Symbol:
     nominal: float | None = None               # in the declared unit
     limits: tuple[float, float] | None = None  # in the declared unit
     line: int = 0
+    unobservable: bool = False  # known not to move the tool point or direction (lint stays quiet)
 
     @property
     def sym(self) -> sp.Symbol:
@@ -79,6 +81,7 @@ Elementary = Union[Rotation, Translation]
 
 @dataclass(frozen=True)
 class Machine:
+    """A validated machine description: its symbols, chain (or loop branches) and tool."""
     name: str
     description: str
     file: str
@@ -169,7 +172,7 @@ def _number(ctx: _Ctx, value, fld: str, line) -> float:
 
 def _parse_symbol(ctx: _Ctx, node, i: int, line) -> Symbol:
     fld = f"symbols[{i}]"
-    _require_map(ctx, node, fld, line, {"name", "role", "unit", "meaning", "nominal", "limits"},
+    _require_map(ctx, node, fld, line, {"name", "role", "unit", "meaning", "nominal", "limits", "unobservable"},
                  {"name", "role", "unit"})
     name = node["name"]
     if not isinstance(name, str) or not NAME.match(name):
@@ -215,7 +218,14 @@ def _parse_symbol(ctx: _Ctx, node, i: int, line) -> Symbol:
     if role == "axis" and unit.kind == "ratio":
         raise ctx.fail(f"an axis must have a length or angle unit, not {unit.name!r}",
                        line_of(node, "unit"), f"{fld}.unit")
-    return Symbol(name, role, unit, meaning, nominal, limits, line or 0)
+    unobservable = node.get("unobservable", False)
+    if not isinstance(unobservable, bool):
+        raise ctx.fail(f"expected true or false, got {describe(unobservable)}", line_of(node, "unobservable"),
+                       f"{fld}.unobservable")
+    if unobservable and role != "error":
+        raise ctx.fail("only an error symbol can be marked unobservable", line_of(node, "unobservable"),
+                       f"{fld}.unobservable")
+    return Symbol(name, role, unit, meaning, nominal, limits, line or 0, unobservable)
 
 
 def _expr(ctx: _Ctx, value, symbols, fld: str, line) -> sp.Expr:

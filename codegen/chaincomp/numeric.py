@@ -7,6 +7,7 @@ from __future__ import annotations
 import sympy as sp
 
 from .derive import Derivation
+from .errors import ChaincompError
 from .machine import ROT_PLANE, Machine, Rotation
 from .varying import resolve
 
@@ -23,8 +24,30 @@ def _lib(backend: str):
     return lib
 
 
+def complete(machine: Machine, values: dict) -> dict:
+    """``values`` (internal units: mm, rad) with every symbol the caller left out filled in:
+    constants at their nominal value, errors at zero. Axes must be given; a name the machine
+    does not declare is an error (a misspelt name would otherwise be ignored silently)."""
+    unknown = sorted(set(values) - {s.name for s in machine.symbols})
+    if unknown:
+        raise ChaincompError(f"unknown symbol {unknown[0]!r} for machine {machine.name!r} "
+                             f"(known: {', '.join(s.name for s in machine.symbols)})")
+    out = dict(values)
+    for s in machine.symbols:
+        if s.name in out:
+            continue
+        if s.role == "axis":
+            raise ChaincompError(f"no value for axis {s.name!r} (internal units: "
+                                 f"{'rad' if s.unit.kind == 'angle' else 'mm'})")
+        out[s.name] = 0.0 if s.role == "error" else s.to_internal(s.nominal)
+    return out
+
+
 class ExactModel:
-    """Tool point and direction from the chain, multiplied numerically, no truncation."""
+    """Tool point and direction from the chain, multiplied numerically, no truncation.
+
+    ``values`` map symbol names to internal values (mm, rad; numbers or numpy arrays, which
+    broadcast); constants left out take their nominal value and errors zero."""
 
     def __init__(self, machine: Machine):
         self.machine = machine
@@ -49,7 +72,7 @@ class ExactModel:
         """(point, direction or None) for ``values`` (internal units, every symbol by name)."""
         lib = _lib(backend)
         steps, point_f, dir_f = self._compiled(backend)
-        values = resolve(values)
+        values = resolve(complete(self.machine, values))
         args = [values[s.name] for s in self.machine.symbols]
         p = [f(*args) for f in point_f]
         d = [f(*args) for f in dir_f] if dir_f else None
@@ -66,7 +89,7 @@ class ExactModel:
 
     def error(self, values: dict, backend: str = "numpy"):
         """Exact tool error: pose with the errors minus pose with every error at zero."""
-        values = resolve(values)
+        values = resolve(complete(self.machine, values))
         nominal_values = dict(values)
         for s in self.machine.errors:
             nominal_values[s.name] = 0 * values[s.name]
@@ -78,7 +101,8 @@ class ExactModel:
 
 
 class TruncatedModel:
-    """Order-k error of a derivation as compiled functions of every symbol."""
+    """Order-k error of a derivation as compiled functions of every symbol (values as for
+    ExactModel)."""
 
     def __init__(self, derivation: Derivation):
         self.d = derivation
@@ -95,7 +119,8 @@ class TruncatedModel:
         return self._cache[key]
 
     def error(self, values: dict, order: int, backend: str = "numpy"):
-        values = resolve(values)
+        """(point error, direction error or None) of the order-``order`` truncated model."""
+        values = resolve(complete(self.machine, values))
         args = [values[s.name] for s in self.machine.symbols]
         dp = [f(*args) for f in self._fn("point", order, backend)]
         dd = [f(*args) for f in self._fn("direction", order, backend)] if self.d.direction else None

@@ -24,6 +24,7 @@ VERBS += (budget,)
 from . import simulate_calibration  # noqa: E402
 VERBS += (simulate_calibration,)
 from . import build; VERBS += (build,)  # noqa: E402,E702
+from . import lint; VERBS += (lint,)  # noqa: E402,E702
 
 
 class _Parser(argparse.ArgumentParser):

@@ -1,0 +1,35 @@
+"""``chaincomp lint``: modelling mistakes that load but cannot be meant (chaincomp.lint)."""
+
+from __future__ import annotations
+
+import sys
+
+from ..errors import ChaincompError
+from ..lint import lint
+from ..machine import load_machine
+from .common import add_machine_argument
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("lint", help="check a machine file for modelling mistakes",
+                       description="Load the machine (which refuses outright mistakes: unknown or unused "
+                                   "symbols, expressions not finite, real and analytic in the errors at the "
+                                   "nominal values) and warn about an error symbol or axis that never moves "
+                                   "the tool point or direction. Every verb prints these warnings when it "
+                                   "loads a machine; exit 0 with warnings, 2 with --strict.")
+    add_machine_argument(p)
+    p.add_argument("--strict", action="store_true", help="exit 2 when there is any warning")
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    machine = load_machine(args.machine)
+    findings = lint(machine)
+    for f in findings:
+        print(f"chaincomp lint: {f.level}: {machine.file}:{f}", file=sys.stderr)
+    if findings and args.strict:
+        raise ChaincompError(f"{len(findings)} warning{'s' if len(findings) > 1 else ''} (--strict)",
+                             machine.file)
+    if not findings:
+        print(f"{machine.file}: {machine.name}: no findings")
+    return 0
