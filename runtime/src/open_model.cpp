@@ -1,6 +1,7 @@
 #include "chaincomp/open_model.hpp"
 
 #include <dlfcn.h>
+#include <fcntl.h>
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -48,7 +49,8 @@ bool compiler_version(std::string& line, std::string& error) {
   return true;
 }
 
-// Runs `chaincomp build MACHINE` (stdout to stderr: the program's stdout stays its own).
+// Runs `chaincomp build MACHINE`: its progress on stderr, its stdout (the library's path,
+// which open_model computes itself) discarded.
 bool run_build(const std::string& machine_path, std::string& error) {
   const char* python = CHAINCOMP_MODEL_PYTHON;
   if (access(python, X_OK) != 0) {
@@ -61,7 +63,7 @@ bool run_build(const std::string& machine_path, std::string& error) {
   setenv("CHAINCOMP_BUILD_DIR", CHAINCOMP_MODEL_BUILD_DIR, 1);
   posix_spawn_file_actions_t actions;
   posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_adddup2(&actions, 2, 1);
+  posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
   std::string a0 = python, a1 = "-m", a2 = "chaincomp.cli.main", a3 = "build", a4 = machine_path;
   char* argv[] = {a0.data(), a1.data(), a2.data(), a3.data(), a4.data(), nullptr};
   pid_t pid = 0;
