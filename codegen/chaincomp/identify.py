@@ -232,7 +232,9 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma: float | None
     scaled = j0[:, cols] * d[cols]
     s, vt = np.zeros(0), np.zeros((0, 0))
     if len(cols):
-        _, s, vt = np.linalg.svd(scaled)   # full: with fewer data than errors the null space is wider than vt[rank:m]
+        # with fewer data than errors the reduced vt lacks part of the null space; only then is
+        # the full one needed (and small: U is data x data)
+        _, s, vt = np.linalg.svd(scaled, full_matrices=len(scaled) < len(cols))
     rank = int((s > _RANK_TOL * s[0]).sum()) if len(s) else 0
     if rank == 0:
         raise ChaincompError(f"none of the {n} errors fitted moves the {data}: nothing to identify", table.file)

@@ -9,6 +9,7 @@ import sys
 import numpy as np
 
 from ..errors import ChaincompError
+from ..expressions import MAX_LITERAL
 from ..identify import MAX_ROWS, coordinate_named_axes, read_table, simulate, write_table
 from ..params import load_params, parse_sets
 from .common import add_machine_argument, check_output, load, number_list, seed
@@ -134,6 +135,10 @@ def run(args) -> int:
     axes = {k: machine.symbol(k).to_internal(np.array([float(f"{machine.symbol(k).from_internal(x):.15g}")
                                                         for x in v])) for k, v in axes.items()}
     coords = simulate(machine, values, axes, noise, rng, measure)
+    if not (np.abs(coords[~np.isnan(coords)]) <= MAX_LITERAL).all():
+        raise ChaincompError(f"the simulated coordinates reach beyond {MAX_LITERAL:g} {machine.length_unit} "
+                             f"(or are not finite), which identify would refuse: check --noise and the "
+                             f"values in --params")
     comments = [f"chaincomp simulate-measurements {machine.name}: params {args.params or '(all errors zero)'}, "
                 f"set-ups {args.setups}, noise {args.noise}, seed {args.seed}",
                 f"axes in their declared units; x, y, z: tool tip in {machine.length_unit}"]
