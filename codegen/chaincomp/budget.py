@@ -41,6 +41,9 @@ POSITION = ("dx", "dy", "dz")
 DIRECTION = ("dkx", "dky", "dkz")
 ORDERS = ("1", "2", "exact")
 MAX_POINTS = 2_000_000
+# The exact model holds every error's gain at every point: 1.9 M points x 29 errors took 2 GB
+# (five_axis_ac, 2026-12); 30 M point-errors keep it near 1 GB.
+MAX_POINT_ERRORS = 30_000_000
 MC_CHUNK = 65536
 EXACT_STEP = 1e-6   # FD step (mm or rad) for an error without a tolerance, exact model
 
@@ -81,6 +84,8 @@ class Grid:
 
 
 def make_grid(machine: Machine, over: list[str] | None, points: int, fixed_values: dict) -> Grid:
+    """The grid of the axes ``over`` (default all), ``points`` values each across their limits;
+    the other axes at ``fixed_values`` (internal units) or their default position."""
     names = [a.name for a in machine.axes]
     over = list(over) if over else names
     bad = [n for n in over if n not in names]
@@ -90,9 +95,11 @@ def make_grid(machine: Machine, over: list[str] | None, points: int, fixed_value
     if points < 2:
         raise ChaincompError(f"--grid must be at least 2 points per axis, got {points}")
     total = points ** len(over)
-    if total > MAX_POINTS:
-        raise ChaincompError(f"the grid would hold {points}^{len(over)} = {total} points (limit {MAX_POINTS}): "
-                             f"lower --grid or vary fewer axes with --over")
+    n_errors = max(len(machine.errors), 1)
+    if total > MAX_POINTS or total * n_errors > MAX_POINT_ERRORS:
+        raise ChaincompError(f"the grid would hold {points}^{len(over)} = {total} points x {n_errors} errors (limits "
+                             f"{MAX_POINTS} points, {MAX_POINT_ERRORS} point-errors): lower --grid or vary fewer "
+                             f"axes with --over")
     axes = tuple(machine.symbol(n) for n in over)
     pts = tuple(np.linspace(a.limits[0], a.limits[1], points) for a in axes)
     fixed = {a.name: a.from_internal(fixed_values[a.name]) for a in machine.axes if a.name not in over}

@@ -296,7 +296,7 @@ def test_plot_maps_and_bars(tmp_path):
 
 @pytest.mark.parametrize("args,word", [
     (("--over", "X,Q"), "--over expects"),
-    (("--grid", "1"), "--grid must be"),
+    (("--grid", "1"), "--grid: must be"),
     (("--grid", "400"), "limit"),
     (("--set", "X=10"), "--set X: X is an axis of the grid"),
     (("--samples", "-1"), "--samples"),

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 
 import numpy as np
@@ -11,7 +10,8 @@ from .. import budget as B
 from ..errors import ChaincompError
 from ..tolerances import from_params, load_tolerances
 from ..varying import varying_errors
-from .common import add_machine_argument, add_values_arguments, load, values_for
+from .common import (add_machine_argument, add_values_arguments, check_finite, check_image, integer, load, seed,
+                     to_json, values_for)
 
 MAX_SAMPLES = 2_000_000
 
@@ -30,14 +30,16 @@ def add_parser(sub) -> None:
     p.add_argument("--tolerances", metavar="T.yaml", help="bounds and distributions (configs/tolerances/*.yaml)")
     p.add_argument("--over", metavar="A1,A2,...", help="axes of the grid (default: every axis); the others "
                    "stay at 0 (or mid-range), or --set")
-    p.add_argument("--grid", type=int, default=9, metavar="N", help="points per grid axis, limits included "
-                   "(default 9)")
+    p.add_argument("--grid", type=integer(2, B.MAX_POINTS), default=9, metavar="N",
+                   help=f"points per grid axis, limits included (default 9; at most {B.MAX_POINTS} points and "
+                        f"{B.MAX_POINT_ERRORS} points x errors in all)")
     p.add_argument("--order", default="1", choices=B.ORDERS, help="model of the gains (default 1)")
-    p.add_argument("--samples", type=int, default=10000, metavar="N",
-                   help="Monte Carlo samples of the exact model at each worst point (default 10000; 0: none)")
-    p.add_argument("--seed", type=int, default=1, help="Monte Carlo seed (default 1)")
+    p.add_argument("--samples", type=integer(0, MAX_SAMPLES), default=10000, metavar="N",
+                   help=f"Monte Carlo samples of the exact model at each worst point (default 10000; 0: none; "
+                        f"at most {MAX_SAMPLES})")
+    p.add_argument("--seed", type=seed, default=1, help="Monte Carlo seed (0 to 2^32-1, default 1)")
     p.add_argument("--format", default="text", choices=("text", "json"))
-    p.add_argument("--top", type=int, default=5, metavar="N",
+    p.add_argument("--top", type=integer(0, 10**6), default=5, metavar="N",
                    help="contributors listed per component in text (default 5; 0: all)")
     p.add_argument("--plot", metavar="OUT.png", help="also write worst-case and RSS maps and a bar chart of "
                    "the contributions")
@@ -48,9 +50,8 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    check_image(args.plot, args.machine, args.params, args.tolerances, option="--plot")
     machine = load(args.machine)
-    if not 0 <= args.samples <= MAX_SAMPLES:
-        raise ChaincompError(f"--samples must be between 0 and {MAX_SAMPLES}, got {args.samples}")
     over = [n.strip() for n in args.over.split(",")] if args.over else None
     set_names = {item.partition("=")[0].strip() for item in args.sets}
     values, _ = values_for(machine, args.params, args.sets)
@@ -73,19 +74,32 @@ def run(args) -> int:
         if not tol.items:
             raise ChaincompError("nothing to budget: give --tolerances T.yaml, or error values in --params")
     grid = B.make_grid(machine, over, args.grid, values)
+    pick = _map_axes(grid, args.map)   # the plot's choices checked before the work
+    if args.component and args.component not in B.components(machine):
+        raise ChaincompError(f"--component {args.component}: this machine has no tool direction")
     b = B.compute(machine, values, tol, grid, order=args.order, samples=args.samples, seed=args.seed,
                   centre_on_params=centred)
-    if args.format == "json":
-        print(json.dumps(B.to_json(b), indent=2))
-    else:
-        print(B.to_text(b, args.top))
+    doc = B.to_json(b)
+    check_finite(doc)
+    print(to_json(doc) if args.format == "json" else B.to_text(b, args.top))
     if args.plot:
-        plot(b, args.plot, args.map, args.component)
+        plot(b, args.plot, pick, args.component)
         print(f"budget: wrote {args.plot}", file=sys.stderr)
     return 0
 
 
-def plot(b: B.Budget, output: str, map_axes: str | None, component: str | None) -> None:
+def _map_axes(grid: B.Grid, text: str | None) -> list[str]:
+    """The two grid axes of the maps (--map), or the first two (one on a grid of one axis)."""
+    names = [a.name for a in grid.axes]
+    if not text:
+        return names[:2]
+    pick = [n.strip() for n in text.split(",")]
+    if len(pick) != 2 or pick[0] == pick[1] or any(n not in names for n in pick):
+        raise ChaincompError(f"--map expects two different axes of the grid ({', '.join(names)}), got {text!r}")
+    return pick
+
+
+def plot(b: B.Budget, output: str, pick: list[str], component: str | None) -> None:
     """Worst-case and RSS maps over two grid axes (the largest value over the other grid axes,
     one colour scale for both) and a bar chart of the contributions at the worst point."""
     import matplotlib
@@ -95,17 +109,8 @@ def plot(b: B.Budget, output: str, map_axes: str | None, component: str | None) 
     names = [a.name for a in b.grid.axes]
     if component is None:
         component = max(B.POSITION, key=lambda c: float(b.components[c].worst.max()))
-    if component not in b.components:
-        raise ChaincompError(f"--component {component}: this machine has no tool direction")
     cb = b.components[component]
     scale, unit = B._display(b, component)
-    if map_axes:
-        pick = [n.strip() for n in map_axes.split(",")]
-        if len(pick) != 2 or pick[0] == pick[1] or any(n not in names for n in pick):
-            raise ChaincompError(f"--map expects two different axes of the grid ({', '.join(names)}), "
-                                 f"got {map_axes!r}")
-    else:
-        pick = names[:2]
     two = len(pick) == 2
     fig = plt.figure(figsize=(16 if two else 11, 5.2), dpi=100)
     panels = 3 if two else 2
