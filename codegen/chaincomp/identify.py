@@ -255,7 +255,7 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma: float | None
                              f"left to estimate the uncertainty from; measure more, or give --sigma", table.file)
     kept = set(cols[_spanning(scaled, rank)])
     suggested = [free[j] for j in cols if j not in kept]
-    basis = np.zeros((n, rank))                           # p = basis @ z: the identifiable subspace
+    basis = np.zeros((n, rank))                           # p = basis @ z: the combinations the data see
     basis[cols] = d[cols, None] * vt[:rank].T
 
     iterations, converged = 0, False
