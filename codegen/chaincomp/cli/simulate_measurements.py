@@ -38,7 +38,7 @@ def add_parser(sub) -> None:
                    help="hold an axis at this value (within its limits) in every set-up")
     p.add_argument("--noise", default="0", metavar="LENGTH",
                    help="standard deviation of the noise on each coordinate, e.g. 1um (default 0)")
-    p.add_argument("--measure", default="x,y,z", metavar="X,Y,Z", help="coordinates written (default x,y,z)")
+    p.add_argument("--measure", default="x,y,z", metavar="x,y,z", help="coordinates written (default x,y,z)")
     p.add_argument("--seed", type=seed, default=0, help="random seed, 0 to 2^32-1 (default 0)")
     p.add_argument("-o", "--output", required=True, metavar="MEAS.csv",
                    help="CSV file to write (never one of the inputs)")
