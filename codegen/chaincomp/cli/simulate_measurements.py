@@ -31,7 +31,8 @@ def add_parser(sub) -> None:
     p.add_argument("--setups", default="auto", metavar="SPEC",
                    help="'auto': every axis at its two limits and mid-range (a rotary axis whose limits "
                         "span a turn at 0, 90, 180, 270 deg instead), all combinations; 'grid:A,B,...': "
-                        "every rotary axis over these values, other axes at 0 (or mid-range, or --set); "
+                        "every rotary axis over these values (in its declared unit), other axes at 0 (or "
+                        "mid-range, or --set); "
                         "'random:N': N set-ups uniform within the axis limits; or a CSV file with a "
                         "column per axis (default auto)")
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="AXIS=VALUE",
