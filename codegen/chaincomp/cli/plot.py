@@ -4,6 +4,7 @@ that varies along an axis (a table and its interpolant, or a polynomial)."""
 from __future__ import annotations
 
 import csv
+import math
 import sys
 
 import numpy as np
@@ -12,9 +13,11 @@ from ..derive import derive
 from ..errors import ChaincompError
 from ..numeric import ExactModel, TruncatedModel
 from ..units import UNITS
-from .common import add_values_arguments, load, values_for
+from .common import add_values_arguments, check_image, integer, load, values_for
 
 COMPONENTS = ("dx", "dy", "dz", "dkx", "dky", "dkz", "norm")
+# 1000 x 1000 points: 4-5 s for one model, 39 s for exact minus second (five_axis_ac, 2026-12)
+MAX_GRID = 1000
 MODELS = ("first", "second", "exact", "second-first", "exact-first", "exact-second")
 
 
@@ -35,7 +38,8 @@ def add_parser(sub) -> None:
     p.add_argument("--range", dest="range1", metavar="LO:HI", help="range of the first axis (declared unit; "
                    "default its limits)")
     p.add_argument("--range2", metavar="LO:HI", help="range of the second axis (default: --range, else limits)")
-    p.add_argument("--grid", type=int, default=41, help="points per axis (default 41)")
+    p.add_argument("--grid", type=integer(2, MAX_GRID), default=41,
+                   help=f"points per axis (2 to {MAX_GRID}, default 41)")
     p.add_argument("--model", default="first", choices=MODELS, help="model, or a difference of two")
     p.add_argument("--style", default="heatmap", choices=("heatmap", "surface"))
     p.add_argument("--replay", metavar="REPLAY.csv", help="plot a replay CSV instead of a map")
@@ -51,6 +55,8 @@ def _range(text: str, what: str) -> tuple[float, float]:
         lo, hi = (float(v) for v in text.split(":"))
     except ValueError:
         raise ChaincompError(f"{what} expects LO:HI, got {text!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        raise ChaincompError(f"{what} expects finite numbers LO:HI, got {text!r}")
     if not lo < hi:
         raise ChaincompError(f"{what}: LO must be below HI, got {text!r}")
     return lo, hi
@@ -93,6 +99,7 @@ def _component(dp, dd, component, scale, shape):
 def run(args) -> int:
     import matplotlib
     matplotlib.use("Agg")
+    check_image(args.output, args.machine, args.params, args.replay, args.table)
     if args.replay:
         _plot_replay(args.replay, args.output)
     elif args.table or args.error:
@@ -108,8 +115,6 @@ def run(args) -> int:
 def _plot_map(args) -> None:
     import matplotlib.pyplot as plt
     machine = load(args.machine)
-    if args.grid < 2 or args.grid > 1000:
-        raise ChaincompError(f"--grid must be between 2 and 1000, got {args.grid}")
     names = [a.name for a in machine.axes]
     over = tuple(args.over.split(",")) if args.over else tuple(names[:2])
     if len(over) != 2 or over[0] == over[1] or any(n not in names for n in over):
@@ -120,6 +125,11 @@ def _plot_map(args) -> None:
         _range(args.range1, "--range") if args.range1 else machine.symbol(over[1]).limits)
     values, _ = values_for(machine, args.params, args.sets)
     g1, g2, z = error_grid(machine, values, over, (r1, r2), args.grid, args.component, args.model)
+    bad = np.argwhere(~np.isfinite(z))
+    if len(bad):
+        i, j = bad[0]
+        raise ChaincompError(f"{args.component} is not finite at {over[0]} = {g1[i]:g}, {over[1]} = {g2[j]:g}: the "
+                             "machine's expressions or the values given leave their domain there")
     unit = "" if args.component.startswith("dk") else machine.length_unit
     if unit == "mm":
         z, unit = z * 1000.0, "µm"
@@ -146,35 +156,71 @@ def _plot_map(args) -> None:
 
 def _plot_replay(path: str, output: str) -> None:
     import matplotlib.pyplot as plt
-    try:
-        with open(path, newline="", encoding="utf-8") as f:
-            rows = list(csv.DictReader(f))
-    except OSError as exc:
-        raise ChaincompError(f"{path}: cannot read: {exc.strerror}") from None
-    ok = [r for r in rows if r.get("result") == "ok"]
-    if not ok:
-        raise ChaincompError(f"{path}: no corrected records to plot (is it a 'chaincomp replay' CSV?)")
-    t = np.array([float(r["utime"]) for r in ok])
+    rows, cols = _read_replay_csv(path)
+    ok = cols.pop("ok")
+    t = cols.pop("utime")
     t = (t - t[0]) * 1e-6
-    axes = [c[len("commanded_"):] for c in ok[0] if c.startswith("commanded_")]
+    residual = cols.pop("residual_point_mm")
+    axes = [c[len("commanded_"):] for c in cols if c.startswith("commanded_")]
     fig, (top, mid, bottom) = plt.subplots(3, 1, figsize=(9, 8), dpi=100, sharex=True)
     for a in axes:
-        top.plot(t, [float(r["commanded_" + a]) for r in ok], label=a)
-        corr = np.array([float(r["correction_" + a]) for r in ok])
+        top.plot(t, cols["commanded_" + a], label=a)
         unit = a.rsplit("_", 1)[-1]
-        mid.plot(t, corr * (1000.0 if unit == "mm" else 3600.0),
+        mid.plot(t, cols["correction_" + a] * (1000.0 if unit == "mm" else 3600.0),
                  label=f"{a.rsplit('_', 1)[0]} [{'µm' if unit == 'mm' else 'arcsec'}]")
-    bottom.plot(t, [float(r["residual_point_mm"]) * 1e6 for r in ok])
+    bottom.plot(t, residual * 1e6)
     top.set_ylabel("commanded")
     mid.set_ylabel("correction")
     bottom.set_ylabel("residual [nm]")
     bottom.set_xlabel("time [s]")
     top.legend(loc="upper right", fontsize="small")
     mid.legend(loc="upper right", fontsize="small")
-    top.set_title(f"replay of {path}: {len(ok)} corrected, {len(rows) - len(ok)} rejected")
+    top.set_title(f"replay of {path}: {ok} corrected, {rows - ok} rejected")
     fig.tight_layout()
     fig.savefig(output)
     plt.close(fig)
+
+
+def _read_replay_csv(path: str) -> tuple[int, dict[str, np.ndarray]]:
+    """(rows, {"ok": count, column: values of the corrected records}) of a replay CSV: utime,
+    residual_point_mm and every commanded_/correction_ column, each cell a finite number."""
+    def fail(message: str, line: int | None = None, field: str | None = None):
+        raise ChaincompError(message, path, line, field)
+
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            reader = csv.DictReader(f)
+            names = reader.fieldnames or []
+            wanted = ["utime", "residual_point_mm"] + [c for c in names if c.startswith(("commanded_", "correction_"))]
+            missing = [c for c in ("result", "utime", "residual_point_mm") if c not in names]
+            if missing or not any(c.startswith("commanded_") for c in names):
+                fail(f"not a 'chaincomp replay' CSV: no {(missing or ['commanded_*'])[0]} column", 1)
+            out: dict[str, list[float]] = {c: [] for c in wanted}
+            rows = 0
+            for row in reader:
+                rows += 1
+                if row.get("result") != "ok":
+                    continue
+                for c in wanted:
+                    cell = row.get(c)
+                    try:
+                        value = float(cell)
+                    except (TypeError, ValueError):
+                        fail(f"expected a number, got {cell!r}", reader.line_num, c)
+                    if not math.isfinite(value):
+                        fail(f"expected a finite number, got {cell!r}", reader.line_num, c)
+                    out[c].append(value)
+    except OSError as exc:
+        fail(f"cannot read: {exc.strerror}")
+    except UnicodeDecodeError as exc:
+        fail(f"not UTF-8 text (byte 0x{exc.object[exc.start]:02x})")
+    except csv.Error as exc:
+        fail(f"not a CSV file: {exc}")
+    if not out["utime"]:
+        fail("no corrected records to plot (is it a 'chaincomp replay' CSV?)")
+    cols = {c: np.array(v) for c, v in out.items()}
+    cols["ok"] = len(out["utime"])
+    return rows, cols
 
 
 def _plot_table(args) -> None:
