@@ -108,10 +108,17 @@ def build(machine_path: str) -> tuple[str, bool]:
             fcntl.flock(lock, fcntl.LOCK_EX)
         if os.path.exists(path):
             return path, True
-        tmp = tempfile.mkdtemp(dir=root, prefix="." + os.path.basename(os.path.dirname(path)) + "-")
+        folder = os.path.dirname(path)
+        try:
+            tmp = tempfile.mkdtemp(dir=root, prefix="." + os.path.basename(folder) + "-")
+        except OSError as exc:
+            raise ChaincompError(f"cannot write the model cache {root}: {exc.strerror}") from None
         try:
             _compile(machine, source, tc, tmp)
-            os.rename(tmp, os.path.dirname(path))  # atomic: the folder appears complete
+            shutil.rmtree(folder, ignore_errors=True)  # a folder whose library was deleted by hand
+            os.rename(tmp, folder)  # atomic: the folder appears complete
+        except OSError as exc:
+            raise ChaincompError(f"cannot write the model cache {root}: {exc.strerror}") from None
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
     return path, False

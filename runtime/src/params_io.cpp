@@ -322,7 +322,8 @@ const ModelEntry* open_machine(const std::string& path, std::string& error) {
   const auto hash = fnv1a64(reinterpret_cast<const unsigned char*>(text.data()), text.size());
   if (hash != entry->info->source_hash) {
     error = path + ": the machine file changed since its model was compiled (hash " + hash_hex(hash) +
-            " differs from the compiled " + entry->info->source_file + ")";
+            " differs from the compiled " + entry->info->source_file +
+            "): rebuild with tools/setup, or build its model at run time with chaincomp build";
     return nullptr;
   }
   return entry;
