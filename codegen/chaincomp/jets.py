@@ -46,13 +46,13 @@ def _lin(a: dict, ca, b: dict, cb) -> dict:
 def _sin_cos(delta: dict, k: int) -> tuple[dict, dict]:
     """sin and cos of a jet without constant term, to order k."""
     s: dict = {}
-    c: dict = {(): 1.0}
-    power: dict = {(): 1.0}
+    c: dict = {(): 1}
+    power: dict = {(): 1}   # exact integers: the same code runs on sympy expressions
     for j in range(1, k + 1):
         power = _mul(power, delta, k)
         if not power:
             break
-        sign = -1.0 if (j // 2) % 2 else 1.0
+        sign = -1 if (j // 2) % 2 else 1
         target = s if j % 2 else c
         for m, v in power.items():
             term = sign * v / math.factorial(j)
@@ -103,9 +103,37 @@ class JetModel:
 
     def jets(self, values: dict, backend: str = "numpy") -> tuple[list[dict], list[dict] | None]:
         """The jets of the tool point and direction (3 each) at the large values given."""
-        lib = _lib(backend)
         values = resolve(complete(self.machine, values))
         coeff = self._fn(backend)(*[values[n] for n in self._large])
+        return self._propagate(coeff, _lib(backend), lambda jet: jet)
+
+    def symbolic(self) -> tuple[list[tuple[sp.Symbol, sp.Expr]], list[dict], list[dict] | None]:
+        """The same propagation on sympy expressions, as straight-line code: (definitions of
+        temporaries in order, point jets, direction jets), every coefficient an expression in
+        the large symbols and earlier temporaries. Binding each element's results to
+        temporaries keeps every expression small and the code linear in the chain (nesting
+        them instead would share subtrees 2^rotations times)."""
+        defs: list[tuple[sp.Symbol, sp.Expr]] = []
+        names = sp.numbered_symbols("_j")
+
+        def bind(jet: dict) -> dict:
+            out = {}
+            for m, v in jet.items():
+                v = sp.expand(v) if v.is_Add or v.is_Mul else v
+                if v == 0:
+                    continue
+                if v.is_Atom or (v.is_Mul and len(v.args) == 2 and v.args[0].is_Number and v.args[1].is_Atom):
+                    out[m] = v
+                else:
+                    t = next(names)
+                    defs.append((t, v))
+                    out[m] = t
+            return out
+
+        p, d = self._propagate(list(self._exprs), sp, bind)
+        return defs, p, d
+
+    def _propagate(self, coeff: list, lib, bind) -> tuple[list[dict], list[dict] | None]:
         k = self.order
 
         def jet(part):
@@ -118,24 +146,26 @@ class JetModel:
                 for c, part in enumerate(parts):
                     for m, i in part:
                         p[c][m] = p[c][m] + coeff[i] if m in p[c] else coeff[i]
+                p = [bind(v) for v in p]
                 continue
             angle = jet(parts[0])
-            theta0 = angle.pop((), 0.0)
+            theta0 = angle.pop((), 0)
             c0, s0 = lib.cos(theta0), lib.sin(theta0)
             if angle:
                 s_d, c_d = _sin_cos(angle, k)
-                cos_t = _lin(c_d, c0, s_d, -s0)
-                sin_t = _lin(c_d, s0, s_d, c0)
+                cos_t = bind(_lin(c_d, c0, s_d, -s0))
+                sin_t = bind(_lin(c_d, s0, s_d, c0))
             else:
                 cos_t, sin_t = {(): c0}, {(): s0}
             i, j = ROT_PLANE[axis]
             for vec in (p, d) if d else (p,):
                 vi, vj = vec[i], vec[j]
-                if len(cos_t) == 1:  # a rotation by a large angle only: no products of jets
-                    vec[i], vec[j] = _lin(vi, c0, vj, -s0), _lin(vi, s0, vj, c0)
+                if set(cos_t) <= {()} and set(sin_t) <= {()}:  # by a large angle only: no jet products
+                    c, s = cos_t.get((), 0), sin_t.get((), 0)
+                    vec[i], vec[j] = bind(_lin(vi, c, vj, -s)), bind(_lin(vi, s, vj, c))
                 else:
-                    vec[i] = _lin(_mul(cos_t, vi, k), 1.0, _mul(sin_t, vj, k), -1.0)
-                    vec[j] = _lin(_mul(sin_t, vi, k), 1.0, _mul(cos_t, vj, k), 1.0)
+                    vec[i] = bind(_lin(_mul(cos_t, vi, k), 1, _mul(sin_t, vj, k), -1))
+                    vec[j] = bind(_lin(_mul(sin_t, vi, k), 1, _mul(cos_t, vj, k), 1))
         return p, d
 
     def _at_errors(self, jet: dict, eps: list, order: int):
