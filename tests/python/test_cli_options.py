@@ -82,8 +82,8 @@ CASES = (
     + _opt(["protocol"] + AH, "--angles", ["nan,inf", "1e400", "", "0,,90", "0,x", "1000",
                                            ",".join(str(a) for a in range(0, 360, 10))])
     + _opt(["protocol"] + AH, "--order", ["0", "2", "nan"])
-    + _opt(["protocol"] + AH, "--measure", ["", "w"])
-    + _opt(["protocol"] + AH, "--assume-zero", ["NOPE", "Ap"])
+    + _opt(["protocol"] + AH, "--measure", ["", "w", "x,,y"])
+    + _opt(["protocol"] + AH, "--assume-zero", ["NOPE", "Ap", "ThetaAs,"])
     + _opt(["protocol"] + AH, "--prefer", ["NOPE"])
     + _opt(["protocol"] + AH, "--set", ["Ap=10", "Q=1"])
     # eval

@@ -9,9 +9,15 @@ from ..protocol import to_json as protocol_json
 from .common import MAX_ORDER, add_machine_argument, integer, load, number_list, to_json
 
 
-def names(text: str | None) -> list[str]:
-    """'A, B,C' -> ['A', 'B', 'C']; repeated options arrive joined by commas."""
-    return [t.strip() for t in (text or "").split(",") if t.strip()]
+def names(text: str | None, option: str = "list") -> list[str]:
+    """'A, B,C' -> ['A', 'B', 'C']; repeated options arrive joined by commas; an empty name
+    ('A,,B', 'A,') is refused: it is a typo, not a request."""
+    if not text:
+        return []
+    out = [t.strip() for t in text.split(",")]
+    if not all(out):
+        raise ChaincompError(f"{option}: empty name in {text!r}")
+    return out
 
 
 def add_parser(sub) -> None:
@@ -46,7 +52,7 @@ def run(args) -> int:
     angles = list(dict.fromkeys(number_list("--angles", args.angles)))
     machine = load(args.machine)
     fixed = {n: machine.symbol(n).from_internal(v) for n, v in parse_sets(args.sets, machine).items()}
-    proto = build_protocol(machine, angles, names(",".join(args.assume_zero)), names(args.measure),
-                           fixed, names(",".join(args.prefer)))
+    proto = build_protocol(machine, angles, names(",".join(args.assume_zero), "--assume-zero"),
+                           names(args.measure, "--measure"), fixed, names(",".join(args.prefer), "--prefer"))
     print(to_json(protocol_json(proto)) if args.format == "json" else to_text(proto))
     return 0
