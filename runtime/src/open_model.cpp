@@ -64,8 +64,9 @@ bool run_build(const std::string& machine_path, std::string& error) {
   posix_spawn_file_actions_t actions;
   posix_spawn_file_actions_init(&actions);
   posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
-  std::string a0 = python, a1 = "-m", a2 = "chaincomp.cli.main", a3 = "build", a4 = machine_path;
-  char* argv[] = {a0.data(), a1.data(), a2.data(), a3.data(), a4.data(), nullptr};
+  // "--": a machine path may start with '-'
+  std::string a0 = python, a1 = "-m", a2 = "chaincomp.cli.main", a3 = "build", a4 = "--", a5 = machine_path;
+  char* argv[] = {a0.data(), a1.data(), a2.data(), a3.data(), a4.data(), a5.data(), nullptr};
   pid_t pid = 0;
   const int rc = posix_spawn(&pid, python, &actions, nullptr, argv, environ);
   posix_spawn_file_actions_destroy(&actions);
