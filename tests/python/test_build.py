@@ -3,6 +3,7 @@ its temporary folder (never under configs/), built into a shared library, loaded
 and replay; a stale, foreign or wrong-ABI library is refused with one line, never used."""
 
 import ctypes
+import json
 import os
 import re
 import shutil
@@ -139,8 +140,9 @@ def test_cached_build_is_reused_and_copied(built, tmp_path):
 
 def test_no_compiler_names_the_debian_package(built, tmp_path):
     with open(os.path.join(ROOT, "build", "model_build.json")) as f:
-        cfg = f.read()
-    (tmp_path / "model_build.json").write_text(cfg.replace('"compiler": "', '"compiler": "/nonexistent', 1))
+        cfg = json.load(f)
+    cfg["compiler"] = "/nonexistent/usr/bin/c++"
+    (tmp_path / "model_build.json").write_text(json.dumps(cfg))
     env = dict(built["env"], CHAINCOMP_BUILD_DIR=str(tmp_path), XDG_CACHE_HOME=str(tmp_path / "cache"))
     proc = chaincomp(env, "build", built["machine"])
     assert proc.returncode == 2
