@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import sympy as sp
 
-from .derive import COMPONENTS, Derivation
+from .derive import COMPONENTS, Derivation, Progress
 from .machine import Machine, Rotation
 
 _SENSE_NOTE = ("Sign: the sign with which the symbol enters a rotation of the chain, rotations "
@@ -135,8 +135,9 @@ def _gain(d: Derivation) -> tuple[list[str], list[tuple[str, list[sp.Expr]]]]:
     return columns, rows
 
 
-def markdown(d: Derivation, protocol: str | None = None) -> str:
+def markdown(d: Derivation, protocol: str | None = None, progress: bool = False) -> str:
     m = d.machine
+    prog = Progress(f"report {m.name}", progress)   # high orders: a minute of grouping terms
     small, axes = d.small, {s.sym for s in m.axes}
     out = [f"# {m.name}: geometric error model", "", m.description, "",
            f"Derived by chaincomp from `{m.file}` to order {d.order} in the errors. Every symbol enters "
@@ -151,6 +152,7 @@ def markdown(d: Derivation, protocol: str | None = None) -> str:
     out += ["```", f"tool point = {factors} · ({point})", "```"]
     section = None
     for title, name, expr in _formulas(d):
+        prog.step(f"{title.lower()}: {name}")
         if title != section:
             if section is not None:
                 out.append("```")
@@ -166,6 +168,7 @@ def markdown(d: Derivation, protocol: str | None = None) -> str:
     for name, row in rows:
         cells = [f"`{_one_line(_lines(grouped(e, small, axes), _text))}`" if e != 0 else "0" for e in row]
         out.append(f"| {name} | " + " | ".join(cells) + " |")
+    prog.done()
     if protocol:
         out += ["", "## Measurement protocol", "", "```", protocol.rstrip(), "```"]
     return "\n".join(out) + "\n"
@@ -180,8 +183,9 @@ def _tex_escape(s: str) -> str:
     return "".join(_TEX.get(ch, ch) for ch in s)
 
 
-def latex(d: Derivation, protocol: str | None = None) -> str:
+def latex(d: Derivation, protocol: str | None = None, progress: bool = False) -> str:
     m = d.machine
+    prog = Progress(f"report {m.name}", progress)   # high orders: a minute of grouping terms
     small, axes = d.small, {s.sym for s in m.axes}
     names = {s.sym: r"\mathit{" + s.name.replace("_", r"\_") + "}" for s in m.symbols}
 
@@ -215,6 +219,7 @@ def latex(d: Derivation, protocol: str | None = None) -> str:
     out += [r"\begin{align*}", r"\text{tool point} &= " + r" \\ &\quad \cdot ".join(rows), r"\end{align*}"]
     section = None
     for title, name, expr in _formulas(d):
+        prog.step(f"{title.lower()}: {name}")
         if title != section:
             if section is not None:
                 out.append(r"\end{align*}")
@@ -230,6 +235,7 @@ def latex(d: Derivation, protocol: str | None = None) -> str:
                 comp = r"\delta " + (f"k_{c[-1]}" if c.startswith("dk") else c[-1])
                 out += block(rf"\partial\, {comp} / \partial {names[m.symbol(name).sym]}", e)
     out.append(r"\end{align*}")
+    prog.done()
     if protocol:
         out += [r"\subsection*{Measurement protocol}", r"\begin{verbatim}", protocol.rstrip(), r"\end{verbatim}"]
     out.append(r"\end{document}")

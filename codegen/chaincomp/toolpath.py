@@ -45,4 +45,7 @@ def toolpath(machine: Machine, rate_hz: float, seconds: float, period_s: float =
             wave = [0.625 + 0.375 * np.sin(phase), np.sin(phase)][min(rotary, 1)]
             rotary += 1
         cols.append(np.clip(mid + amp * wave, lo, hi))
-    return np.stack(cols, axis=1)
+    out = np.stack(cols, axis=1)
+    if not np.isfinite(out).all():   # limits near the float range: their middle overflows
+        raise ChaincompError(f"the toolpath of {machine.name} is not finite: check its axis limits", machine.file)
+    return out

@@ -39,7 +39,7 @@ def run(args) -> int:
         from ..protocol import build_protocol, to_text
         zero = [n.strip() for item in args.assume_zero for n in item.split(",") if n.strip()]
         proto = to_text(build_protocol(machine, assume_zero=zero))
-    text = report.latex(d, proto) if fmt == "latex" else report.markdown(d, proto)
+    text = (report.latex if fmt == "latex" else report.markdown)(d, proto, progress=True)
     if not args.output:
         sys.stdout.write(text)
         return 0
