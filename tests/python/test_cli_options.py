@@ -236,6 +236,14 @@ def test_simulate_calibration_at_the_knot_limit_loads_back(ws, capsys):
     tables = [v for v in values.values() if isinstance(v, Table)]
     assert tables and all(len(t.x) == MAX_TABLE_KNOTS for t in tables)
     assert not [f for f in os.listdir(os.path.dirname(out)) if f.endswith(".tmp")]
+    # the C++ loader too: replay a few commands with it (the compiled compensator reads the tables)
+    log, csv_path = ws["out"] + ".lcmlog", ws["out"] + ".csv"
+    assert run(capsys, ["simulate-log", ws["five"], "-o", log, "--seconds", "0.01"])[0] == 0
+    proc = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "replay", log, "--machine", ws["five"],
+                           "--params", out, "--csv", csv_path], capture_output=True, text=True, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    with open(csv_path, encoding="utf-8") as f:
+        assert sum(1 for line in f if ",ok," in line) == 10
 
 
 def test_protocol_bounds_its_set_ups(ws, capsys):
