@@ -187,7 +187,7 @@ def test_exact_error_with_demo_params(case):
     params = f"{PARAMS}/{case.name}-demo.yaml"
     values = case.m.nominal_values()
     values.update(load_params(params, case.m))
-    for v in case.samples(3, 3):
+    for v in case.samples(2, 3):
         sets = [x for a in case.m.axes for x in ("--set", f"{a.name}={v[a.name] / a.to_internal(1.0)!r}")]
         out = eval_json(machine_path(case.name), "--params", params, *sets)
         p1, k1 = MODELS[case.name]({**values, **{a.name: v[a.name] for a in case.m.axes}})
