@@ -139,6 +139,10 @@ const ModelEntry* load_model_library(const std::string& path, const std::string&
     return refuse("built against other runtime headers (structure sizes differ): rebuild it with chaincomp build " +
                   machine_path);
   }
+  if (lib->name == nullptr || lib->source_text == nullptr || lib->toolchain == nullptr || lib->entry == nullptr ||
+      lib->entry->info == nullptr) {
+    return refuse("an incomplete chaincomp model library (a null name, text, toolchain or function table)");
+  }
   if (name != lib->name) {
     return refuse(std::string("the model of machine '") + lib->name + "', not of '" + name + "' (" + machine_path + ")");
   }
