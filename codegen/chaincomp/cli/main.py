@@ -38,7 +38,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="chaincomp",
         description="Geometric error models of machine tools: derive, evaluate and generate "
-                    "compensation code from a machine description.")
+                    "compensation code from a machine description.",
+        epilog="Exit codes: 0 done, 1 'check' found differences, 2 bad input (one line naming the file, "
+               "line and field, or the option), 3 internal error (one line; set CHAINCOMP_DEBUG=1 for the "
+               "traceback), 130 interrupted.")
     sub = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
     for verb in VERBS:
         verb.add_parser(sub)
