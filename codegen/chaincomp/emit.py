@@ -15,6 +15,7 @@ import sympy as sp
 from sympy.printing.cxx import CXX17CodePrinter
 
 from .derive import derive
+from .jets import JetModel
 from .machine import ROT_PLANE, Machine, Rotation
 from .units import UNITS
 
@@ -101,6 +102,9 @@ class _Function:
     # Takes the axes' sin and cos (a Trig after `q`) instead of computing them: compensate
     # computes them once per command. A wrapper without it is declared inline.
     trig: bool = False
+    # Temporaries (symbol, expression) the outputs refer to, in order: the jets' straight-line
+    # code (chaincomp.jets), emitted only where an output needs them.
+    defs: tuple = ()
 
     def declaration(self) -> str:
         if not self.trig:
@@ -121,16 +125,25 @@ class _Hoister:
     def __init__(self, params: set[sp.Symbol]):
         self.params = params
         self.table: dict[sp.Expr, sp.Symbol] = {}
+        self._done: dict[sp.Expr, sp.Expr] = {}
 
     def __call__(self, e: sp.Expr) -> sp.Expr:
         if e.is_Atom:
             return e
+        if e in self._done:  # the nested pose shares subtrees: each is rewritten once
+            return self._done[e]
         non_poly = isinstance(e, sp.Function) or (e.is_Pow and not (e.exp.is_Integer and e.exp > 0))
         if non_poly and e.free_symbols and e.free_symbols <= self.params:
             if e not in self.table:
                 self.table[e] = sp.Symbol(f"k{len(self.table)}")
-            return self.table[e]
-        return e.func(*[self(a) for a in e.args])
+            out = self.table[e]
+        else:
+            out = e.func(*[self(a) for a in e.args])
+        self._done[e] = out
+        return out
+
+    def defs(self, defs) -> tuple:
+        return tuple((t, self(e)) for t, e in defs)
 
 
 def _c_name(sym: sp.Symbol, machine: Machine) -> str:
@@ -138,11 +151,12 @@ def _c_name(sym: sp.Symbol, machine: Machine) -> str:
     return ("q_" if s.role == "axis" else "p_") + s.name
 
 
-def _body(machine: Machine, outputs: list[tuple[str, sp.Expr]], hoisted: bool, trig: bool = False) -> list[str]:
+def _body(machine: Machine, outputs: list[tuple[str, sp.Expr]], hoisted: bool, trig: bool = False,
+          defs: tuple = ()) -> list[str]:
     """Statements computing ``outputs`` with one joint CSE; inputs bound to locals first. With
     ``trig``, sin and cos of each angular axis come from ``t`` (any other function of an axis
-    is still computed from ``q``)."""
-    exprs = [e for _, e in outputs]
+    is still computed from ``q``). ``defs``: temporaries the outputs use, in order."""
+    exprs = [e for _, e in defs] + [e for _, e in outputs]
     bound = []
     if trig:
         sub = {}
@@ -152,9 +166,11 @@ def _body(machine: Machine, outputs: list[tuple[str, sp.Expr]], hoisted: bool, t
                 sub[sp.sin(a.sym)] = sp.Symbol(f"_s_{a.name}")
                 sub[sp.cos(a.sym)] = sp.Symbol(f"_c_{a.name}")
                 bound += [(sub[sp.sin(a.sym)], f"t.s[{i}]"), (sub[sp.cos(a.sym)], f"t.c[{i}]")]
-        exprs = [e.xreplace(sub) for e in exprs]
+        memo: dict = {}
+        exprs = [_replace(e, sub, memo) for e in exprs]
     repl, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("t"), order="canonical")
-    used = set().union(*(e.free_symbols for e in exprs)) if exprs else set()
+    # from the reduced forms: free_symbols of the nested pose would walk its shared subtrees
+    used = set().union(*(e.free_symbols for e in [r for _, r in repl] + list(reduced))) if exprs else set()
     axes = {a.sym: i for i, a in enumerate(machine.axes)}
     params = {p.sym: p for p in machine.symbols if p.role != "axis"}
     lines = [f"// {sp.count_ops(sp.Tuple(*[r for _, r in repl], *reduced))} operations after CSE"]
@@ -176,11 +192,53 @@ def _body(machine: Machine, outputs: list[tuple[str, sp.Expr]], hoisted: bool, t
         lines.append("static_cast<void>(t);  // no sin or cos of an axis here")
     if trig and not any(sym in used for sym in axes):
         lines.append("static_cast<void>(q);  // the axes enter through t alone")
-    for lhs, rhs in repl:
-        lines.append(f"const double {lhs} = {ccode(rhs.xreplace(rename))};")
-    for (target, _), e in zip(outputs, reduced):
+    for t, _ in defs:
+        rename[t] = sp.Symbol(str(t).lstrip("_"))
+    statements = list(repl)
+    if defs:  # temporaries interleaved as they are read; unused ones left out (and not counted)
+        statements = _in_dependency_order(statements + [(t, e) for (t, _), e in zip(defs, reduced)],
+                                          list(reduced[len(defs):]))
+        lines[0] = f"// {sp.count_ops(sp.Tuple(*[r for _, r in statements], *reduced[len(defs):]))} operations after CSE"
+    for lhs, rhs in statements:
+        lines.append(f"const double {rename.get(lhs, lhs)} = {ccode(rhs.xreplace(rename))};")
+    for (target, _), e in zip(outputs, reduced[len(defs):]):
         lines.append(f"{target} = {ccode(e.xreplace(rename))};")
     return lines
+
+
+def _replace(e: sp.Expr, rule: dict, memo: dict) -> sp.Expr:
+    """e.xreplace(rule), rewriting each shared subtree once (xreplace would walk it as often as
+    it is reached)."""
+    if e in rule:
+        return rule[e]
+    if e.is_Atom:
+        return e
+    if e not in memo:
+        args = [_replace(a, rule, memo) for a in e.args]
+        memo[e] = e.func(*args) if any(a is not b for a, b in zip(args, e.args)) else e
+    return memo[e]
+
+
+def _in_dependency_order(assignments: list[tuple[sp.Symbol, sp.Expr]], outputs: list[sp.Expr]):
+    """The assignments the outputs need, each after those it reads: a depth-first walk from
+    the outputs in order (deterministic; iterative, as chains of temporaries run long)."""
+    by_name = dict(assignments)
+    done: set = set()
+    out = []
+    for root in outputs:
+        stack = [(sym, False) for sym in sorted(root.free_symbols & by_name.keys(), key=str, reverse=True)]
+        while stack:
+            sym, expanded = stack.pop()
+            if sym in done:
+                continue
+            if expanded:
+                done.add(sym)
+                out.append((sym, by_name[sym]))
+                continue
+            stack.append((sym, True))
+            stack.extend((d, False) for d in sorted(by_name[sym].free_symbols & by_name.keys(), key=str, reverse=True)
+                         if d not in done)
+    return out
 
 
 def generate(machine: Machine, order: int = 2) -> dict[str, str]:
@@ -196,12 +254,8 @@ def generate(machine: Machine, order: int = 2) -> dict[str, str]:
     exact = exact_pose(machine, True)
     nominal = exact_pose(machine, False)
     jac = [[sp.diff(e, a) for a in axes] for e in exact]
-    d = derive(machine, order)
-    vecs = d.point + (d.direction or [])
-    # d pose / d error at zero errors (the first-order error gain matrix): the chain rule's
-    # factor for errors that vary along an axis (compensate.hpp, add_slopes).
-    gain = [d.gain(s) for s in vecs]
     n_err = len(machine.errors)
+    gain, errors, defs = _truncated(machine, order, hoist)
     functions = [
         _Function("pose_exact", "const Model& m, const Axes& q, Pose& out",
                   [(f"out[{i}]", hoist(e)) for i, e in enumerate(exact)],
@@ -218,13 +272,13 @@ def generate(machine: Machine, order: int = 2) -> dict[str, str]:
                   + [(f"J({i}, {j})", hoist(jac[i][j])) for i in range(pose_size) for j in range(n)]
                   + [(f"G({i}, {c})", hoist(gain[i][c])) for i in range(pose_size) for c in range(n_err)],
                   "pose_jacobian, and the error gain matrix G = d pose / d error at zero errors (columns: "
-                  "the errors in kParams order).", trig=True),
+                  "the errors in kParams order).", trig=True, defs=defs),
     ]
     for k in range(1, order + 1):
         functions.append(_Function(
             f"error_order{k}", "const Model& m, const Axes& q, Pose& out",
-            [(f"out[{i}]", hoist(d.error(s, k))) for i, s in enumerate(vecs)],
-            f"Tool error (actual - nominal) of the order-{k} truncated series in the errors."))
+            [(f"out[{i}]", hoist(e)) for i, e in enumerate(errors[k])],
+            f"Tool error (actual - nominal) of the order-{k} truncated series in the errors.", defs=defs))
 
     src_hash = fnv1a64(machine.source_text.encode("utf-8"))
     src_file = os.path.basename(machine.file)
@@ -234,6 +288,31 @@ def generate(machine: Machine, order: int = 2) -> dict[str, str]:
     hpp = _header(machine, banner, n, pose_size, corr_dir, order, len(pre), src_hash, src_file, functions)
     cpp = _source(machine, banner, n, pre, functions, order)
     return {f"{name}.hpp": hpp, f"{name}.cpp": cpp}
+
+
+# Up to this many terms in the expanded series (orders 1..k, every pose component) the
+# generated error functions and gain matrix evaluate the expanded forms, which CSE shrinks
+# best on short chains; beyond it, the jets' straight-line code (chaincomp.jets), whose size
+# grows linearly with the chain where the expansion grows with every rotation (a UR5 with
+# constant twists: 32 883 terms, 7105 operations as jets).
+EXPANDED_TERMS_LIMIT = 5000
+
+
+def _truncated(machine: Machine, order: int, hoist: "_Hoister"):
+    """(gain rows per pose component, {k: order-k error per component}, temporaries)."""
+    d = derive(machine, order)
+    vecs = d.point + (d.direction or [])
+    if sum(d.term_count(v, k) for v in vecs for k in range(1, order + 1)) <= EXPANDED_TERMS_LIMIT:
+        return [d.gain(v) for v in vecs], {k: [d.error(v, k) for v in vecs] for k in range(1, order + 1)}, ()
+    defs, jp, jd = JetModel(machine, order).symbolic()
+    jets = jp + (jd or [])
+    small = [s.sym for s in machine.errors]
+    gain = [[v.get((c,), sp.Integer(0)) for c in range(len(small))] for v in jets]
+
+    def error(v: dict, k: int) -> sp.Expr:
+        return sp.Add(*[c * sp.Mul(*[small[i] for i in m]) for m, c in sorted(v.items()) if 1 <= len(m) <= k])
+
+    return gain, {k: [error(v, k) for v in jets] for k in range(1, order + 1)}, hoist.defs(defs)
 
 
 def _kind(unit) -> str:
@@ -344,7 +423,7 @@ def _source(machine, banner, n, pre, functions, order) -> str:
     L += _set_errors(machine, params, pre)
     for f in functions:
         L += [f"{f.declaration()} {{"]
-        L += ["  " + line for line in _body(machine, f.outputs, hoisted=True, trig=f.trig)]
+        L += ["  " + line for line in _body(machine, f.outputs, hoisted=True, trig=f.trig, defs=f.defs)]
         L += ["}", ""]
     # Type-erased entry points: with varying errors attached, each evaluates them at `axes`
     # first (a model outside a rejecting range gives NaN).
