@@ -245,7 +245,7 @@ def test_simulate_calibration_options(tmp_path):
     from chaincomp import load_machine, load_params
     load_params(str(out), load_machine(FIVE))
     proc = run_cli("simulate-calibration", FIVE, "--knots", "1", "-o", str(out), check=False)
-    assert proc.returncode == 2 and "--knots must be at least 2" in proc.stderr
+    assert proc.returncode == 2 and "--knots: must be between 2 and 4096" in proc.stderr
     # a machine without slides: nothing to tabulate
     proc = run_cli("simulate-calibration", machine_path("angle_head"), "-o", str(out), check=False)
     assert proc.returncode == 2 and "no slide" in proc.stderr
