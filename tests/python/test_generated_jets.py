@@ -1,0 +1,118 @@
+"""Generated C++ by the jets' straight-line code (a chain past the expansion limit): a UR5
+with constant twists (24 DH errors), built into a library by `chaincomp build`, called
+through its function table with ctypes, against the Python models: the gain matrix and the
+order-1/2 errors to 1e-12, the pose and Jacobian against central differences."""
+
+import ctypes
+import os
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from chaincomp import ExactModel, load_machine
+from chaincomp.emit import EXPANDED_TERMS_LIMIT, generate
+from chaincomp.jets import JetModel
+
+from test_jets import ur5_yaml
+
+ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
+VOID_P, DBL_P = ctypes.c_void_p, ctypes.POINTER(ctypes.c_double)
+
+
+class Entry(ctypes.Structure):
+    """runtime/include/chaincomp/model_info.hpp: ModelEntry."""
+    _fields_ = [("info", VOID_P), ("model_size", ctypes.c_size_t), ("model_align", ctypes.c_size_t),
+                ("prepare", ctypes.CFUNCTYPE(None, DBL_P, VOID_P)),
+                ("pose_exact", ctypes.CFUNCTYPE(None, VOID_P, DBL_P, DBL_P)),
+                ("pose_nominal", ctypes.CFUNCTYPE(None, VOID_P, DBL_P, DBL_P)),
+                ("pose_jacobian", ctypes.CFUNCTYPE(None, VOID_P, DBL_P, DBL_P, DBL_P)),
+                ("error", ctypes.CFUNCTYPE(ctypes.c_bool, VOID_P, DBL_P, ctypes.c_int, DBL_P)),
+                ("max_order", ctypes.c_int),
+                ("compensate", VOID_P), ("workspace_size", ctypes.c_size_t), ("workspace_align", ctypes.c_size_t),
+                ("init_workspace", VOID_P), ("num_errors", ctypes.c_int), ("attach_varying", VOID_P),
+                ("pose_jacobian_gain", ctypes.CFUNCTYPE(None, VOID_P, DBL_P, DBL_P, DBL_P, DBL_P))]
+
+
+class Library(ctypes.Structure):
+    _fields_ = [("abi", ctypes.c_int), ("layout", ctypes.c_uint32 * 6), ("name", ctypes.c_char_p),
+                ("source_hash", ctypes.c_uint64), ("source_text", VOID_P), ("source_size", ctypes.c_size_t),
+                ("toolchain", ctypes.c_char_p), ("entry", ctypes.POINTER(Entry))]
+
+
+def arr(values):
+    return (ctypes.c_double * len(values))(*values)
+
+
+@pytest.fixture(scope="module")
+def ur5c(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("ur5c")
+    text = ur5_yaml().replace("name: ur5_dh", "name: ur5_twists")
+    consts = "".join(f"  - {{name: al{i}, role: constant, unit: deg, nominal: {a}}}\n"
+                     for i, a in enumerate([90, 0, 0, 90, -90, 0], 1))
+    text = text.replace("  - {name: dth1,", consts + "  - {name: dth1,", 1)
+    for i, a in enumerate(["pi/2", "0", "0", "pi/2", "-pi/2", "0"], 1):
+        text = text.replace(f"angle: {a} + dal{i}}}", f"angle: al{i} + dal{i}}}")
+    path = tmp / "ur5_twists.yaml"
+    path.write_text(text)
+    env = dict(os.environ, XDG_CACHE_HOME=str(tmp / "cache"))
+    proc = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "build", str(path)], capture_output=True,
+                          text=True, cwd=ROOT, env=env, timeout=900)
+    assert proc.returncode == 0, proc.stderr
+    lib = ctypes.CDLL(proc.stdout.strip().splitlines()[-1])
+    lib.chaincomp_model_library.restype = ctypes.POINTER(Library)
+    entry = lib.chaincomp_model_library().contents.entry.contents
+    m = load_machine(str(path))
+    model = ctypes.create_string_buffer(entry.model_size + entry.model_align)
+    addr = (ctypes.addressof(model) + entry.model_align - 1) // entry.model_align * entry.model_align
+    return m, entry, ctypes.c_void_p(addr), lib, model  # lib and model kept alive with it
+
+
+def test_the_chain_is_past_the_expansion_limit(ur5c):
+    from chaincomp import derive
+    m = ur5c[0]
+    d = derive(m, 2)
+    assert sum(d.term_count(v, k) for v in d.point + d.direction for k in (1, 2)) > EXPANDED_TERMS_LIMIT
+
+
+def test_generated_jets_against_python(ur5c):
+    m, entry, model, *_ = ur5c
+    rng = np.random.default_rng(9)
+    params = [s for s in m.symbols if s.role != "axis"]
+    errs = {s.name: 1e-3 * rng.normal() for s in m.errors}
+    values = [errs[s.name] if s.role == "error" else s.to_internal(s.nominal) for s in params]
+    entry.prepare(arr(values), model)
+    jets, exact = JetModel(m, 2), ExactModel(m)
+    for _ in range(5):
+        q = {a.name: rng.uniform(-np.pi, np.pi) for a in m.axes}
+        qa = arr([q[a.name] for a in m.axes])
+        for k in (1, 2):
+            out = arr([0.0] * 6)
+            assert entry.error(model, qa, k, out)
+            want = np.concatenate(jets.error(q | errs, k))
+            assert np.allclose(list(out), want, rtol=1e-12, atol=1e-13)
+        pose, jac, gain = arr([0.0] * 6), arr([0.0] * 36), arr([0.0] * 6 * len(m.errors))
+        entry.pose_jacobian_gain(model, qa, pose, jac, gain)
+        g = jets.gains(q)
+        want_gain = np.array([g[c] for c in ("dx", "dy", "dz", "dkx", "dky", "dkz")])   # column-major in C++
+        assert np.allclose(np.array(list(gain)).reshape(len(m.errors), 6).T, want_gain, rtol=1e-12, atol=1e-12)
+        p, d = exact.pose(q | errs)
+        assert np.allclose(list(pose), list(p) + list(d), atol=1e-12)
+        J = np.array(list(jac)).reshape(6, 6).T
+        for j, a in enumerate(m.axes):
+            up, down = dict(q | errs), dict(q | errs)
+            up[a.name] += 1e-6
+            down[a.name] -= 1e-6
+            fd = (np.concatenate(exact.pose(up)) - np.concatenate(exact.pose(down))) / 2e-6
+            assert np.allclose(J[:, j], fd, atol=1e-6)
+
+
+def test_generated_source_size_and_operations(ur5c):
+    """Linear in the chain: the issue's expanded code was 1.49 MB with 32 139 operations in
+    pose_jacobian_gain; the jets' straight-line code is a fraction of that."""
+    text = generate(ur5c[0], 2)["ur5_twists.cpp"]
+    assert len(text) < 400_000
+    ops = dict(re.findall(r"void (\w+)\(const Model& m[^{]*\{\n  // (\d+) operations", text))
+    assert int(ops["pose_jacobian_gain"]) < 3000 and int(ops["error_order2"]) < 10000, ops
