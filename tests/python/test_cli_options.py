@@ -38,7 +38,7 @@ def ws(tmp_path):
     (tmp_path / "folder").mkdir()
     p["folder"] = str(tmp_path / "folder")
     p["missing"] = str(tmp_path / "missing.yaml")
-    p["nodir"] = "/nonexistent/dir/out.png"
+    p["nodir"] = str(tmp_path / "no" / "such" / "out.png")
     p["out"] = str(tmp_path / "out.png")
     return p
 
@@ -132,11 +132,13 @@ CASES = (
     + _opt(["generate"] + AH, "-o", ["{ah}"])
     + _opt(["report"] + AH, "--assume-zero", ["ThetaAs"])
 )
-# The machine file itself: missing, not UTF-8, a folder, for every verb that takes one.
+# The machine file itself: missing, not UTF-8, a folder, for every verb that takes one (replay
+# hands it to the C++ loader: tests/python/test_replay_plot.py).
 for verb, tail in (("derive", []), ("eval", []), ("generate", ["-o", "{folder}"]), ("testvectors", ["-o", "{out}"]),
                    ("protocol", []), ("plot", ["-o", "{out}"]), ("check", ["{check}"]), ("report", []),
                    ("budget", ["--params", "{ahp}"]), ("simulate-calibration", ["-o", "{out}.yaml"]),
-                   ("simulate-log", ["-o", "{out}.log"])):
+                   ("simulate-log", ["-o", "{out}.log"]), ("identify", ["{ahp}"]),
+                   ("simulate-measurements", ["-o", "{out}.csv"]), ("lint", []), ("build", [])):
     CASES += [([verb, m] + tail, m) for m in ("{missing}", "{latin1}", "{folder}")]
 
 
