@@ -21,8 +21,6 @@ from chaincomp.derive import derive
 
 from conftest import PARAMS, eval_json, machine_path
 
-ARCSEC = math.pi / (180 * 3600)
-
 
 def trans(x, y, z):
     m = np.eye(4)
