@@ -168,7 +168,11 @@ def _body(machine: Machine, outputs: list[tuple[str, sp.Expr]], hoisted: bool, t
                 bound += [(sub[sp.sin(a.sym)], f"t.s[{i}]"), (sub[sp.cos(a.sym)], f"t.c[{i}]")]
         memo: dict = {}
         exprs = [_replace(e, sub, memo) for e in exprs]
-    repl, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("t"), order="canonical")
+    # The jets' temporaries are straight-line code already: CSE sees the outputs only (over
+    # thousands of small definitions it would cost seconds for little).
+    nd = len(defs)
+    repl, reduced = sp.cse(exprs[nd:], symbols=sp.numbered_symbols("t"), order="canonical")
+    reduced = exprs[:nd] + list(reduced)
     # from the reduced forms: free_symbols of the nested pose would walk its shared subtrees
     used = set().union(*(e.free_symbols for e in [r for _, r in repl] + list(reduced))) if exprs else set()
     axes = {a.sym: i for i, a in enumerate(machine.axes)}
