@@ -61,7 +61,7 @@ def run(capsys, argv: list[str]) -> tuple[int, str, str]:
 
 # Each case: the command line ({name} takes a workspace path) and the word the message must hold.
 FILE = "file"
-NUMBERS = ["nan", "inf", "-inf", "1e400", "", "x"]
+NUMBERS = ["nan", "inf", "-inf", "1e400", "", "x", "1_0", "\u0661"]   # the last two: float() takes them
 INTEGERS = NUMBERS + ["1.5", "1e3", "0x10"]
 
 

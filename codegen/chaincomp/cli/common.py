@@ -115,15 +115,32 @@ def integer(lo: int, hi: int):
     return parse
 
 
+_DECIMAL = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
+
+
+def parse_number(text: str) -> float:
+    """A finite number written in plain ASCII decimals: float() alone would also take 'nan',
+    'inf', '1_000' and other scripts' digits. Raises ValueError with the reason."""
+    t = text.strip()
+    if _DECIMAL.fullmatch(t):
+        value = float(t)
+        if math.isfinite(value):
+            return value
+        raise ValueError(f"expected a finite number, got {text!r}")   # e.g. 1e400
+    try:
+        value = float(t)
+    except ValueError:
+        raise ValueError(f"expected a number, got {text!r}") from None
+    raise ValueError(f"expected a {'plain decimal' if math.isfinite(value) else 'finite'} number, got {text!r}")
+
+
 def number(lo: float = -math.inf, hi: float = math.inf, above: bool = False):
     """A finite number in [lo, hi] (in (lo, hi] with above=True): nan and inf refused."""
     def parse(text: str) -> float:
         try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-        if not math.isfinite(value):
-            raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+            value = parse_number(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
         if value < lo or value > hi or (above and value == lo):
             want = (f"above {lo:g}" if above else f"at least {lo:g}") + (f" and at most {hi:g}" if hi < math.inf
                                                                           else "")
@@ -149,12 +166,9 @@ def number_list(option: str, text: str) -> list[float]:
     out = []
     for item in (t.strip() for t in text.split(",")):
         try:
-            value = float(item)
-        except ValueError:
-            raise ChaincompError(f"{option}: expected numbers separated by commas, got {item!r}") from None
-        if not math.isfinite(value):
-            raise ChaincompError(f"{option}: expected finite numbers, got {item!r}")
-        out.append(value)
+            out.append(parse_number(item))
+        except ValueError as exc:
+            raise ChaincompError(f"{option}: {exc} (numbers separated by commas)") from None
     return out
 
 

@@ -4,7 +4,6 @@ that varies along an axis (a table and its interpolant, or a polynomial)."""
 from __future__ import annotations
 
 import csv
-import math
 import sys
 
 import numpy as np
@@ -13,7 +12,7 @@ from ..derive import derive
 from ..errors import ChaincompError
 from ..numeric import ExactModel, TruncatedModel
 from ..units import UNITS
-from .common import add_values_arguments, check_image, integer, load, values_for
+from .common import add_values_arguments, check_image, integer, load, parse_number, values_for
 
 COMPONENTS = ("dx", "dy", "dz", "dkx", "dky", "dkz", "norm")
 # 1000 x 1000 points: 4-5 s for one model, 39 s for exact minus second (five_axis_ac, 2026-12)
@@ -51,12 +50,13 @@ def add_parser(sub) -> None:
 
 
 def _range(text: str, what: str) -> tuple[float, float]:
+    parts = text.split(":")
+    if len(parts) != 2:
+        raise ChaincompError(f"{what} expects LO:HI, got {text!r}")
     try:
-        lo, hi = (float(v) for v in text.split(":"))
-    except ValueError:
-        raise ChaincompError(f"{what} expects LO:HI, got {text!r}") from None
-    if not (math.isfinite(lo) and math.isfinite(hi)):
-        raise ChaincompError(f"{what} expects finite numbers LO:HI, got {text!r}")
+        lo, hi = (parse_number(v) for v in parts)
+    except ValueError as exc:
+        raise ChaincompError(f"{what} expects LO:HI: {exc}") from None
     if not lo < hi:
         raise ChaincompError(f"{what}: LO must be below HI, got {text!r}")
     return lo, hi
@@ -202,14 +202,10 @@ def _read_replay_csv(path: str) -> tuple[int, dict[str, np.ndarray]]:
                 if row.get("result") != "ok":
                     continue
                 for c in wanted:
-                    cell = row.get(c)
                     try:
-                        value = float(cell)
-                    except (TypeError, ValueError):
-                        fail(f"expected a number, got {cell!r}", reader.line_num, c)
-                    if not math.isfinite(value):
-                        fail(f"expected a finite number, got {cell!r}", reader.line_num, c)
-                    out[c].append(value)
+                        out[c].append(parse_number(row.get(c) or ""))
+                    except ValueError as exc:
+                        fail(str(exc), reader.line_num, c)
     except OSError as exc:
         fail(f"cannot read: {exc.strerror}")
     except UnicodeDecodeError as exc:
