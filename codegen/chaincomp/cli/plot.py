@@ -253,6 +253,10 @@ def _plot_table(args) -> None:
     pad = 0.05 * (hi - lo)
     t = np.linspace(lo - pad, hi + pad, 4001)
     value, slope = v._value_slope(t)
+    if not (np.isfinite(value).all() and np.isfinite(slope).all()):   # a polynomial far out
+        k = int(np.flatnonzero(~(np.isfinite(value) & np.isfinite(slope)))[0])
+        raise ChaincompError(f"{args.error} is not finite at {v.axis} = {t[k] / pu.to_internal:g} {pu.name}",
+                             args.table, values.lines[args.error], f"values.{args.error}")
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 7), dpi=100, sharex=True,
                                       gridspec_kw={"height_ratios": [3, 2]})
     top.plot(t / pu.to_internal, value / vu.to_internal, lw=1.2,
