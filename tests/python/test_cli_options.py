@@ -266,3 +266,35 @@ def test_a_subprocess_sees_no_traceback_either(ws):
                               cwd=ROOT)
         assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr, \
             proc.stderr
+
+
+def test_number_parsers_take_every_float_and_refuse_everything_else_cleanly():
+    """parse_number reads back any finite float's repr exactly, and on any other text either
+    returns a finite number or raises ValueError: never another exception."""
+    import argparse
+
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from chaincomp.cli.common import integer, parse_number
+
+    @settings(max_examples=300, deadline=None)
+    @given(st.floats(allow_nan=False, allow_infinity=False))
+    def exact(x):
+        assert parse_number(repr(x)) == x and parse_number(f"{x:.17e}") == x
+
+    @settings(max_examples=300, deadline=None)
+    @given(st.text(max_size=40))
+    def clean(text):
+        try:
+            assert math.isfinite(parse_number(text))
+        except ValueError:
+            pass
+        try:
+            assert -5 <= integer(-5, 5)(text) <= 5
+        except argparse.ArgumentTypeError:
+            pass
+
+    exact()
+    clean()
+    assert parse_number(" -1.5e3 ") == -1500.0 and integer(0, 9)("+7") == 7
