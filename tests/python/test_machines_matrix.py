@@ -3,8 +3,10 @@ machine joins the matrix by being added): derive, eval, generate, check (where a
 file names the machine), protocol (or its refusal without rotary axes),
 simulate-measurements -> identify, budget, simulate-log -> replay, and chaincompd end to
 end in a network namespace. Each cell checks what a user relies on against something the
-verb did not compute itself: the machine file read with plain YAML, the exact chain at
-other errors, the compiled build's own copy of the generated code, the replay's targets.
+verb did not compute itself: the machine file read with plain YAML, the exact chain
+(Python) at the set-ups, bounds or corrected axes the verb reports, the build's own copy
+of the generated code, and for the daemon the targets replay computes offline.
+Run time: about 40 s on the 2-core CI machine (the generate cell of five_axis_ac is 15 s).
 """
 
 import contextlib
@@ -21,10 +23,9 @@ import sympy as sp
 import yaml
 
 from chaincomp import load_machine, load_params
+from chaincomp.cli.main import main as chaincomp_main
 from chaincomp.numeric import ExactModel
 from chaincomp.units import unit
-
-from chaincomp.cli.main import main as chaincomp_main
 
 from conftest import MACHINES, PARAMS, ROOT, machine_path
 
