@@ -37,7 +37,8 @@ def run(args) -> int:
     proto = None
     if args.protocol:
         from ..protocol import build_protocol, to_text
-        zero = [n.strip() for item in args.assume_zero for n in item.split(",") if n.strip()]
+        from .protocol import names
+        zero = names(",".join(args.assume_zero), "--assume-zero")
         proto = to_text(build_protocol(machine, assume_zero=zero))
     text = (report.latex if fmt == "latex" else report.markdown)(d, proto, progress=True)
     if not args.output:
