@@ -25,6 +25,7 @@ from . import simulate_calibration  # noqa: E402
 VERBS += (simulate_calibration,)
 from . import build; VERBS += (build,)  # noqa: E402,E702
 from . import lint; VERBS += (lint,)  # noqa: E402,E702
+from . import iso230_2; VERBS += (iso230_2,)  # noqa: E402,E702
 
 
 class _Parser(argparse.ArgumentParser):
