@@ -1,7 +1,6 @@
 #include "chaincomp/event_log.hpp"
 
 #include <fcntl.h>
-#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -30,49 +29,75 @@ void put_be(unsigned char* p, std::uint64_t v, int bytes) noexcept {
 
 }  // namespace
 
-LogReader::~LogReader() { unmap(); }
+LogReader::~LogReader() { close(); }
 
-void LogReader::unmap() noexcept {
-  if (data_ != nullptr && size_ > 0) munmap(const_cast<unsigned char*>(data_), size_);
-  data_ = nullptr;
+void LogReader::close() noexcept {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+  start_ = len_ = 0;
   size_ = pos_ = 0;
 }
 
 bool LogReader::open(const std::string& path, std::string& error) {
-  unmap();
+  close();
   damage_.clear();
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) {
+  fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd_ < 0) {
     error = path + ": " + (errno == ENOENT ? "no such log file" : std::strerror(errno));
     return false;
   }
   struct stat st {};
-  if (fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+  if (fstat(fd_, &st) != 0 || !S_ISREG(st.st_mode)) {
     error = path + ": not a regular file";
-    ::close(fd);
+    close();
     return false;
   }
-  size_ = static_cast<std::size_t>(st.st_size);
-  if (size_ > 0) {
-    void* p = mmap(nullptr, size_, PROT_READ, MAP_PRIVATE, fd, 0);
-    if (p == MAP_FAILED) {
-      error = path + ": cannot map the log: " + std::strerror(errno);
-      size_ = 0;
-      ::close(fd);
+  size_ = static_cast<std::uint64_t>(st.st_size);
+  posix_fadvise(fd_, 0, 0, POSIX_FADV_SEQUENTIAL);
+  if (capacity_ < kChunk) {
+    buf_.reset(static_cast<unsigned char*>(std::malloc(kChunk)));
+    capacity_ = buf_ ? kChunk : 0;
+    if (!buf_) {
+      error = path + ": no memory for the read buffer";
+      close();
       return false;
     }
-    madvise(p, size_, MADV_SEQUENTIAL);
-    data_ = static_cast<const unsigned char*>(p);
   }
-  ::close(fd);
+  return true;
+}
+
+bool LogReader::have(std::size_t n) noexcept {
+  if (pos_ >= start_ && pos_ + n <= start_ + len_) return true;
+  if (pos_ + n > size_) return false;
+  // keep the unread tail, then fill the buffer from the file
+  const std::size_t keep = pos_ >= start_ && pos_ < start_ + len_ ? static_cast<std::size_t>(start_ + len_ - pos_) : 0;
+  if (keep > 0) std::memmove(buf_.get(), at(), keep);
+  start_ = pos_;
+  len_ = keep;
+  if (n > capacity_) {
+    auto* p = static_cast<unsigned char*>(std::realloc(buf_.release(), n));
+    if (p == nullptr) return false;  // cannot happen below kMaxEvent on this machine's sizes
+    buf_.reset(p);
+    capacity_ = n;
+  }
+  while (len_ < n) {
+    const std::size_t want = static_cast<std::size_t>(std::min<std::uint64_t>(capacity_ - len_, size_ - (start_ + len_)));
+    const ssize_t k = pread(fd_, buf_.get() + len_, want, static_cast<off_t>(start_ + len_));
+    if (k < 0 && errno == EINTR) continue;
+    if (k <= 0) {  // the file shrank (or cannot be read) while it is read: it ends here
+      size_ = start_ + len_;
+      return false;
+    }
+    len_ += static_cast<std::size_t>(k);
+  }
   return true;
 }
 
 void LogReader::skip_damaged(const char* what, bool to_end) noexcept {
-  const std::size_t start = pos_;
-  std::size_t p = pos_ + 1;
-  while (!to_end && p + 4 <= size_ && be(data_ + p, 4) != kSync) ++p;
-  pos_ = !to_end && p + 4 <= size_ ? p : size_;
+  const std::uint64_t start = pos_;
+  ++pos_;
+  while (!to_end && have(4) && be(at(), 4) != kSync) ++pos_;
+  if (to_end || pos_ + 4 > size_) pos_ = size_;
   // one report per damaged stretch: a stretch that continues the last one extends it
   if (!damage_.empty() && damage_.back().offset + damage_.back().bytes == start) {
     damage_.back().bytes += pos_ - start;
@@ -83,26 +108,28 @@ void LogReader::skip_damaged(const char* what, bool to_end) noexcept {
 
 bool LogReader::next(LogEvent& ev) noexcept {
   while (pos_ < size_) {
-    if (size_ - pos_ < kHeader) {
+    if (!have(kHeader)) {
       skip_damaged("truncated event at the end of the log", true);
       continue;
     }
-    const unsigned char* h = data_ + pos_;
+    const unsigned char* h = at();
     if (be(h, 4) != kSync) {
       skip_damaged("no sync word");
       continue;
     }
     const auto channellen = static_cast<std::int32_t>(be(h + 20, 4));
     const auto datalen = static_cast<std::int32_t>(be(h + 24, 4));
-    if (channellen <= 0 || channellen >= kMaxChannel || datalen < 0) {
+    if (channellen <= 0 || channellen >= kMaxChannel || datalen < 0 ||
+        static_cast<std::size_t>(datalen) > kMaxEvent) {
       skip_damaged("invalid channel or data length");
       continue;
     }
     const std::size_t total = kHeader + static_cast<std::size_t>(channellen) + static_cast<std::size_t>(datalen);
-    if (total > size_ - pos_) {
+    if (!have(total)) {
       skip_damaged("event length runs past the end of the log (a damaged length, or the log was cut short)");
       continue;
     }
+    h = at();  // the buffer may have moved
     ev.offset = pos_;
     ev.eventnum = static_cast<std::int64_t>(be(h + 4, 8));
     ev.timestamp = static_cast<std::int64_t>(be(h + 12, 8));

@@ -103,9 +103,13 @@ int main(int argc, char** argv) {
   }
   chaincomp::Compensator comp(*entry, model, config.compensator);
 
+  // One file for both outputs would hold the log and the CSV interleaved: neither readable.
+  if (!out_path.empty() && (out_path == csv_path || same_file(out_path, csv_path))) {
+    return fail("--csv: " + csv_path + " is also the --out log; choose another file for one of them");
+  }
   chaincomp::LogReader in;
   if (!in.open(in_path, error)) return fail(error);
-  // Writing over the log being read would destroy it (and, mapped, crash the reader).
+  // Writing over the log being read would destroy it.
   for (const std::string* out_file : {&out_path, &csv_path}) {
     if (!out_file->empty() && same_file(in_path, *out_file)) {
       return fail(*out_file + ": is the input log itself; choose another output file");

@@ -2,6 +2,8 @@
 #include <catch2/catch.hpp>
 #include <lcm/eventlog.h>
 
+#include <unistd.h>
+
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -116,4 +118,62 @@ TEST_CASE("an empty log has no events and no damage; a missing one is an error",
   std::remove(path.c_str());
   CHECK_FALSE(in.open(path, error));
   CHECK(error == path + ": no such log file");
+}
+
+TEST_CASE("a log cut short or replaced while it is read ends cleanly (no SIGBUS)", "[event_log]") {
+  // 3000 events of 4 KiB: 12 MiB, three of the reader's 4 MiB chunks
+  const std::string path = temp_path("shrinking.lcmlog");
+  const int count = 3000, bytes = 4096;
+  auto write_log = [&](const std::string& p, int n) {
+    lcm_eventlog_t* l = lcm_eventlog_create(p.c_str(), "w");
+    REQUIRE(l != nullptr);
+    std::vector<unsigned char> data(bytes);
+    for (int k = 0; k < n; ++k) {
+      for (int i = 0; i < bytes; ++i) data[i] = static_cast<unsigned char>(k + i);
+      lcm_eventlog_event_t ev{};
+      ev.timestamp = k;
+      ev.channellen = 4;
+      ev.datalen = bytes;
+      ev.channel = const_cast<char*>("CHAN");
+      ev.data = data.data();
+      REQUIRE(lcm_eventlog_write_event(l, &ev) == 0);
+    }
+    lcm_eventlog_destroy(l);
+  };
+  const bool replace = GENERATE(false, true);
+  INFO((replace ? "replaced by a shorter file" : "truncated in place"));
+  write_log(path, count);
+  std::string error;
+  chaincomp::LogReader in;
+  REQUIRE(in.open(path, error));
+  chaincomp::LogEvent ev;
+  REQUIRE(in.next(ev));
+  if (replace) {
+    write_log(path + ".new", 10);
+    REQUIRE(std::rename((path + ".new").c_str(), path.c_str()) == 0);
+  } else {
+    // past the first 4 MiB chunk (already read), mid-event: a mapped reader would fault here
+    REQUIRE(truncate(path.c_str(), 5L * (1 << 20) + 13) == 0);
+  }
+  int k = 1;
+  bool intact = true;
+  while (in.next(ev)) {
+    intact = intact && ev.eventnum == k && ev.timestamp == k && ev.datalen == bytes;
+    for (int i = 0; intact && i < bytes; i += 997) intact = ev.data[i] == static_cast<unsigned char>(k + i);
+    ++k;
+  }
+  CHECK(intact);  // every event read is the one written, in order
+  if (replace) {
+    // the open file is the old one: all of it is read, nothing damaged
+    CHECK(k == count);
+    CHECK(in.damage().empty());
+  } else {
+    // the events wholly inside the first 5 MiB, then the torn one reported as damage
+    const long event_bytes = 28 + 4 + bytes;
+    CHECK(k == (5L * (1 << 20) + 13) / event_bytes);
+    REQUIRE(in.damage().size() == 1);
+    CHECK(in.damage()[0].offset == static_cast<std::uint64_t>(k) * event_bytes);
+    CHECK(in.damage()[0].offset + in.damage()[0].bytes == 5ull * (1 << 20) + 13);
+  }
+  std::remove(path.c_str());
 }

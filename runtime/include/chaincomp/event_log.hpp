@@ -27,20 +27,25 @@ struct LogEvent {
   std::uint64_t offset = 0;  // byte offset of the event's sync word in the file
 };
 
-// Reads a whole log through a read-only memory map (a log cut short by another process
-// while it is read ends the reader with SIGBUS, as any mapped reader: replay logs at rest).
+// Reads a log with pread into a buffer of its own (not a memory map: a log cut short or
+// replaced by another process while it is read would end a mapped reader with SIGBUS; here
+// the shorter file simply ends, the missing tail reported as damage). The buffer grows to
+// hold the longest event; events longer than kMaxEvent are taken as damaged lengths.
 class LogReader {
  public:
+  static constexpr std::size_t kChunk = 4 << 20, kMaxEvent = 256 << 20;
+
   LogReader() = default;
   LogReader(const LogReader&) = delete;
   LogReader& operator=(const LogReader&) = delete;
   ~LogReader();
 
-  // False with `error` naming the file when it cannot be opened or mapped. Opening again
-  // starts over with the new file.
+  // False with `error` naming the file when it cannot be opened. Opening again starts over
+  // with the new file.
   bool open(const std::string& path, std::string& error);
-  // The next event; false at the end. A damaged stretch (no sync word where one belongs, a
-  // length that does not fit) is skipped up to the next sync word and recorded in damage().
+  // The next event (its channel and data valid until the next call); false at the end. A
+  // damaged stretch (no sync word where one belongs, a length that does not fit) is skipped
+  // up to the next sync word and recorded in damage().
   bool next(LogEvent& ev) noexcept;
 
   struct Damage {
@@ -52,12 +57,23 @@ class LogReader {
   const std::vector<Damage>& damage() const noexcept { return damage_; }
 
  private:
-  void unmap() noexcept;
+  void close() noexcept;
+  // Whether bytes [pos_, pos_ + n) are in the buffer, reading them if not; false when the
+  // file ends first (then size_ is cut to what could be read).
+  bool have(std::size_t n) noexcept;
+  const unsigned char* at() const noexcept { return buf_.get() + (pos_ - start_); }
   // Skips from pos_ to the next sync word (or to the end) and records the stretch.
   void skip_damaged(const char* what, bool to_end = false) noexcept;
 
-  const unsigned char* data_ = nullptr;
-  std::size_t size_ = 0, pos_ = 0;
+  struct Free {
+    void operator()(unsigned char* p) const noexcept { std::free(p); }
+  };
+  int fd_ = -1;
+  std::unique_ptr<unsigned char, Free> buf_;
+  std::size_t capacity_ = 0;  // of buf_
+  std::uint64_t start_ = 0;   // file offset of buf_[0]
+  std::size_t len_ = 0;       // bytes in buf_
+  std::uint64_t size_ = 0, pos_ = 0;  // file size at open (or as far as it could be read)
   std::vector<Damage> damage_;
 };
 
