@@ -76,6 +76,12 @@ struct Reader {
   }
 };
 
+// The receive buffer asked of udpm's socket: one key, recv_buf_size, appended to the URL.
+std::string udpm_url(const std::string& url, int recv_buf_size) {
+  if (url.rfind("udpm://", 0) != 0) return url;
+  return url + (url.find('?') == std::string::npos ? "?" : "&") + "recv_buf_size=" + std::to_string(recv_buf_size);
+}
+
 }  // namespace
 
 bool load_daemon_config(const MachineInfo& info, const std::string& path, DaemonConfig& out,
@@ -90,7 +96,11 @@ bool load_daemon_config(const MachineInfo& info, const std::string& path, Daemon
     lim.upper = info.axes[i].upper;
     out.compensator.axes[i] = lim;
   }
-  if (path.empty()) return true;
+  out.source_file = path;
+  if (path.empty()) {
+    out.lcm_url = udpm_url(out.lcm_url, out.recv_buf_size);
+    return true;
+  }
   YAML::Node doc;
   try {
     doc = YAML::LoadFile(path);
@@ -103,9 +113,17 @@ bool load_daemon_config(const MachineInfo& info, const std::string& path, Daemon
   }
   Reader r{path, error};
   if (!r.keys(doc, "", {"lcm_url", "channels", "status_period", "latency_window", "start_enabled", "ramp_time",
-                        "out_of_limits", "linear_axes", "rotary_axes", "axes", "realtime"}))
+                        "out_of_limits", "linear_axes", "rotary_axes", "axes", "realtime", "recv_buf_size"}))
     return false;
   if (doc["lcm_url"] && !r.text(doc["lcm_url"], "lcm_url", out.lcm_url)) return false;
+  if (out.lcm_url.find("recv_buf_size=") != std::string::npos)
+    return r.fail(doc["lcm_url"], "lcm_url", "recv_buf_size is set by its own key, recv_buf_size");
+  if (doc["recv_buf_size"]) {
+    if (!r.integer(doc["recv_buf_size"], "recv_buf_size", out.recv_buf_size)) return false;
+    if (out.recv_buf_size < 2048 || out.recv_buf_size > (1 << 30))
+      return r.fail(doc["recv_buf_size"], "recv_buf_size", "must be between 2048 and 1073741824 bytes");
+  }
+  out.lcm_url = udpm_url(out.lcm_url, out.recv_buf_size);
   if (const YAML::Node ch = doc["channels"]) {
     if (!r.keys(ch, "channels", {"command", "corrected", "status", "control"})) return false;
     if (ch["command"] && !r.text(ch["command"], "channels.command", out.command_channel)) return false;

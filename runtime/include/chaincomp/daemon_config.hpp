@@ -9,7 +9,10 @@
 namespace chaincomp {
 
 struct DaemonConfig {
-  std::string lcm_url = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=2097152";
+  // a udpm URL gets `recv_buf_size=` from recv_buf_size (load_daemon_config adds it)
+  std::string lcm_url = "udpm://239.255.76.67:7667?ttl=0";
+  int recv_buf_size = 2097152;  // bytes of socket receive buffer asked for (capped by net.core.rmem_max)
+  std::string source_file;      // the file read ("": defaults)
   std::string command_channel = "CHAINCOMP_COMMAND";
   std::string corrected_channel = "CHAINCOMP_CORRECTED";
   std::string status_channel = "CHAINCOMP_STATUS";
