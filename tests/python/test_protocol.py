@@ -179,7 +179,7 @@ def test_unidentifiable_errors_with_reasons(tmp_path):
     (("--assume-zero", "DY,Dz"), "--assume-zero: unknown error 'Dz' for machine 'angle_head'"),
     (("--assume-zero", "G"), "--assume-zero: 'G' is a constant, not an error"),
     (("--prefer", "Ap"), "--prefer: 'Ap' is an axis, not an error"),
-    (("--angles", "0,ninety"), "--angles: expected numbers separated by commas, got 'ninety'"),
+    (("--angles", "0,ninety"), "--angles: expected a number, got 'ninety'"),
     (("--measure", "x,q"), "--measure: unknown coordinate 'q'"),
     (("--order", "2"), "--order 2: protocol equations are first order"),
 ])

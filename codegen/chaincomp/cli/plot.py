@@ -253,8 +253,10 @@ def _plot_table(args) -> None:
     pad = 0.05 * (hi - lo)
     t = np.linspace(lo - pad, hi + pad, 4001)
     value, slope = v._value_slope(t)
-    if not (np.isfinite(value).all() and np.isfinite(slope).all()):   # a polynomial far out
-        k = int(np.flatnonzero(~(np.isfinite(value) & np.isfinite(slope)))[0])
+    # nan outside the range is 'outside: reject' (drawn as a gap); inf is an overflow
+    bad = np.isinf(value) | np.isinf(slope) | ((t >= lo) & (t <= hi) & ~np.isfinite(value + slope))
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
         raise ChaincompError(f"{args.error} is not finite at {v.axis} = {t[k] / pu.to_internal:g} {pu.name}",
                              args.table, values.lines[args.error], f"values.{args.error}")
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 7), dpi=100, sharex=True,
