@@ -212,7 +212,7 @@ def run(args) -> int:
                              f"{a.unit.name}", args.runs)
     if runs.unit.kind != sym.unit.kind:
         raise ChaincompError(f"the deviations are in {runs.unit.name} ({runs.unit.kind}s) but {args.error} is "
-                             f"declared in {sym.unit.name} (an {sym.unit.kind})", args.runs)
+                             f"declared in {sym.unit.name} ({'an' if sym.unit.kind == 'angle' else 'a'} {sym.unit.kind})", args.runs)
     if len(runs.targets) > MAX_TABLE_KNOTS:
         raise ChaincompError(f"{len(runs.targets)} targets: a table holds at most {MAX_TABLE_KNOTS} points",
                              args.runs)
