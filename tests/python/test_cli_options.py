@@ -132,13 +132,15 @@ CASES = (
     + _opt(["generate"] + AH, "-o", ["{ah}"])
     + _opt(["report"] + AH, "--assume-zero", ["ThetaAs"])
 )
-# The machine file itself: missing, not UTF-8, a folder, for every verb that takes one (replay
+# The first input file: missing, not UTF-8, a folder, for every verb that takes one (replay
 # hands it to the C++ loader: tests/python/test_replay_plot.py).
 for verb, tail in (("derive", []), ("eval", []), ("generate", ["-o", "{folder}"]), ("testvectors", ["-o", "{out}"]),
                    ("protocol", []), ("plot", ["-o", "{out}"]), ("check", ["{check}"]), ("report", []),
                    ("budget", ["--params", "{ahp}"]), ("simulate-calibration", ["-o", "{out}.yaml"]),
                    ("simulate-log", ["-o", "{out}.log"]), ("identify", ["{ahp}"]),
-                   ("simulate-measurements", ["-o", "{out}.csv"]), ("lint", []), ("build", [])):
+                   ("simulate-measurements", ["-o", "{out}.csv"]), ("lint", []), ("build", []),
+                   # these two take a CSV of laser runs first: the same three cases for it
+                   ("iso230-2", []), ("laser-to-params", ["--machine", "{five}", "--error", "EXX", "-o", "{out}.yaml"])):
     CASES += [([verb, m] + tail, m) for m in ("{missing}", "{latin1}", "{folder}")]
 
 
