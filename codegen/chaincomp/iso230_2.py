@@ -167,8 +167,12 @@ def read_runs(path: str, column_map: dict[str, str] | None = None,
         return next(csv.reader([line], delimiter=delimiter))
 
     header = cells(htext)
+    column_map = column_map or {}
     wanted = {f: f for f in FIELDS}
-    wanted.update(column_map or {})
+    for mapped, other in (("deviation", "actual"), ("actual", "deviation")):
+        if mapped in column_map and other not in column_map:
+            del wanted[other]   # mapped one: another column of the default name is not a second value
+    wanted.update(column_map)
     col: dict[str, int] = {}
     head_units: dict[str, str | None] = {}
     for field, want in wanted.items():
@@ -189,9 +193,9 @@ def read_runs(path: str, column_map: dict[str, str] | None = None,
                                  f"with --columns {field}=NAME)", path, hline, wanted[field])
     value = "deviation" if "deviation" in col else "actual" if "actual" in col else None
     if value is None:
-        raise ChaincompError(f"no column {wanted['deviation']!r} or {wanted['actual']!r} (header: "
+        raise ChaincompError(f"no column 'deviation' or 'actual' (header: "
                              f"{', '.join(header)}; map other names with --columns deviation=NAME or "
-                             "actual=NAME)", path, hline, wanted["deviation"])
+                             "actual=NAME)", path, hline, "deviation")
 
     def unit_of(field: str, given: U.Unit | None) -> U.Unit:
         written = head_units.get(field)

@@ -160,6 +160,11 @@ def test_other_programs_export_through_columns_and_actual_positions(tmp_path, ca
     for g, w in zip(got["positions"], want["positions"]):
         for k in w:
             assert g[k] == pytest.approx(w[k], abs=1e-6), k   # actual - target loses digits below 1e-9 mm
+    # an export with both a deviation and an actual column: the one mapped is used
+    write_csv(tmp_path / "both.csv", readings, header="target [mm],run,direction,deviation [um],Error [um]",
+              fmt=lambda t, d, j, v: f"{t!r},{j},{d},999,{v!r}")
+    got = evaluate(capsys, tmp_path / "both.csv", "--columns", "deviation=Error")
+    assert got["positions"] == want["positions"]
 
 
 def test_units_from_the_option_and_angles(tmp_path, capsys):
