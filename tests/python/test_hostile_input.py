@@ -321,3 +321,73 @@ def test_chain_and_symbol_counts_bounded(tmp_path):
     extra = "".join(f"  - {{name: k{i}, role: constant, unit: mm, nominal: 1}}\n" for i in range(MAX_SYMBOLS))
     text = edit(MACHINE, (S, S + extra))
     _cli_refuses(tmp_path, text, f"at most {MAX_SYMBOLS}", line=line_of(text, "symbols:"), field="symbols")
+
+
+_YAML_VALUES = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=12)
+    | st.sampled_from(["5 um", "1e308 m", "-0 arcsec", "0170", "nan", ".inf", "3 furlong", "pi/2", "sin(X)"]),
+    lambda kids: st.lists(kids, max_size=4) | st.dictionaries(st.text(max_size=8), kids, max_size=4),
+    max_leaves=16)
+
+
+@settings(max_examples=150, deadline=5000, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.dictionaries(st.sampled_from(["machine", "values", "description", "extra"]), _YAML_VALUES, max_size=4),
+       st.dictionaries(st.sampled_from(["dx1", "ey1", "tx", "X", "nope"]), _YAML_VALUES, max_size=4))
+def test_params_loader_property_random_yaml(tmp_path, top, values):
+    """Random params files: values or ChaincompError, never another exception."""
+    import yaml
+    from chaincomp.params import load_params
+    m = tmp_path / "m.yaml"
+    m.write_text(MACHINE)
+    doc = dict(top)
+    if values:
+        doc["values"] = values
+    p = tmp_path / "p.yaml"
+    p.write_text(yaml.safe_dump(doc, allow_unicode=True))
+    try:
+        out = load_params(str(p), load_machine(str(m)))
+    except ChaincompError:
+        return
+    for v in out.values():
+        assert not isinstance(v, float) or abs(v) <= 1e15
+
+
+@settings(max_examples=150, deadline=5000, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.dictionaries(st.sampled_from(["machine", "normal_bound", "tolerances", "description", "x"]), _YAML_VALUES,
+                       max_size=4),
+       st.dictionaries(st.sampled_from(["dx1", "ey1", "tx", "zz"]),
+                       st.dictionaries(st.sampled_from(["bound", "distribution", "normal_bound", "q"]), _YAML_VALUES,
+                                       max_size=3), max_size=3))
+def test_tolerances_loader_property_random_yaml(tmp_path, top, tols):
+    import yaml
+    from chaincomp.tolerances import load_tolerances
+    m = tmp_path / "m.yaml"
+    m.write_text(MACHINE)
+    doc = dict(top)
+    if tols:
+        doc["tolerances"] = tols
+    t = tmp_path / "t.yaml"
+    t.write_text(yaml.safe_dump(doc, allow_unicode=True))
+    try:
+        load_tolerances(str(t), load_machine(str(m)))
+    except ChaincompError:
+        pass
+
+
+@settings(max_examples=100, deadline=5000, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.dictionaries(st.sampled_from(["machine", "where", "formulas", "chain", "source"]), _YAML_VALUES, max_size=4),
+       st.lists(st.dictionaries(st.sampled_from(["name", "of", "formula", "x"]), _YAML_VALUES, max_size=4), max_size=3))
+def test_check_loader_property_random_yaml(tmp_path, top, formulas):
+    import yaml
+    from chaincomp.check import load_formulas
+    m = tmp_path / "m.yaml"
+    m.write_text(MACHINE)
+    doc = dict(top)
+    if formulas:
+        doc["formulas"] = formulas
+    c = tmp_path / "c.yaml"
+    c.write_text(yaml.safe_dump(doc, allow_unicode=True))
+    try:
+        load_formulas(str(c), load_machine(str(m)))
+    except ChaincompError:
+        pass
