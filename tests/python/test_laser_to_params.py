@@ -262,3 +262,33 @@ def test_daemon_loads_the_merged_file(tmp_path, capsys, machine, truth):
     assert bad.returncode == 2 and "positions must increase" in bad.stderr, bad.stderr
     good = daemon(out)
     assert good.returncode == 2 and "cannot open LCM at 'bogus://nowhere'" in good.stderr, good.stderr
+
+
+def test_rotary_axis_angular_positioning(tmp_path, capsys):
+    """ISO 230-2 on a rotary table: trunnion_ac's zero position error of C as a table over C (deg,
+    arcsec); the exact chain's tool point then turns about the C axis line by the measured mean."""
+    path = machine_path("trunnion_ac")
+    machine = load_machine(path)
+    targets = [0.0, 30.0, 60.0, 90.0, 135.0, 180.0, 270.0, 330.0]
+    true = {t: 3.0 * math.sin(math.radians(2 * t)) + 1.0 for t in targets}   # arcsec
+    csv = tmp_path / "c.csv"
+    csv.write_text("target [deg],run,direction,deviation [arcsec]\n" + "".join(
+        f"{t},{j},{d},{true[t] + (0.4 if d == 'up' else -0.4) + 0.01 * j}\n"
+        for j in (1, 2, 3, 4) for d in ("up", "down") for t in targets))
+    code, err = run(capsys, csv, "--machine", path, "--error", "EC0C", "--axis", "C", "-o", tmp_path / "p.yaml")
+    assert code == 0, err
+    params = load_params(str(tmp_path / "p.yaml"), machine)
+    table = params["EC0C"]
+    assert table.axis == "C" and [u.name for u in table.units] == ["deg", "arcsec"]
+    arcsec = math.pi / 648000
+    assert np.allclose(table.y / arcsec, [true[t] + 0.025 for t in targets], atol=1e-4)
+    # the tool point's error is that rotation about the C axis line: |dp| = r * angle
+    model = ExactModel(machine)
+    base = {a.name: a.to_internal(a.default_position) for a in machine.axes}
+    for t in targets:
+        at = {**base, "X": 120.0, "Y": -50.0, "C": math.radians(t)}   # off the C axis line
+        p0, _ = model.pose(at)
+        dp, _ = model.error({**params, **at})
+        r = math.hypot(p0[0], p0[1])   # the C axis line is z through the origin at zero errors
+        assert r > 100
+        assert math.hypot(dp[0], dp[1]) == pytest.approx(r * (true[t] + 0.025) * arcsec, abs=r * 6e-5 * arcsec)   # 4 decimals
