@@ -282,7 +282,6 @@ def test_rotary_axis_angular_positioning(tmp_path, capsys):
     assert table.axis == "C" and [u.name for u in table.units] == ["deg", "arcsec"]
     arcsec = math.pi / 648000
     assert np.allclose(table.y / arcsec, [true[t] + 0.025 for t in targets], atol=1e-4)
-    # the tool point's error is that rotation about the C axis line: |dp| = r * angle
     model = ExactModel(machine)
     base = {a.name: a.to_internal(a.default_position) for a in machine.axes}
     for t in targets:
@@ -291,4 +290,6 @@ def test_rotary_axis_angular_positioning(tmp_path, capsys):
         dp, _ = model.error({**params, **at})
         r = math.hypot(p0[0], p0[1])   # the C axis line is z through the origin at zero errors
         assert r > 100
-        assert math.hypot(dp[0], dp[1]) == pytest.approx(r * (true[t] + 0.025) * arcsec, abs=r * 6e-5 * arcsec)   # 4 decimals
+        # dp = θ z × p0 for a turn by θ about +z of the tool relative to the workpiece (ISO 230-1's sign)
+        turn = (p0[0] * dp[1] - p0[1] * dp[0]) / r**2
+        assert turn / arcsec == pytest.approx(true[t] + 0.025, abs=6e-5)   # the table's 4 decimals
