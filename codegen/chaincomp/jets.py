@@ -22,19 +22,6 @@ from .numeric import _lib, complete
 from .varying import resolve
 
 
-def _mul(a: dict, b: dict, k: int) -> dict:
-    out: dict = {}
-    for ma, ca in a.items():
-        room = k - len(ma)
-        for mb, cb in b.items():
-            if len(mb) > room:
-                continue
-            m = tuple(sorted(ma + mb)) if (ma and mb) else (ma or mb)
-            v = ca * cb
-            out[m] = out[m] + v if m in out else v
-    return out
-
-
 def _lin(a: dict, ca, b: dict, cb) -> dict:
     """ca·a + cb·b for jets a, b and scalars (or arrays) ca, cb."""
     out = {m: ca * v for m, v in a.items()}
@@ -49,7 +36,7 @@ def _sin_cos(delta: dict, k: int) -> tuple[dict, dict]:
     c: dict = {(): 1}
     power: dict = {(): 1}   # exact integers: the same code runs on sympy expressions
     for j in range(1, k + 1):
-        power = _mul(power, delta, k)
+        power = S.mul_all(power, delta, k)
         if not power:
             break
         sign = -1 if (j // 2) % 2 else 1
@@ -164,8 +151,8 @@ class JetModel:
                     c, s = cos_t.get((), 0), sin_t.get((), 0)
                     vec[i], vec[j] = bind(_lin(vi, c, vj, -s)), bind(_lin(vi, s, vj, c))
                 else:
-                    vec[i] = bind(_lin(_mul(cos_t, vi, k), 1, _mul(sin_t, vj, k), -1))
-                    vec[j] = bind(_lin(_mul(sin_t, vi, k), 1, _mul(cos_t, vj, k), 1))
+                    vec[i] = bind(_lin(S.mul_all(cos_t, vi, k), 1, S.mul_all(sin_t, vj, k), -1))
+                    vec[j] = bind(_lin(S.mul_all(sin_t, vi, k), 1, S.mul_all(cos_t, vj, k), 1))
         return p, d
 
     def _at_errors(self, jet: dict, eps: list, order: int):

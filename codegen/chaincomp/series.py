@@ -54,7 +54,12 @@ class Atoms:
 
 
 def mul(a: dict, b: dict, k: int) -> dict:
-    """Product of two series, dropping monomials of degree above k."""
+    """Product of two series, dropping monomials of degree above k (and zero coefficients)."""
+    return {m: c for m, c in mul_all(a, b, k).items() if c}
+
+
+def mul_all(a: dict, b: dict, k: int) -> dict:
+    """The same, keeping every coefficient (numpy arrays cannot be tested for zero)."""
     out: dict = {}
     for ma, ca in a.items():
         room = k - len(ma)
@@ -63,11 +68,8 @@ def mul(a: dict, b: dict, k: int) -> dict:
                 continue
             m = tuple(sorted(ma + mb)) if (ma and mb) else (ma or mb)
             c = ca * cb
-            if m in out:
-                out[m] += c
-            else:
-                out[m] = c
-    return {m: c for m, c in out.items() if c}
+            out[m] = out[m] + c if m in out else c
+    return out
 
 
 def add(a: dict, b: dict, sign: int = 1) -> dict:

@@ -330,24 +330,29 @@ _YAML_VALUES = st.recursive(
     max_leaves=16)
 
 
+def _load_random(tmp_path, doc: dict, key: str, entries, load):
+    """Write ``doc`` (with ``entries`` under ``key``) and load it against the test machine:
+    a value or ChaincompError, never another exception."""
+    import yaml
+    m = tmp_path / "m.yaml"
+    m.write_text(MACHINE)
+    doc = dict(doc)
+    if entries:
+        doc[key] = entries
+    path = tmp_path / "f.yaml"
+    path.write_text(yaml.safe_dump(doc, allow_unicode=True))
+    try:
+        return load(str(path), load_machine(str(m)))
+    except ChaincompError:
+        return None
+
+
 @settings(max_examples=150, deadline=5000, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.dictionaries(st.sampled_from(["machine", "values", "description", "extra"]), _YAML_VALUES, max_size=4),
        st.dictionaries(st.sampled_from(["dx1", "ey1", "tx", "X", "nope"]), _YAML_VALUES, max_size=4))
 def test_params_loader_property_random_yaml(tmp_path, top, values):
-    """Random params files: values or ChaincompError, never another exception."""
-    import yaml
     from chaincomp.params import load_params
-    m = tmp_path / "m.yaml"
-    m.write_text(MACHINE)
-    doc = dict(top)
-    if values:
-        doc["values"] = values
-    p = tmp_path / "p.yaml"
-    p.write_text(yaml.safe_dump(doc, allow_unicode=True))
-    try:
-        out = load_params(str(p), load_machine(str(m)))
-    except ChaincompError:
-        return
+    out = _load_random(tmp_path, top, "values", values, load_params) or {}
     for v in out.values():
         assert not isinstance(v, float) or abs(v) <= 1e15
 
@@ -359,35 +364,13 @@ def test_params_loader_property_random_yaml(tmp_path, top, values):
                        st.dictionaries(st.sampled_from(["bound", "distribution", "normal_bound", "q"]), _YAML_VALUES,
                                        max_size=3), max_size=3))
 def test_tolerances_loader_property_random_yaml(tmp_path, top, tols):
-    import yaml
     from chaincomp.tolerances import load_tolerances
-    m = tmp_path / "m.yaml"
-    m.write_text(MACHINE)
-    doc = dict(top)
-    if tols:
-        doc["tolerances"] = tols
-    t = tmp_path / "t.yaml"
-    t.write_text(yaml.safe_dump(doc, allow_unicode=True))
-    try:
-        load_tolerances(str(t), load_machine(str(m)))
-    except ChaincompError:
-        pass
+    _load_random(tmp_path, top, "tolerances", tols, load_tolerances)
 
 
 @settings(max_examples=100, deadline=5000, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.dictionaries(st.sampled_from(["machine", "where", "formulas", "chain", "source"]), _YAML_VALUES, max_size=4),
        st.lists(st.dictionaries(st.sampled_from(["name", "of", "formula", "x"]), _YAML_VALUES, max_size=4), max_size=3))
 def test_check_loader_property_random_yaml(tmp_path, top, formulas):
-    import yaml
     from chaincomp.check import load_formulas
-    m = tmp_path / "m.yaml"
-    m.write_text(MACHINE)
-    doc = dict(top)
-    if formulas:
-        doc["formulas"] = formulas
-    c = tmp_path / "c.yaml"
-    c.write_text(yaml.safe_dump(doc, allow_unicode=True))
-    try:
-        load_formulas(str(c), load_machine(str(m)))
-    except ChaincompError:
-        pass
+    _load_random(tmp_path, top, "formulas", formulas, load_formulas)
