@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from ..derive import derive
-from ..numeric import ExactModel, TruncatedModel
+from ..jets import JetModel
+from ..numeric import ExactModel
 from ..units import UNITS
 from ..varying import check_inside, resolve, varying_errors
 from .common import add_machine_argument, add_values_arguments, check_finite, load, to_json, values_for
@@ -42,7 +42,7 @@ def evaluate(machine, values: dict, with_errors: bool) -> dict:
                               "unit": machine.symbol(k).unit.name, "axis": v.axis}
                           for k, v in varying.items()}
     if with_errors:
-        model = TruncatedModel(derive(machine, 2))
+        model = JetModel(machine, 2)   # numerically through the chain: no symbolic expansion
         err, derr = {}, {}
         for name, (dp, dd) in (("first", model.error(values, 1)), ("second", model.error(values, 2)),
                                ("exact", exact.error(values))):

@@ -8,9 +8,9 @@ import sys
 
 import numpy as np
 
-from ..derive import derive
 from ..errors import ChaincompError
-from ..numeric import ExactModel, TruncatedModel
+from ..jets import JetModel
+from ..numeric import ExactModel
 from ..units import UNITS
 from .common import add_values_arguments, check_image, integer, load, parse_number, values_for
 
@@ -74,7 +74,7 @@ def error_grid(machine, values: dict, over: tuple[str, str], ranges, grid: int, 
     v[a2.name] = a2.to_internal(G2)
     scale = 1.0 / UNITS[machine.length_unit].to_internal
     needs = set(model.split("-"))
-    truncated = TruncatedModel(derive(machine, 2)) if needs & {"first", "second"} else None
+    truncated = JetModel(machine, 2) if needs & {"first", "second"} else None
     parts = {}
     for name in needs:
         if name == "exact":

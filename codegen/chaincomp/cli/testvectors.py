@@ -7,8 +7,8 @@ import random
 
 import mpmath
 
-from ..derive import derive
-from ..numeric import ExactModel, TruncatedModel
+from ..jets import JetModel
+from ..numeric import ExactModel
 from ..errors import ChaincompError
 from .common import add_machine_argument, check_output, integer, load, seed
 
@@ -38,7 +38,7 @@ def run(args) -> int:
     mpmath.mp.dps = 40
     rng = random.Random(args.seed)
     exact = ExactModel(machine)
-    model = TruncatedModel(derive(machine, 2))
+    model = JetModel(machine, 2)
     params = [s for s in machine.symbols if s.role != "axis"]
     lines = [f"# chaincomp testvectors {machine.name}: count axes params pose_size; then per vector:",
              "# axes, params (kParams order), pose_exact, pose_nominal, error_order1, error_order2",
