@@ -158,7 +158,8 @@ def copy_to(path: str, folder: str) -> str:
     """A copy of the library at ``path`` in ``folder`` (for --model on another computer),
     written under a temporary name and renamed, so a reader never sees half of it."""
     try:
-        os.makedirs(folder, exist_ok=True)
+        if not os.path.isdir(folder):
+            os.mkdir(folder)  # the folder itself, never its parents: a typo makes no tree
         target = os.path.join(folder, os.path.basename(path))
         fd, tmp = tempfile.mkstemp(dir=folder, prefix="." + os.path.basename(path) + "-")
         with os.fdopen(fd, "wb") as out, open(path, "rb") as src:

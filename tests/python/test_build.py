@@ -279,3 +279,17 @@ def test_daemon_on_a_built_machine_then_a_changed_constant(built, tmp_path):
     assert "chaincomp build: test_trunnion: compiled in" in out
     assert "max point error" in out
     assert os.path.isfile(new_path)
+
+
+def test_build_output_folder_is_checked_before_the_build(tmp_path):
+    """-o creates at most the folder itself, never missing parents, and says so before compiling."""
+    proc = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "build", os.path.join(ROOT, "configs",
+                           "machines", "angle_head.yaml"), "-o", str(tmp_path / "missing" / "x")],
+                          capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert proc.returncode == 2 and f"folder {tmp_path / 'missing'} does not exist" in proc.stderr, proc.stderr
+    assert not (tmp_path / "missing").exists()
+    (tmp_path / "f").write_text("")
+    proc = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "build", os.path.join(ROOT, "configs",
+                           "machines", "angle_head.yaml"), "-o", str(tmp_path / "f")],
+                          capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert proc.returncode == 2 and "is a file, expected a folder" in proc.stderr, proc.stderr

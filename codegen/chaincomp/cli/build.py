@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import os
 import sys
 
 from ..build import build, copy_to
+from ..errors import ChaincompError
 
 
 def add_parser(sub) -> None:
@@ -23,6 +25,12 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    if args.output:  # before the build: a bad folder should not cost a compile
+        parent = os.path.dirname(os.path.abspath(args.output))
+        if os.path.exists(args.output) and not os.path.isdir(args.output):
+            raise ChaincompError(f"-o {args.output}: is a file, expected a folder")
+        if not os.path.isdir(parent):
+            raise ChaincompError(f"-o {args.output}: folder {parent} does not exist")
     path, cached = build(args.machine)
     if cached:
         print(f"chaincomp build: {args.machine}: cached", file=sys.stderr)
