@@ -300,3 +300,25 @@ def test_number_parsers_take_every_float_and_refuse_everything_else_cleanly():
     exact()
     clean()
     assert parse_number(" -1.5e3 ") == -1500.0 and integer(0, 9)("+7") == 7
+
+
+def test_replay_checks_machine_and_outputs_before_the_binary(tmp_path):
+    """replay: the machine file validated as every verb validates it, and an output that is an
+    input (or -o and --csv the same file) refused before the C++ binary runs."""
+    machine = os.path.join(ROOT, "configs", "machines", "angle_head.yaml")
+    params = os.path.join(ROOT, "configs", "params", "angle_head-fig3.yaml")
+    log = tmp_path / "a.lcmlog"
+    log.write_bytes(b"not a log, never read")
+    bad = tmp_path / "bad.yaml"
+    bad.write_bytes(b"name: caf\xe9\n")
+
+    def replay(*args):
+        return subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "replay", str(log), *map(str, args)],
+                              capture_output=True, text=True, cwd=ROOT, timeout=120)
+    proc = replay("--machine", bad, "--params", params)
+    assert proc.returncode == 2 and f"{bad}:1: not UTF-8 text (byte 0xe9)" in proc.stderr, proc.stderr
+    proc = replay("--machine", machine, "--params", params, "-o", log)
+    assert proc.returncode == 2 and "is also an input" in proc.stderr, proc.stderr
+    proc = replay("--machine", machine, "--params", params, "-o", tmp_path / "o", "--csv", tmp_path / "o")
+    assert proc.returncode == 2 and "is also the -o output" in proc.stderr, proc.stderr
+    assert log.read_bytes() == b"not a log, never read"

@@ -7,6 +7,7 @@ import subprocess
 
 from ..buildtree import binary
 from ..errors import ChaincompError
+from .common import check_output, load
 
 
 def add_parser(sub) -> None:
@@ -32,6 +33,12 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     if not os.path.isfile(args.input):
         raise ChaincompError(f"{args.input}: no such log file")
+    load(args.machine)  # the machine's mistakes with file, line and field, as every verb reports them
+    inputs = (args.input, args.machine, args.params, args.config, args.model)
+    check_output(args.output, *inputs, option="-o")
+    check_output(args.csv, *inputs, option="--csv")
+    if args.csv and args.output and os.path.abspath(args.csv) == os.path.abspath(args.output):
+        raise ChaincompError(f"--csv {args.csv}: is also the -o output")
     cmd = [binary("chaincomp_replay"), "--machine", args.machine, "--params", args.params, "--in", args.input,
            "--channel", args.channel]
     for flag, value in (("--config", args.config), ("--out", args.output), ("--csv", args.csv),
