@@ -2,7 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
+#include <cstdint>
 
 #include "chaincomp/compensate.hpp"
 
@@ -33,13 +33,73 @@ bool Compensator::reject(Reject r, Reject* why) noexcept {
   return false;
 }
 
+void Compensator::reset() noexcept {
+  ++counters_.resets;
+  seq_known_ = have_seen_ = have_top_ = false;
+  run_length_ = 0;
+}
+
+// Gaps: a seq beyond the highest one received skips commands that never arrived.
+void Compensator::count_gap(std::int64_t seq) noexcept {
+  if (have_top_ && seq > top_seq_) {
+    // unsigned: seq - top_seq_ may exceed INT64_MAX
+    const std::uint64_t skipped = static_cast<std::uint64_t>(seq) - static_cast<std::uint64_t>(top_seq_) - 1;
+    if (skipped > 0) {
+      ++counters_.seq_gaps;
+      const auto room = static_cast<std::uint64_t>(INT64_MAX - counters_.seq_missing);
+      counters_.seq_missing += static_cast<std::int64_t>(std::min(skipped, room));
+    }
+  }
+  if (!have_top_ || seq > top_seq_) top_seq_ = seq;
+  have_top_ = true;
+}
+
+// In order after the last accepted seq; or, behind it, the kRestartRun-th command of a run
+// that is in order among itself: a new stream.
+bool Compensator::seq_ok(const Command& in, const std::array<double, kMaxAxes>& cmd, Reject* why) noexcept {
+  if (!seq_known_ || in.seq > last_seq_) {
+    run_length_ = 0;
+    return true;
+  }
+  bool follows = run_length_ > 0 && in.seq > run_seq_ && in.utime >= run_utime_;
+  for (int i = 0; i < n_; ++i) follows = follows && std::abs(cmd[i] - run_axes_[i]) <= config_.axes[i].max_step;
+  run_length_ = follows ? run_length_ + 1 : 1;
+  const std::array<double, kMaxAxes> before = run_axes_;
+  run_seq_ = in.seq;
+  run_utime_ = in.utime;
+  run_axes_ = cmd;
+  if (run_length_ < kRestartRun) return reject(in.seq == last_seq_ ? Reject::kDuplicateSeq : Reject::kOutOfOrderSeq, why);
+  ++counters_.stream_restarts;
+  run_length_ = 0;
+  top_seq_ = in.seq;
+  seen_axes_ = before;  // the run's own last step is the one the step check sees
+  have_seen_ = true;
+  return true;
+}
+
+// Point (mm) and direction (rad) error left at `target` (axis units) for the command at q
+// (internal units): what a target whose correction was limited or ramped really leaves.
+void Compensator::residual_at(const double* q, const std::array<double, kMaxAxes>& target,
+                              double* residual) const noexcept {
+  double t[kMaxAxes], actual[6], nominal[6];
+  for (int i = 0; i < n_; ++i) t[i] = target[i] * entry_.info->axes[i].to_internal;
+  entry_.pose_exact(model_, t, actual);
+  entry_.pose_nominal(model_, q, nominal);
+  auto distance = [&](int from) {
+    double s = 0;
+    for (int k = from; k < from + 3; ++k) s += (actual[k] - nominal[k]) * (actual[k] - nominal[k]);
+    return std::sqrt(s);
+  };
+  residual[0] = distance(0);
+  residual[1] = entry_.info->corrects_direction ? distance(3) : 0.0;
+}
+
 bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept {
   ++counters_.received;
   const AxisInfo* info = entry_.info->axes;
-  if (in.machine != nullptr && in.machine[0] != '\0' && std::strcmp(in.machine, entry_.info->name) != 0) {
-    return reject(Reject::kWrongMachine, why);
-  }
+  if (in.machine != std::string_view(entry_.info->name)) return reject(Reject::kWrongMachine, why);
   if (in.num_axes != n_) return reject(Reject::kWrongAxisCount, why);
+  count_gap(in.seq);
   std::array<double, kMaxAxes> cmd = in.axes;
   for (int i = 0; i < n_; ++i) {
     if (!std::isfinite(cmd[i])) return reject(Reject::kNonFinite, why);
@@ -53,10 +113,7 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
       flags |= kFlagClampedInput;
     }
   }
-  if (have_last_) {
-    if (in.seq == last_seq_) return reject(Reject::kDuplicateSeq, why);
-    if (in.seq < last_seq_) return reject(Reject::kOutOfOrderSeq, why);
-  }
+  if (!seq_ok(in, cmd, why)) return false;
   // A jump is measured from the previous valid command, accepted or not: a lone spike is
   // rejected (and the command after it), while a stream that really moved on after a gap
   // is followed again from its second command instead of being rejected for ever.
@@ -83,7 +140,6 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
   }
   if (enabled_ || ramp_ > 0) flags |= kFlagCompensating;
   if (ramp_ != goal) flags |= kFlagRamping;
-  if (status == Status::kResidual) flags |= kFlagResidual;
 
   bool clamped = false;
   std::array<double, kMaxAxes> correction{};
@@ -104,23 +160,34 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
     ++counters_.clamped;
   }
   if (flags & kFlagClampedInput) ++counters_.clamped_input;
+  // The target's residual and status describe the target published: where the correction
+  // was limited or is ramped (or off), the model is evaluated at that target.
+  Status published = status;
+  std::array<double, kMaxAxes> target_axes{};
+  for (int i = 0; i < n_; ++i) target_axes[i] = cmd[i] + correction[i];
+  if (clamped || ramp_ < 1.0) {
+    residual_at(q, target_axes, residual);
+    if (!std::isfinite(residual[0]) || !std::isfinite(residual[1])) return reject(Reject::kCompensationFailed, why);
+    published = residual[0] <= kPointTolerance && residual[1] <= kDirectionTolerance ? Status::kOk : Status::kResidual;
+  }
+  if (published == Status::kResidual) flags |= kFlagResidual;
 
   out.utime = in.utime;
   out.seq = in.seq;
   out.num_axes = n_;
   for (int i = 0; i < kMaxAxes; ++i) {
-    out.axes[i] = i < n_ ? cmd[i] + correction[i] : 0.0;
+    out.axes[i] = i < n_ ? target_axes[i] : 0.0;
     out.correction[i] = i < n_ ? correction[i] : 0.0;
   }
   out.residual_point = residual[0];
   out.residual_direction = residual[1];
   out.flags = flags;
-  out.status = static_cast<int>(status);
+  out.status = static_cast<int>(published);
   for (int i = 0; i < n_; ++i) {
     if (!std::isfinite(out.axes[i])) return reject(Reject::kCompensationFailed, why);
   }
 
-  have_last_ = true;
+  have_last_ = seq_known_ = true;
   last_seq_ = in.seq;
   last_utime_ = in.utime;
   last_correction_ = correction;

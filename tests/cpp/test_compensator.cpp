@@ -1,7 +1,10 @@
 // The daemon's per-message logic without LCM: rejections by reason, limits, bumpless ramp.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
+#include <climits>
 #include <cmath>
+#include <string_view>
 #include <vector>
 
 #include "chaincomp/compensator.hpp"
@@ -146,4 +149,171 @@ TEST_CASE("after a jump the stream is followed again; a lone spike is dropped", 
   CHECK(comp.process(f.command(6, 40.1), t));
   CHECK(comp.process(f.command(7, 40.2), t));
   CHECK(comp.counters().rejected[static_cast<int>(chaincomp::Reject::kStepTooLarge)] == 3);
+}
+
+namespace {
+
+chaincomp::Counters run(chaincomp::Compensator& comp, chaincomp::Command c, int* accepted = nullptr) {
+  chaincomp::Target t;
+  const bool ok = comp.process(c, t);
+  if (accepted != nullptr) *accepted += ok ? 1 : 0;
+  return comp.counters();
+}
+
+}  // namespace
+
+TEST_CASE("one command with seq 2^63-1 does not lock the stream out: followed again after kRestartRun",
+          "[compensator][stream]") {
+  Fixture f;
+  chaincomp::Compensator comp(f.entry, f.model, f.config.compensator);
+  chaincomp::Target t;
+  for (int k = 1; k <= 3; ++k) REQUIRE(comp.process(f.command(k), t));
+  auto hostile = f.command(4);
+  hostile.seq = INT64_MAX;
+  REQUIRE(comp.process(hostile, t));  // valid in itself: published
+  CHECK(comp.counters().seq_gaps == 1);
+  CHECK(comp.counters().seq_missing == INT64_MAX - 4);  // seq 4 .. 2^63-2 never came
+  // the real stream goes on at seq 4: its first four are behind 2^63-1, the fifth is taken
+  std::vector<bool> accepted;
+  for (int k = 4; k < 4 + 200; ++k) accepted.push_back(comp.process(f.command(k, 10.0 + 0.01 * k), t));
+  CHECK(std::count(accepted.begin(), accepted.begin() + 4, true) == 0);
+  CHECK(std::count(accepted.begin() + 4, accepted.end(), true) == 196);
+  REQUIRE(chaincomp::kRestartRun == 5);
+  const auto& k = comp.counters();
+  CHECK(k.stream_restarts == 1);
+  CHECK(k.rejected[static_cast<int>(chaincomp::Reject::kOutOfOrderSeq)] == 4);
+  CHECK(k.seq_gaps == 1);  // the restart is not a gap, nor are the commands after it
+  CHECK(t.seq == 203);
+}
+
+TEST_CASE("a CNC that restarts its numbering is followed after kRestartRun commands; a hostile "
+          "interleave or an inconsistent run never restarts", "[compensator][stream]") {
+  Fixture f;
+  chaincomp::Compensator comp(f.entry, f.model, f.config.compensator);
+  int accepted = 0;
+  for (int k = 1; k <= 100; ++k) run(comp, f.command(k), &accepted);
+  REQUIRE(accepted == 100);
+  // old seqs injected between the stream's commands: each resets the run, none gets in
+  for (int k = 101; k <= 200; ++k) {
+    run(comp, f.command(k), &accepted);
+    run(comp, f.command(k - 100), &accepted);
+  }
+  CHECK(accepted == 200);
+  CHECK(comp.counters().stream_restarts == 0);
+  // a run going back in time (utime) or jumping in position is not a stream
+  for (int k = 1; k <= 10; ++k) {
+    auto c = f.command(k);
+    c.utime = 1000000 - 1000 * k;
+    run(comp, c, &accepted);
+  }
+  for (int k = 11; k <= 20; ++k) run(comp, f.command(k, k % 2 ? 10.0 : 25.0), &accepted);
+  CHECK(accepted == 200);
+  CHECK(comp.counters().stream_restarts == 0);
+  // the CNC restarts at seq 1 (a new utime origin as well): accepted from its fifth command
+  for (int k = 1; k <= 20; ++k) {
+    auto c = f.command(k);
+    c.utime = 7 + 1000 * k;
+    run(comp, c, &accepted);
+    if (k == 4) CHECK(accepted == 200);
+    if (k == 5) CHECK(accepted == 201);
+  }
+  CHECK(accepted == 216);
+  CHECK(comp.counters().stream_restarts == 1);
+  CHECK(comp.counters().seq_gaps == 0);
+}
+
+TEST_CASE("reset starts a new stream at once; gaps in seq are counted", "[compensator][stream]") {
+  Fixture f;
+  chaincomp::Compensator comp(f.entry, f.model, f.config.compensator);
+  int accepted = 0;
+  for (int seq : {1, 2, 5, 6, 10}) run(comp, f.command(seq), &accepted);
+  auto bad = f.command(11);
+  bad.axes[0] = std::nan("");
+  run(comp, bad, &accepted);  // received, not missing, though rejected
+  run(comp, f.command(12), &accepted);
+  CHECK(accepted == 6);
+  CHECK(comp.counters().seq_gaps == 2);
+  CHECK(comp.counters().seq_missing == 5);  // 3, 4, 7, 8, 9
+  comp.reset();
+  run(comp, f.command(1, 30.0), &accepted);  // behind, and 20 mm away: a new stream nonetheless
+  run(comp, f.command(2, 30.0), &accepted);
+  CHECK(accepted == 8);
+  const auto& k = comp.counters();
+  CHECK(k.resets == 1);
+  CHECK(k.stream_restarts == 0);
+  CHECK(k.seq_gaps == 2);
+  CHECK(k.rejected[static_cast<int>(chaincomp::Reject::kStepTooLarge)] == 0);
+}
+
+TEST_CASE("machine names are compared exactly: an empty name or one with a NUL inside is refused",
+          "[compensator]") {
+  Fixture f;
+  chaincomp::Compensator comp(f.entry, f.model, f.config.compensator);
+  chaincomp::Target t;
+  chaincomp::Reject why;
+  const char with_nul[] = "five_axis_ac\0garbage";
+  for (std::string_view name : {std::string_view(with_nul, sizeof with_nul - 1), std::string_view(""),
+                                std::string_view("five_axis_a"), std::string_view("five_axis_ac ")}) {
+    auto c = f.command(1);
+    c.machine = name;
+    CHECK_FALSE(comp.process(c, t, &why));
+    CHECK(why == chaincomp::Reject::kWrongMachine);
+  }
+  CHECK(comp.process(f.command(1), t));
+}
+
+TEST_CASE("a clamped or ramped target carries its own residual and status, not the solver's",
+          "[compensator][truthful]") {
+  Fixture f;
+  for (auto& a : f.config.compensator.axes) a.max_correction_step = 1e-4;
+  chaincomp::Compensator comp(f.entry, f.model, f.config.compensator);
+  const int n = 5;
+  const auto c = f.command(1);
+  // the full correction, from a compensator without the rate limit
+  chaincomp::Target full;
+  {
+    chaincomp::CompensatorConfig loose = f.config.compensator;
+    for (auto& a : loose.axes) a.max_correction_step = 1.0;
+    chaincomp::Compensator ref(f.entry, f.model, loose);
+    REQUIRE(ref.process(c, full));
+    REQUIRE(full.status == 0);
+    REQUIRE(full.residual_point < 1e-7);
+  }
+  // Independent of the daemon's evaluation: the point error left is, to first order, the
+  // Jacobian of the point times the correction still missing (internal units).
+  auto linear_residual = [&](const chaincomp::Target& t) {
+    double q[8], pose[6], jac[6 * 8];
+    for (int i = 0; i < n; ++i) q[i] = t.axes[i] * f.entry.info->axes[i].to_internal;
+    f.entry.pose_jacobian(f.model, q, pose, jac);
+    const int rows = f.entry.info->pose_size;
+    double e[3] = {0, 0, 0};
+    for (int i = 0; i < n; ++i) {
+      const double missing = (full.correction[i] - t.correction[i]) * f.entry.info->axes[i].to_internal;
+      for (int r = 0; r < 3; ++r) e[r] += jac[i * rows + r] * missing;
+    }
+    return std::sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
+  };
+  chaincomp::Target t;
+  REQUIRE(comp.process(c, t));
+  CHECK((t.flags & chaincomp::kFlagClamped) != 0);
+  CHECK((t.flags & chaincomp::kFlagResidual) != 0);
+  CHECK(t.status == 1);
+  // (target - command: the rounding of a 100 mm position)
+  for (int i = 0; i < n; ++i) CHECK(std::abs(t.correction[i]) <= 1e-4 + 1e-12);
+  const double expected = linear_residual(t);
+  REQUIRE(expected > 1e-3);  // some µm still missing
+  CHECK(t.residual_point == Approx(expected).epsilon(1e-3));
+  // the limit lets the correction catch up: then the solver's residual and status again
+  for (int k = 2; k <= 400; ++k) REQUIRE(comp.process(f.command(k), t));
+  CHECK((t.flags & (chaincomp::kFlagClamped | chaincomp::kFlagResidual)) == 0);
+  CHECK(t.status == 0);
+  CHECK(t.residual_point < 1e-7);
+
+  // switched off (ramp 0): the target is the command, and its residual the machine's error
+  f.config.compensator.start_enabled = false;
+  chaincomp::Compensator off(f.entry, f.model, f.config.compensator);
+  REQUIRE(off.process(c, t));
+  for (int i = 0; i < n; ++i) CHECK(t.correction[i] == 0.0);
+  CHECK(t.status == 1);
+  CHECK(t.residual_point == Approx(linear_residual(t)).epsilon(1e-3));
 }

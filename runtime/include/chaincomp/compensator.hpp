@@ -6,6 +6,7 @@
 
 #include <array>
 #include <cstdint>
+#include <string_view>
 #include <vector>
 
 #include "chaincomp/model_info.hpp"
@@ -51,9 +52,16 @@ struct CompensatorConfig {
   bool start_enabled = true;
 };
 
+// A stream restart: this many commands in a row that are behind the last accepted seq but in
+// order among themselves (seq increasing, utime not decreasing, each step within max_step)
+// are taken as a new stream, the last of them accepted. One message (e.g. seq 2^63-1)
+// cannot lock the stream out, and a CNC that restarts its numbering is followed again
+// after at most this many commands.
+constexpr int kRestartRun = 5;
+
 struct Command {
   std::int64_t utime = 0, seq = 0;
-  const char* machine = "";           // empty: not checked
+  std::string_view machine;           // compared exactly (length and bytes) with the model's
   int num_axes = 0;
   std::array<double, kMaxAxes> axes{};  // axis units (mm, deg)
 };
@@ -68,6 +76,10 @@ struct Target {
 
 struct Counters {
   std::int64_t received = 0, published = 0, clamped = 0, clamped_input = 0;
+  std::int64_t seq_gaps = 0;         // forward jumps of seq (for this machine): commands never received
+  std::int64_t seq_missing = 0;      // the seq values those jumps skipped (saturates at 2^63-1)
+  std::int64_t stream_restarts = 0;  // restarts taken by the kRestartRun rule
+  std::int64_t resets = 0;           // restarts asked for by reset()
   std::array<std::int64_t, kNumReasons> rejected{};
 };
 
@@ -85,6 +97,9 @@ class Compensator {
     reject(Reject::kUndecodable, nullptr);
   }
   void set_enabled(bool on) noexcept { enabled_ = on; }
+  // A new stream (a control message's reset): the next command is accepted whatever its seq
+  // and wherever it starts; the correction keeps its rate limit from the last one.
+  void reset() noexcept;
   bool enabled() const noexcept { return enabled_; }
   double ramp() const noexcept { return ramp_; }
   const Counters& counters() const noexcept { return counters_; }
@@ -92,6 +107,9 @@ class Compensator {
 
  private:
   bool reject(Reject r, Reject* why) noexcept;
+  bool seq_ok(const Command& in, const std::array<double, kMaxAxes>& cmd, Reject* why) noexcept;
+  void count_gap(std::int64_t seq) noexcept;
+  void residual_at(const double* q, const std::array<double, kMaxAxes>& target, double* residual) const noexcept;
 
   const ModelEntry& entry_;
   const void* model_;
@@ -103,10 +121,16 @@ class Compensator {
   int n_;
   bool enabled_;
   double ramp_;
-  bool have_last_ = false;  // a command has been accepted
+  bool have_last_ = false;  // a command has been accepted (ramp time, rate limit)
+  bool seq_known_ = false;  // last_seq_ holds the accepted stream's seq (a reset forgets it)
   bool have_seen_ = false;  // a valid command has been seen (for the step check)
   std::int64_t last_seq_ = 0, last_utime_ = 0;
   std::array<double, kMaxAxes> seen_axes_{}, last_correction_{};
+  bool have_top_ = false;   // top_seq_ holds the highest seq received (gap counting)
+  std::int64_t top_seq_ = 0;
+  int run_length_ = 0;      // commands behind last_seq_ in order among themselves (restart rule)
+  std::int64_t run_seq_ = 0, run_utime_ = 0;
+  std::array<double, kMaxAxes> run_axes_{};
   Counters counters_;
 };
 
