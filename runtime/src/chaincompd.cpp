@@ -5,6 +5,7 @@
 #include <sched.h>
 #include <sys/mman.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -105,23 +106,35 @@ int main(int argc, char** argv) {
   sa.sa_handler = on_signal;
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
+  // The kernel reports twice the size asked (its bookkeeping); less means net.core.rmem_max capped it.
+  const long long got = node->recv_buf_bytes();
+  if (config.lcm_url.rfind("udpm://", 0) == 0 && got >= 0 && got < 2LL * config.recv_buf_size) {
+    std::fprintf(stderr, "chaincompd: warning: socket receive buffer %lld bytes, not the %d asked "
+                 "(recv_buf_size; raise net.core.rmem_max); continuing\n", got / 2, config.recv_buf_size);
+  }
   const std::string tables = chaincomp::describe_varying(loaded.varying);
-  std::fprintf(stderr, "chaincompd: %s with %s%s on %s: %s -> %s; ready\n", entry->info->name, params_path.c_str(),
-               tables.empty() ? "" : (" (" + tables + ")").c_str(), config.lcm_url.c_str(),
-               config.command_channel.c_str(), config.corrected_channel.c_str());
+  std::fprintf(stderr, "chaincompd: %s with %s%s on %s: %s -> %s; instance %016llx; ready\n", entry->info->name,
+               params_path.c_str(), tables.empty() ? "" : (" (" + tables + ")").c_str(), config.lcm_url.c_str(),
+               config.command_channel.c_str(), config.corrected_channel.c_str(),
+               static_cast<unsigned long long>(node->instance_id()));
 
   using Clock = std::chrono::steady_clock;
   const int fd = lcm_get_fileno(lcm);
   const auto period = std::chrono::nanoseconds(static_cast<std::int64_t>(config.status_period_s * 1e9));
   auto next_status = Clock::now() + period;
   while (!g_stop) {
-    const auto wait = std::chrono::duration_cast<std::chrono::milliseconds>(next_status - Clock::now()).count();
+    // ppoll sleeps to the nanosecond: never a zero timeout while the status is not yet due
+    // (poll's milliseconds would spin for the last one).
+    const auto left = std::max(std::chrono::nanoseconds(0), next_status - Clock::now());
+    const timespec wait{static_cast<time_t>(left.count() / 1000000000), static_cast<long>(left.count() % 1000000000)};
     pollfd pfd{fd, POLLIN, 0};
-    const int r = poll(&pfd, 1, wait > 0 ? static_cast<int>(wait) + 1 : 0);
+    const int r = ppoll(&pfd, 1, &wait, nullptr);
     if (r > 0 && (pfd.revents & POLLIN)) lcm_handle(lcm);
-    if (Clock::now() >= next_status) {
+    const auto now = Clock::now();
+    if (now >= next_status) {
       node->publish_status(false);
       next_status += period;
+      if (next_status <= now) next_status = now + period;  // after a stall: no burst to catch up
     }
   }
   node->publish_status(true);

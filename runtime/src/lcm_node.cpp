@@ -2,8 +2,15 @@
 
 #include "chaincomp/params_io.hpp"
 
+#include <dirent.h>
 #include <dlfcn.h>
+#include <linux/sock_diag.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
 
+#include <cstdio>
+#include <cstdlib>
+#include <random>
 
 namespace chaincomp {
 
@@ -20,9 +27,14 @@ std::int64_t wall_us() {
              std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
+// Where the machine name's length field is: in a command after fingerprint, utime and seq;
+// in a target after fingerprint, utime, seq, num_axes, axes, correction, the residuals,
+// flags, status, compute_ns and instance_id.
+constexpr std::size_t kCommandMachineAt = 8 + 8 + 8;
+constexpr std::size_t kTargetMachineAt = 8 + 8 + 8 + 4 + 64 + 64 + 8 + 8 + 4 + 4 + 8 + 8;
+
 // The machine name's length field must be 1..kMaxMachineName+1 and fit in the payload.
-bool machine_name_fits(const void* data, std::size_t size) {
-  constexpr std::size_t kAt = 8 + 8 + 8;  // fingerprint, utime, seq
+bool machine_name_fits(const void* data, std::size_t size, std::size_t kAt) {
   if (size < kAt + 4) return false;
   const auto* b = static_cast<const unsigned char*>(data) + kAt;
   const std::int64_t len = static_cast<std::int32_t>((std::uint32_t(b[0]) << 24) | (std::uint32_t(b[1]) << 16) |
@@ -34,13 +46,13 @@ bool machine_name_fits(const void* data, std::size_t size) {
 
 bool decode_command(const void* data, std::size_t size, chaincomp_lcm::lcmt_axis_command& scratch,
                     Command& out) noexcept {
-  if (!machine_name_fits(data, size) || scratch.decode(data, 0, static_cast<int>(size)) < 0 ||
+  if (!machine_name_fits(data, size, kCommandMachineAt) || scratch.decode(data, 0, static_cast<int>(size)) < 0 ||
       scratch.num_axes < 0 || scratch.num_axes > kMaxAxes) {
     return false;
   }
   out.utime = scratch.utime;
   out.seq = scratch.seq;
-  out.machine = scratch.machine.c_str();
+  out.machine = scratch.machine;  // all of it: a NUL inside is part of the name
   out.num_axes = scratch.num_axes;
   for (int i = 0; i < kMaxAxes; ++i) out.axes[i] = scratch.axes[i];
   return true;
@@ -63,10 +75,20 @@ void to_message(const Target& t, chaincomp_lcm::lcmt_corrected_target& o) noexce
 LcmNode::LcmNode(lcm_t* lcm, const ModelEntry& entry, const void* model, const DaemonConfig& config,
                  const std::string& params_file, const std::string& params_hash, RealtimeObtained rt)
     : lcm_(lcm), config_(config), comp_(entry, model, config.compensator), latency_(config.latency_window) {
+  std::random_device random;
+  while (instance_id_ == 0) {
+    instance_id_ = static_cast<std::int64_t>(((std::uint64_t(random()) << 32) | random()) >> 1);
+  }
+  machine_ = entry.info->name;
   cmd_msg_.machine.reserve(kMaxMachineName + 1);
+  heard_msg_.machine.reserve(kMaxMachineName + 1);
+  out_msg_.instance_id = instance_id_;
+  out_msg_.machine = machine_;
   out_buf_.resize(out_msg_.getEncodedSize() + 64);
   auto& s = status_msg_;
   s.machine = entry.info->name;
+  s.instance_id = instance_id_;
+  s.config_file = config.source_file;
   s.model_hash = hash_hex(entry.info->source_hash);
   s.params_file = params_file;
   s.params_hash = params_hash;
@@ -79,6 +101,10 @@ LcmNode::LcmNode(lcm_t* lcm, const ModelEntry& entry, const void* model, const D
   // LCM drops a subscription's messages beyond its queue capacity (default 30): a short
   // stall of the loop at 10 kHz would lose commands. The socket buffer bounds it anyway.
   lcm_subscription_set_queue_capacity(command_sub_, kQueueCapacity);
+  // Targets on the bus: its own heard back, and another daemon's for this machine.
+  target_sub_ = lcm_subscribe(lcm_, config_.corrected_channel.c_str(), &LcmNode::on_target, this);
+  lcm_subscription_set_queue_capacity(target_sub_, kQueueCapacity);
+  find_sockets();
   // An LD_PRELOAD allocation counter, when present, measures the steady state.
   alloc_count_ = reinterpret_cast<long long (*)()>(dlsym(RTLD_DEFAULT, "chaincomp_alloc_count"));
   started_ = Clock::now();
@@ -89,6 +115,72 @@ LcmNode::LcmNode(lcm_t* lcm, const ModelEntry& entry, const void* model, const D
 LcmNode::~LcmNode() {
   lcm_unsubscribe(lcm_, command_sub_);
   lcm_unsubscribe(lcm_, control_sub_);
+  lcm_unsubscribe(lcm_, target_sub_);
+}
+
+// LCM's udpm provider receives on a socket of its own thread; lcm_get_fileno gives a
+// notification pipe. The process's UDP sockets are LCM's (a receiving and a sending one):
+// found once here, asked for their drop counters at each status.
+void LcmNode::find_sockets() {
+  DIR* dir = opendir("/proc/self/fd");
+  if (dir == nullptr) return;
+  const int own = dirfd(dir);
+  while (dirent* e = readdir(dir)) {
+    const int fd = std::atoi(e->d_name);
+    int type = 0, domain = 0, size = 0;
+    socklen_t len = sizeof type;
+    if (fd == own || e->d_name[0] < '0' || e->d_name[0] > '9') continue;
+    if (getsockopt(fd, SOL_SOCKET, SO_TYPE, &type, &len) != 0 || type != SOCK_DGRAM) continue;
+    len = sizeof domain;
+    if (getsockopt(fd, SOL_SOCKET, SO_DOMAIN, &domain, &len) != 0 || domain != AF_INET) continue;
+    if (num_sockets_ == kMaxSockets) break;
+    sockets_[num_sockets_++] = fd;
+    // the receiving socket is the one bound to a port (udpm binds it to the group's port)
+    sockaddr_in addr{};
+    len = sizeof addr;
+    if (getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len) == 0 && addr.sin_port != 0) {
+      len = sizeof size;
+      if (getsockopt(fd, SOL_SOCKET, SO_RCVBUF, &size, &len) == 0) recv_buf_bytes_ = size;
+    }
+  }
+  closedir(dir);
+}
+
+std::int64_t LcmNode::kernel_drops() const {
+  if (num_sockets_ == 0) return -1;
+  std::int64_t drops = 0;
+  for (int i = 0; i < num_sockets_; ++i) {
+    std::uint32_t info[SK_MEMINFO_VARS] = {};
+    socklen_t len = sizeof info;
+    if (getsockopt(sockets_[i], SOL_SOCKET, SO_MEMINFO, info, &len) == 0) drops += info[SK_MEMINFO_DROPS];
+  }
+  return drops;
+}
+
+void LcmNode::on_target(const lcm_recv_buf_t* rbuf, const char*, void* user) {
+  static_cast<LcmNode*>(user)->handle_target(rbuf);
+}
+
+void LcmNode::handle_target(const lcm_recv_buf_t* rbuf) {
+  auto& t = heard_msg_;
+  if (!machine_name_fits(rbuf->data, rbuf->data_size, kTargetMachineAt) ||
+      t.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) < 0) {
+    return;  // not a target of this version: nobody this node could be confused with
+  }
+  if (t.instance_id == instance_id_) {
+    ++own_heard_;
+    return;
+  }
+  if (t.machine != machine_) return;  // exact: length and bytes
+  ++foreign_;
+  foreign_instance_ = t.instance_id;
+  for (int i = 0; i < num_reported_; ++i) {
+    if (reported_[i] == t.instance_id) return;
+  }
+  if (num_reported_ < kMaxReported) reported_[num_reported_++] = t.instance_id;
+  std::fprintf(stderr, "chaincompd: warning: another daemon (instance %016llx) publishes targets for %s on %s; "
+               "this is instance %016llx\n", static_cast<unsigned long long>(t.instance_id), machine_.c_str(),
+               config_.corrected_channel.c_str(), static_cast<unsigned long long>(instance_id_));
 }
 
 void LcmNode::on_command(const lcm_recv_buf_t* rbuf, const char*, void* user) {
@@ -99,6 +191,7 @@ void LcmNode::on_control(const lcm_recv_buf_t* rbuf, const char*, void* user) {
   auto* self = static_cast<LcmNode*>(user);
   if (self->control_msg_.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) >= 0) {
     self->comp_.set_enabled(self->control_msg_.enable);
+    if (self->control_msg_.reset) self->comp_.reset();
   }
 }
 
@@ -144,6 +237,15 @@ void LcmNode::publish_status(bool final) {
   s.latency_max_ns = lat.max;
   s.allocations = (alloc_count_ && steady_) ? alloc_count_() - alloc_baseline_ : -1;
   s.final = final;
+  s.seq_gaps = k.seq_gaps;
+  s.seq_missing = k.seq_missing;
+  s.stream_restarts = k.stream_restarts;
+  s.resets = k.resets;
+  s.kernel_drops = kernel_drops();
+  s.recv_buf_bytes = recv_buf_bytes_;
+  s.own_targets_heard = own_heard_;
+  s.foreign_targets = foreign_;
+  s.foreign_instance = foreign_instance_;
   const int n = s.encode(status_buf_.data(), 0, static_cast<int>(status_buf_.size()));
   if (n > 0) lcm_publish(lcm_, config_.status_channel.c_str(), status_buf_.data(), n);
 }

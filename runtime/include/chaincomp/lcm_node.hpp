@@ -41,6 +41,11 @@ class LcmNode {
 
   void publish_status(bool final);
   const Counters& counters() const { return comp_.counters(); }
+  std::int64_t instance_id() const { return instance_id_; }
+  // Datagrams the kernel dropped at the process's UDP sockets (-1: none), and the receive
+  // buffer of the one LCM receives on (-1: none), as SO_MEMINFO and SO_RCVBUF report them.
+  std::int64_t kernel_drops() const;
+  std::int64_t recv_buf_bytes() const { return recv_buf_bytes_; }
 
   // The longest machine name a command may carry (lcm-gen's decoder trusts the length).
   static constexpr int kMaxMachineName = 255;
@@ -50,14 +55,17 @@ class LcmNode {
  private:
   static void on_command(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
   static void on_control(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
+  static void on_target(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
   void handle_command(const lcm_recv_buf_t* rbuf);
+  void handle_target(const lcm_recv_buf_t* rbuf);
+  void find_sockets();
 
   lcm_t* lcm_;
   DaemonConfig config_;
   Compensator comp_;
   LatencyWindow latency_;
   chaincomp_lcm::lcmt_axis_command cmd_msg_;
-  chaincomp_lcm::lcmt_corrected_target out_msg_;
+  chaincomp_lcm::lcmt_corrected_target out_msg_, heard_msg_;
   chaincomp_lcm::lcmt_chaincomp_control control_msg_;
   chaincomp_lcm::lcmt_chaincomp_status status_msg_;
   std::vector<unsigned char> out_buf_, status_buf_;
@@ -69,6 +77,20 @@ class LcmNode {
   bool steady_ = false;  // the first command has been handled
   lcm_subscription_t* command_sub_ = nullptr;
   lcm_subscription_t* control_sub_ = nullptr;
+  lcm_subscription_t* target_sub_ = nullptr;
+  std::int64_t instance_id_ = 0;
+  std::string machine_;
+  // Targets on the corrected channel: this node's own, heard back, and another instance's
+  // for the same machine (two daemons answering one CNC); each other instance is reported
+  // on stderr once (the first kMaxReported of them).
+  std::int64_t own_heard_ = 0, foreign_ = 0, foreign_instance_ = 0;
+  static constexpr int kMaxReported = 8;
+  std::int64_t reported_[kMaxReported] = {};
+  int num_reported_ = 0;
+  static constexpr int kMaxSockets = 8;
+  int sockets_[kMaxSockets] = {};
+  int num_sockets_ = 0;
+  std::int64_t recv_buf_bytes_ = -1;
 };
 
 }  // namespace chaincomp
