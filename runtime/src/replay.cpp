@@ -137,6 +137,7 @@ int main(int argc, char** argv) {
   chaincomp_lcm::lcmt_axis_command scratch;
   scratch.machine.reserve(chaincomp::LcmNode::kMaxMachineName + 1);
   chaincomp_lcm::lcmt_corrected_target msg;
+  msg.machine = entry->info->name;  // instance_id stays 0: replayed offline, not a daemon
   std::vector<unsigned char> buf(msg.getEncodedSize() + 64);
   const std::string out_channel = config.corrected_channel;
   chaincomp::Command cmd;
@@ -233,6 +234,12 @@ int main(int argc, char** argv) {
     for (const auto& d : in.damage()) bytes += d.bytes;
     std::fprintf(stderr, "  damaged: %zu stretches of the log (%llu bytes) skipped, not events\n",
                  in.damage().size(), bytes);
+  }
+  // the stream rule (compensator.hpp, kRestartRun) is the daemon's: its events counted alike
+  if (k.seq_gaps || k.stream_restarts) {
+    std::fprintf(stderr, "  seq gaps %lld (%lld commands missing), stream restarts %lld\n",
+                 static_cast<long long>(k.seq_gaps), static_cast<long long>(k.seq_missing),
+                 static_cast<long long>(k.stream_restarts));
   }
   for (int r = 0; r < chaincomp::kNumReasons; ++r) {
     if (k.rejected[r]) {
