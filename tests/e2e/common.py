@@ -27,6 +27,14 @@ def exact_check(commands: np.ndarray, targets: np.ndarray, machine: str = MACHIN
                 params: str = PARAMS) -> tuple[float, float]:
     """Largest point (mm) and direction (rad) difference between the actual pose at the
     targets and the nominal pose at the commands, by the independent exact chain."""
+    dp, dd = exact_errors(commands, targets, machine, params)
+    return float(np.max(dp)), float(np.max(dd))
+
+
+def exact_errors(commands: np.ndarray, targets: np.ndarray, machine: str = MACHINE,
+                 params: str = PARAMS) -> tuple[np.ndarray, np.ndarray]:
+    """Per target: the point (mm) and direction (rad) difference between the actual pose at
+    the target and the nominal pose at its command, by the independent exact chain."""
     m = load_machine(machine)
     exact = ExactModel(m)
     base = m.nominal_values()
@@ -40,5 +48,4 @@ def exact_check(commands: np.ndarray, targets: np.ndarray, machine: str = MACHIN
         return np.array(p), np.array(d)
     p_act, d_act = pose(base, targets)
     p_nom, d_nom = pose(nominal, commands)
-    return (float(np.max(np.linalg.norm(p_act - p_nom, axis=0))),
-            float(np.max(np.linalg.norm(d_act - d_nom, axis=0))))
+    return np.linalg.norm(p_act - p_nom, axis=0), np.linalg.norm(d_act - d_nom, axis=0)

@@ -33,12 +33,15 @@ def main(machine_path: str, params: str, n: int, model: str | None) -> int:
     daemon = h.start_daemon(machine_path, params, f"{HERE}/config_test.yaml", preload=True, model=model)
     listener = h.Listener()
     pub = h.lcm.LCM(h.URL)
-    warm = 200
+    paced, backlog = 200, 1000
+    warm = paced + backlog
     path = path_within_limits(m, n + warm)
     t0 = time.perf_counter()
-    for i in range(warm):
+    for i in range(paced):
         h.pace(t0, i, 2000)
         pub.publish("CHAINCOMP_COMMAND", h.command(i + 1, path[i], machine=m.name))
+    h.warm_backlog(daemon, lambda i: pub.publish("CHAINCOMP_COMMAND", h.command(i + 1, path[i], machine=m.name)),
+                   paced, backlog)
     listener.wait_for(lambda: len(listener.targets) >= warm and any(s.published >= warm for s in listener.status), 10)
     allocations_after_warmup = listener.status[-1].allocations
     listener.targets.clear()

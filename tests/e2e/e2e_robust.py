@@ -38,7 +38,9 @@ def main(random_count: int) -> int:
         "non_finite": [h.command(seq + 1, [float("nan"), 0, -200, 30, -45]),
                        h.command(seq + 1, [0, float("inf"), -200, 30, -45])],
         "wrong_axis_count": [h.command(seq + 1, [0, 0, -200, 30])],
-        "wrong_machine": [h.command(seq + 1, path[1], machine="angle_head")],
+        "wrong_machine": [h.command(seq + 1, path[1], machine="angle_head"),
+                          h.command(seq + 1, path[1], machine="five_axis_ac\0garbage"),
+                          h.command(seq + 1, path[1], machine="")],
         "out_of_limits": [h.command(seq + 1, [limits[0, 1] + 1, 0, -200, 30, -45])],
         "step_too_large": [h.command(seq + 1, path[1] + np.array([6.0, 0, 0, 0, 0]))],
         "duplicate_seq": [h.command(seq, path[1])],
@@ -78,11 +80,9 @@ def main(random_count: int) -> int:
     listener.wait_for(lambda: len(listener.targets) >= total_good, 10)
     daemon.terminate()
     daemon.wait(5)
-    listener.wait_for(lambda: any(s.final for s in listener.status), 3)
+    final = h.final_status(listener, daemon)
     listener.close()
-    finals = [s for s in listener.status if s.final]
-    assert finals, f"no final status (daemon exit {daemon.returncode}): {daemon.stderr.read()}"
-    final = finals[-1]
+    h.print_losses(final)
     rejected = dict(zip(REASONS, final.rejected))
     print(f"sent {total_good} good, {sum(expected.values())} bad, {sent_random} random; daemon received "
           f"{final.received}, published {final.published}")
@@ -100,6 +100,7 @@ def main(random_count: int) -> int:
     assert [t.seq for _, t in listener.targets][:2] == [1, 2]
     assert [t.seq for _, t in listener.targets][-10:] == list(range(total_good - 9, total_good + 1))
     assert rejected["compensation_failed"] == 0
+    assert final.seq_gaps == 0 and final.stream_restarts == 0 and final.kernel_drops == 0
     return 0
 
 

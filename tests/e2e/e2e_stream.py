@@ -15,13 +15,16 @@ def main(rate: float, n: int) -> int:
     daemon = h.start_daemon(MACHINE, PARAMS, f"{HERE}/config_test.yaml", preload=True)
     listener = h.Listener()
     pub = h.lcm.LCM(h.URL)
-    warm = 500
+    paced, backlog = 500, 1000
+    warm = paced + backlog
     path = toolpath(n + warm)
-    # Warm-up at the test's rate: LCM grows its receive-buffer pool to its working size.
+    # Warm-up at the test's rate, then a deep backlog: LCM grows its receive-buffer pool
+    # and ring to their working size.
     tw = time.perf_counter()
-    for i in range(warm):
+    for i in range(paced):
         h.pace(tw, i, rate)
         pub.publish("CHAINCOMP_COMMAND", h.command(i + 1, path[i]))
+    h.warm_backlog(daemon, lambda i: pub.publish("CHAINCOMP_COMMAND", h.command(i + 1, path[i])), paced, backlog)
     listener.wait_for(lambda: len(listener.targets) >= warm and
                       any(s.published >= warm for s in listener.status), 10)
     allocations_after_warmup = listener.status[-1].allocations
@@ -37,10 +40,10 @@ def main(rate: float, n: int) -> int:
     ok = listener.wait_for(lambda: len(listener.targets) >= n, 10)
     daemon.terminate()
     daemon.wait(5)
-    listener.wait_for(lambda: any(s.final for s in listener.status), 3)
+    final = h.final_status(listener, daemon)
     listener.close()
     targets = listener.targets
-    final = [s for s in listener.status if s.final][-1]
+    h.print_losses(final)
     seqs = [t.seq for _, t in targets]
     rtt = np.array([(stamp - sent[t.seq]) * 1e6 for stamp, t in targets])
     corrected = np.array([t.axes[:5] for _, t in targets])
@@ -56,6 +59,9 @@ def main(rate: float, n: int) -> int:
     assert seqs == list(range(warm + 1, warm + n + 1)), "targets out of order or duplicated"
     assert np.all(np.isfinite(corrected))
     assert final.received == n + warm and final.published == n + warm and sum(final.rejected) == 0
+    # nothing lost anywhere the daemon can see: no gap, no kernel drop, its targets all on the bus
+    assert final.seq_gaps == 0 and final.kernel_drops == 0 and final.own_targets_heard == n + warm
+    assert final.foreign_targets == 0 and all(t.instance_id == daemon.instance for _, t in targets)
     dp, dd = exact_check(path[np.array(seqs) - 1], corrected)
     print(f"exact model: max point error {dp:.2e} mm, max direction error {dd:.2e} rad")
     assert dp < 1e-6 and dd < 1e-9

@@ -1,5 +1,7 @@
 """Switch compensation off and on under a 1 kHz stream: consecutive corrections never
-change by more than the per-cycle limit, and after the ramp the full correction is back."""
+change by more than the per-cycle limit, and after the ramp the full correction is back.
+Every target's residual, status and flags describe that target (ramped, rate-limited, off):
+the independent exact chain at the target against the nominal pose at its command."""
 
 import sys
 import time
@@ -7,7 +9,7 @@ import time
 import numpy as np
 
 import lcm_harness as h
-from common import HERE, MACHINE, PARAMS, exact_check, toolpath
+from common import HERE, MACHINE, PARAMS, exact_check, exact_errors, toolpath
 
 RATE = 1000.0
 N = 3000
@@ -33,7 +35,9 @@ def main() -> int:
     listener.wait_for(lambda: len(listener.targets) >= N, 10)
     daemon.terminate()
     daemon.wait(5)
+    final = h.final_status(listener, daemon)
     listener.close()
+    h.print_losses(final)
     targets = [t for _, t in listener.targets]
     assert len(targets) == N, f"received {len(targets)} of {N}"
     corr = np.array([t.correction[:5] for t in targets])
@@ -53,6 +57,22 @@ def main() -> int:
     dp, dd = exact_check(cmds, np.array([t.axes[:5] for t in targets[tail]]))
     print(f"after the ramp: max point error {dp:.2e} mm, direction error {dd:.2e} rad")
     assert dp < 1e-6 and dd < 1e-9
+    # Truthful targets: residual = the exact model's error at the target published.
+    seqs = [t.seq for t in targets]
+    ep, ed = exact_errors(path[np.array(seqs) - 1], np.array([t.axes[:5] for t in targets]))
+    rp = np.array([t.residual_point for t in targets])
+    rd = np.array([t.residual_direction for t in targets])
+    status = np.array([t.status for t in targets])
+    left = (flags & 2) | (flags & 4) | (corr == 0).all(axis=1)  # ramping, clamped or off
+    print(f"targets with a correction held back: {int((left != 0).sum())}; largest residual "
+          f"{rp.max():.3e} mm; largest difference from the exact model {np.abs(rp - ep)[left != 0].max():.1e} mm, "
+          f"{np.abs(rd - ed)[left != 0].max():.1e} rad")
+    assert (left != 0).sum() > 500
+    assert np.allclose(rp[left != 0], ep[left != 0], rtol=1e-6, atol=1e-9)
+    assert np.allclose(rd[left != 0], ed[left != 0], rtol=1e-6, atol=1e-11)
+    beyond = (rp > 1e-7) | (rd > 1e-9)
+    assert np.array_equal(status == 1, beyond) and np.array_equal((flags & 8) != 0, beyond)
+    assert final.published == N and final.kernel_drops == 0 and final.seq_gaps == 0
     return 0
 
 

@@ -4,6 +4,7 @@ netns.sh (udpm with ttl=0 on a loopback that carries multicast; never on the hos
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -30,19 +31,21 @@ def require_namespace() -> None:
 
 def start_daemon(machine: str, params: str, config: str, preload: bool = False,
                  model: str | None = None) -> subprocess.Popen:
-    """chaincompd, once it says ready; the lines of a model build before that are printed."""
+    """chaincompd, once it says ready; the lines of a model build (and warnings) before that
+    are printed; its instance id is proc.instance."""
     env = dict(os.environ)
     if preload:
         env["LD_PRELOAD"] = os.path.join(BUILD, "runtime", "libchaincomp_alloc_counter.so")
     cmd = [os.path.join(BUILD, "bin", "chaincompd"), "--machine", machine, "--params", params, "--config", config]
     proc = subprocess.Popen(cmd + (["--model", model] if model else []), stderr=subprocess.PIPE, text=True, env=env)
     line = proc.stderr.readline()
-    while line.startswith("chaincomp build:"):
+    while line.startswith(("chaincomp build:", "chaincompd: warning:")):
         print(line, end="")
         line = proc.stderr.readline()
     if "ready" not in line:
         proc.kill()
         raise RuntimeError(f"chaincompd did not start: {line}{proc.stderr.read()}")
+    proc.instance = int(line.split("instance ")[1].split(";")[0], 16)
     return proc
 
 
@@ -93,11 +96,42 @@ def command(seq: int, axes, machine: str = "five_axis_ac", utime: int | None = N
     return msg.encode()
 
 
-def control(enable: bool) -> bytes:
+def control(enable: bool, reset: bool = False) -> bytes:
     msg = lcmt_chaincomp_control()
     msg.utime = int(time.time() * 1e6)
     msg.enable = enable
+    msg.reset = reset
     return msg.encode()
+
+
+def warm_backlog(daemon: subprocess.Popen, publish, first: int, count: int = 1000) -> None:
+    """Warm-up with a backlog deeper than a loaded machine's stalls (tens of ms at 10 kHz):
+    the daemon stopped while `count` commands arrive (publish(i) for i in first..first+count-1),
+    then resumed. LCM grows its receive ring to the deepest backlog it has held (its own
+    targets heard back queue there too): here, not in the steady state."""
+    daemon.send_signal(signal.SIGSTOP)
+    try:
+        for i in range(first, first + count):
+            publish(i)
+        time.sleep(0.02)
+    finally:
+        daemon.send_signal(signal.SIGCONT)
+
+
+def final_status(listener: "Listener", daemon: subprocess.Popen) -> lcmt_chaincomp_status:
+    """The status the daemon published at exit (it must have published one)."""
+    listener.wait_for(lambda: any(s.final and s.instance_id == daemon.instance for s in listener.status), 3)
+    finals = [s for s in listener.status if s.final and s.instance_id == daemon.instance]
+    assert finals, f"no final status (daemon exit {daemon.returncode}): {daemon.stderr.read()}"
+    return finals[-1]
+
+
+def print_losses(s: lcmt_chaincomp_status) -> None:
+    """What the daemon says about loss: commands never received, kernel drops, its own
+    targets heard back."""
+    print(f"daemon {s.instance_id:016x}: received {s.received}, published {s.published}, seq gaps {s.seq_gaps} "
+          f"({s.seq_missing} missing), kernel drops {s.kernel_drops} (buffer {s.recv_buf_bytes} B), "
+          f"own targets heard back {s.own_targets_heard}, foreign targets {s.foreign_targets}")
 
 
 def pace(t0: float, i: int, rate_hz: float) -> None:

@@ -1,8 +1,11 @@
 """chaincompd: start-up errors (no LCM traffic), and the end-to-end scenarios of
 tests/e2e/, each run inside a network namespace made by tests/e2e/netns.sh."""
 
+import contextlib
 import os
 import subprocess
+import sys
+import time
 
 import pytest
 
@@ -47,6 +50,14 @@ def test_daemon_help():
                 _write(t, "r.yaml", "axes:\n  W: {max_step: 1}\n")], "r.yaml:2: axes.W: no such axis"),
     (lambda t: ["--machine", machine_path("five_axis_ac"), "--params", PARAMS, "--config",
                 _write(t, "r.yaml", "lcm_url: \"bogus://nowhere\"\n")], "cannot open LCM at 'bogus://nowhere'"),
+    (lambda t: ["--machine", machine_path("five_axis_ac"), "--params", PARAMS, "--config",
+                _write(t, "r.yaml", "lcm_url: \"udpm://239.255.76.67:7667?ttl=0&recv_buf_size=9999\"\n")],
+     "r.yaml:1: lcm_url: recv_buf_size is set by its own key, recv_buf_size"),
+    (lambda t: ["--machine", machine_path("five_axis_ac"), "--params", PARAMS, "--config",
+                _write(t, "r.yaml", "status_period: 1\nrecv_buf_size: 100\n")],
+     "r.yaml:2: recv_buf_size: must be between 2048 and 1073741824 bytes"),
+    (lambda t: ["--machine", machine_path("five_axis_ac"), "--params", PARAMS, "--config",
+                _write(t, "r.yaml", "recv_buf_size: 2.5e6\n")], "r.yaml:1: recv_buf_size: expected an integer"),
     (lambda t: ["--frobnicate"], "unexpected argument '--frobnicate'"),
 ])
 def test_daemon_startup_errors(tmp_path, make, words):
@@ -61,8 +72,44 @@ def _write(tmp, name, text):
     return str(path)
 
 
+def test_status_timer_does_not_spin(tmp_path):
+    """status_period at its minimum (1 ms) on memq:// (no network): the daemon sleeps between
+    statuses. poll() with a millisecond timeout spun a core for the last millisecond of each
+    period, i.e. all the time here."""
+    config = _write(tmp_path, "r.yaml", "lcm_url: \"memq://\"\nstatus_period: 0.001\n")
+    proc = subprocess.Popen([DAEMON, "--machine", machine_path("five_axis_ac"), "--params", PARAMS,
+                             "--config", config], stderr=subprocess.PIPE, text=True)
+    try:
+        assert "ready" in proc.stderr.readline()
+        def cpu_seconds():
+            with open(f"/proc/{proc.pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime + stime
+        c0, t0 = cpu_seconds(), time.monotonic()
+        time.sleep(2.0)
+        share = (cpu_seconds() - c0) / (time.monotonic() - t0)
+    finally:
+        proc.terminate()
+        proc.wait(5)
+    print(f"daemon CPU share with a 1 ms status period: {share:.1%}")
+    assert share < 0.25, f"the daemon used {share:.0%} of a core while idle"
+
+
+@contextlib.contextmanager
+def _cpu_hog():
+    """One busy process per core beside the scenario (the loaded machine of issue 19)."""
+    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(os.cpu_count() or 1)]
+    try:
+        yield
+    finally:
+        for p in hogs:
+            p.kill()
+            p.wait()
+
+
 def _scenario(*args, timeout=120):
-    proc = subprocess.run([NETNS, PY, *args], capture_output=True, text=True, cwd=ROOT, timeout=timeout)
+    with _cpu_hog():
+        proc = subprocess.run([NETNS, PY, *args], capture_output=True, text=True, cwd=ROOT, timeout=timeout)
     print(proc.stdout)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return proc.stdout
@@ -81,6 +128,11 @@ def test_bad_input_and_random_payloads():
 
 
 @needs_netns
+def test_hostile_streams_twins_and_a_tiny_buffer():
+    _scenario("tests/e2e/e2e_hostile.py")
+
+
+@needs_netns
 def test_switching_is_bumpless():
     _scenario("tests/e2e/e2e_switch.py")
 
@@ -92,3 +144,32 @@ def test_replay_equals_daemon_bit_for_bit(tmp_path):
                     "--seconds", "2"], check=True, capture_output=True, cwd=ROOT)
     out = _scenario("tests/e2e/e2e_replay.py", str(log))
     assert "targets differing: 0" in out
+
+
+def test_replay_follows_the_stream_rule(tmp_path):
+    """The replay binary runs the daemon's compensator: a log with one seq 2^63-1 and then a
+    CNC that restarts at 1 is followed again after 5 commands each time, as the daemon does."""
+    sys.path.insert(0, os.path.join(ROOT, "build", "lcmtypes"))
+    import lcm
+    from chaincomp_lcm import lcmt_axis_command
+    log = tmp_path / "hostile.lcmlog"
+    out = lcm.EventLog(str(log), "w", overwrite=True)
+    seqs = list(range(1, 101)) + [2**63 - 1] + list(range(101, 201)) + list(range(1, 51))
+    for i, seq in enumerate(seqs):
+        msg = lcmt_axis_command()
+        msg.utime, msg.seq, msg.machine, msg.num_axes = 1000 * (i + 1), seq, "five_axis_ac", 5
+        msg.axes = [10.0 + 0.01 * i, -20.0, -100.0, 30.0, -45.0, 0.0, 0.0, 0.0]
+        out.write_event(1000 * (i + 1), "CHAINCOMP_COMMAND", msg.encode())
+    out.close()
+    csv = tmp_path / "out.csv"
+    proc = subprocess.run([os.path.join(ROOT, "build", "bin", "chaincomp_replay"), "--machine",
+                           machine_path("five_axis_ac"), "--params", PARAMS, "--in", str(log), "--csv", str(csv)],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    rows = [line.split(",") for line in csv.read_text().splitlines()[1:]]
+    results = [r[3] for r in rows]
+    refused = [i for i, r in enumerate(results) if r != "ok"]
+    # behind 2^63-1: seq 101..104 refused, 105 taken; behind 200: seq 1..4 refused, 5 taken
+    assert refused == [101, 102, 103, 104, 201, 202, 203, 204], refused
+    assert {results[i] for i in refused} == {"out_of_order_seq"}
+    assert "seq gaps 1 (9223372036854775706 commands missing), stream restarts 2" in proc.stderr
