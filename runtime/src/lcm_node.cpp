@@ -42,6 +42,12 @@ bool machine_name_fits(const void* data, std::size_t size, std::size_t kAt) {
   return len >= 1 && len <= LcmNode::kMaxMachineName + 1 && len <= static_cast<std::int64_t>(size - kAt - 4);
 }
 
+std::int64_t big_endian64(const unsigned char* b) {
+  std::uint64_t v = 0;
+  for (int i = 0; i < 8; ++i) v = (v << 8) | b[i];
+  return static_cast<std::int64_t>(v);
+}
+
 }  // namespace
 
 bool decode_command(const void* data, std::size_t size, chaincomp_lcm::lcmt_axis_command& scratch,
@@ -162,16 +168,19 @@ void LcmNode::on_target(const lcm_recv_buf_t* rbuf, const char*, void* user) {
 }
 
 void LcmNode::handle_target(const lcm_recv_buf_t* rbuf) {
+  // Its own targets come back once each: told by fingerprint and instance without decoding.
+  const auto* b = static_cast<const unsigned char*>(rbuf->data);
+  if (rbuf->data_size >= kTargetMachineAt && big_endian64(b) == heard_msg_.getHash() &&
+      big_endian64(b + kTargetMachineAt - 8) == instance_id_) {
+    ++own_heard_;
+    return;
+  }
   auto& t = heard_msg_;
   if (!machine_name_fits(rbuf->data, rbuf->data_size, kTargetMachineAt) ||
       t.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) < 0) {
     return;  // not a target of this version: nobody this node could be confused with
   }
-  if (t.instance_id == instance_id_) {
-    ++own_heard_;
-    return;
-  }
-  if (t.machine != machine_) return;  // exact: length and bytes
+  if (t.instance_id == instance_id_ || t.machine != machine_) return;  // exact: length and bytes
   ++foreign_;
   foreign_instance_ = t.instance_id;
   for (int i = 0; i < num_reported_; ++i) {
