@@ -12,9 +12,10 @@ from .errors import ChaincompError
 from .expressions import MAX_LITERAL
 from .machine import Machine, Symbol
 from .varying import MAX_VARYING_ERRORS, Varying, parse_varying
-from .yamlsource import load_yaml
+from .yamlsource import describe, load_yaml
 
-_VALUE = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([^\s\d].*?)?\s*\Z")
+# ASCII digits only (float() takes other scripts' digits; the C++ loader does not)
+_VALUE = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([^\s\d].*?)?\s*\Z", re.ASCII)
 
 
 def parse_value(sym: Symbol, raw) -> float:
@@ -25,7 +26,10 @@ def parse_value(sym: Symbol, raw) -> float:
     if isinstance(raw, bool):
         raise ValueError(f"expected a number, got {raw!r}")
     if isinstance(raw, (int, float)):
-        value, unit = float(raw), sym.unit
+        try:
+            value, unit = float(raw), sym.unit
+        except OverflowError:  # an int beyond any float
+            value, unit = (math.inf if raw > 0 else -math.inf), sym.unit
     elif isinstance(raw, str):
         m = _VALUE.match(raw)
         if not m:
@@ -60,6 +64,9 @@ def load_params(path: str, machine: Machine) -> dict[str, float | Varying]:
         if key not in ("machine", "values", "description"):
             raise ChaincompError(f"unknown field {key!r} (expected machine, values, description)",
                                  path, doc.lines[key], key)
+    if "machine" in doc and not isinstance(doc["machine"], str):
+        raise ChaincompError(f"expected the machine's name, got {describe(doc['machine'])}",
+                             path, doc.lines["machine"], "machine")
     if "machine" in doc and doc["machine"] != machine.name:
         raise ChaincompError(f"params are for machine {doc['machine']!r}, not {machine.name!r}",
                              path, doc.lines["machine"], "machine")
@@ -84,6 +91,8 @@ def load_params(path: str, machine: Machine) -> dict[str, float | Varying]:
                 raise ChaincompError(f"more than {MAX_VARYING_ERRORS} varying errors", path, line,
                                      f"values.{name}")
             continue
+        if raw is None:
+            raise ChaincompError("missing value", path, line, f"values.{name}")
         if isinstance(raw, list):
             raise ChaincompError("expected a number, or a mapping with 'table' or 'polynomial'", path, line,
                                  f"values.{name}")

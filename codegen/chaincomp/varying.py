@@ -272,9 +272,13 @@ def varying_errors(values: dict) -> dict[str, Varying]:
 def _number(value, fail) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         fail(f"expected a number, got {describe(value)}")
-    if not math.isfinite(value):
+    try:
+        number = float(value)
+    except OverflowError:  # an int beyond any float
+        number = math.inf if value > 0 else -math.inf
+    if not math.isfinite(number):
         fail(f"expected finite numbers, got {value!r}")
-    return float(value)
+    return number
 
 
 def parse_varying(node, name: str, path: str, line: int, machine=None) -> Varying:
@@ -376,6 +380,8 @@ def parse_varying(node, name: str, path: str, line: int, machine=None) -> Varyin
                 rfail(f"duplicate position {row[0]!r}")
             if xs and p < xs[-1]:
                 rfail(f"positions must increase: {row[0]!r} follows {rows[i - 1][0]!r}")
+            if not (math.isfinite(p * pu.to_internal) and math.isfinite(v * vu.to_internal)):
+                rfail("not finite in internal units (mm, rad)")
             xs.append(p)
             ys.append(v)
         x = np.array(xs) * pu.to_internal

@@ -7,6 +7,7 @@ returns dicts and lists that know where each of their entries came from.
 from __future__ import annotations
 
 import os
+import re
 from typing import Any
 
 import yaml
@@ -57,9 +58,17 @@ MAX_EXPANSION = 10                 # nodes after alias expansion, per node writt
 _SLACK = 10_000
 
 
+# Numbers YAML 1.1 (PyYAML, here) and YAML 1.2 (yaml-cpp, the runtime) read alike: plain
+# decimals. 0170 (octal 120 in 1.1, 170 in 1.2), 0x1f, 1_000, 1:30 are refused by both.
+_PLAIN_DECIMAL = re.compile(r"[-+]?(?:(?:0|[1-9][0-9]*)(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?"
+                            r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN)")
+
+
 class _Loader(yaml.SafeLoader):
-    """SafeLoader that refuses nesting deeper than MAX_DEPTH while it composes (the composer
-    recurses, so a deep document would otherwise end in RecursionError)."""
+    """SafeLoader that refuses, while it composes, nesting deeper than MAX_DEPTH (the composer
+    recurses, so a deep document would otherwise end in RecursionError), explicit tags,
+    duplicate anchors and aliases to a node from inside it. The C++ loaders apply the same
+    rules with the same messages (runtime/src/yaml_strict.cpp)."""
 
     _depth = 0
     nodes = 0
@@ -68,10 +77,24 @@ class _Loader(yaml.SafeLoader):
         self._depth += 1
         self.nodes += 1
         try:
+            event = self.peek_event()
+            line = event.start_mark.line + 1
             if self._depth > MAX_DEPTH:
-                raise ChaincompError(f"nested more than {MAX_DEPTH} levels deep", self.name,
-                                     self.peek_event().start_mark.line + 1)
-            return super().compose_node(parent, index)
+                raise ChaincompError(f"nested more than {MAX_DEPTH} levels deep", self.name, line)
+            if isinstance(event, yaml.AliasEvent):
+                if event.anchor in self._open_anchors:
+                    raise ChaincompError("a YAML alias refers to a node that contains it", self.name, line)
+                return super().compose_node(parent, index)
+            if event.tag not in (None, "!"):
+                raise ChaincompError(f"YAML tags are not accepted ({event.tag})", self.name, line)
+            anchor = event.anchor
+            if anchor is not None and anchor in self.anchors:
+                raise ChaincompError(f"duplicate YAML anchor {anchor!r}", self.name, line)
+            self._open_anchors.add(anchor)
+            try:
+                return super().compose_node(parent, index)
+            finally:
+                self._open_anchors.discard(anchor)
         finally:
             self._depth -= 1
 
@@ -111,11 +134,13 @@ def _construct_mapping(loader: _Loader, node: yaml.MappingNode) -> LineDict:
     out.line = node.start_mark.line + 1
     out.lines = {}
     for key_node, value_node in node.value:
+        if key_node.tag == "tag:yaml.org,2002:merge":
+            raise ChaincompError("YAML merge keys (<<) are not accepted", loader.name, key_node.start_mark.line + 1)
         key = loader.construct_object(key_node, deep=True)
         try:
             hash(key)
         except TypeError:
-            raise ChaincompError(f"a mapping key must be text or a number, not a list or mapping: {key!r}",
+            raise ChaincompError("a mapping key must be text or a number, not a list or mapping",
                                  loader.name, key_node.start_mark.line + 1) from None
         if key in out:
             raise ChaincompError(f"duplicate key {key!r}", loader.name, key_node.start_mark.line + 1,
@@ -132,7 +157,18 @@ def _construct_sequence(loader: _Loader, node: yaml.SequenceNode) -> LineList:
     return out
 
 
+def _construct_number(loader: _Loader, node: yaml.ScalarNode):
+    if not _PLAIN_DECIMAL.fullmatch(node.value):
+        raise ChaincompError(f"ambiguous number {node.value!r}: YAML 1.1 and 1.2 read it differently; "
+                             "write it in plain decimal", loader.name, node.start_mark.line + 1)
+    if node.tag == "tag:yaml.org,2002:int":
+        return yaml.SafeLoader.construct_yaml_int(loader, node)
+    return yaml.SafeLoader.construct_yaml_float(loader, node)
+
+
 _Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+_Loader.add_constructor("tag:yaml.org,2002:int", _construct_number)
+_Loader.add_constructor("tag:yaml.org,2002:float", _construct_number)
 _Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_sequence)
 
 
@@ -164,6 +200,7 @@ def load_yaml(path: str) -> Any:
         raise ChaincompError(f"YAML syntax error: unacceptable character #x{exc.character:04x}: {exc.reason}",
                              path, line) from None
     loader.name = path
+    loader._open_anchors = set()
     try:
         root = loader.get_single_node()
         if root is None:

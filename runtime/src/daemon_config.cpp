@@ -2,7 +2,17 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include "chaincomp/yaml_strict.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <climits>
 #include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <regex>
+#include <sstream>
 #include <set>
 
 namespace chaincomp {
@@ -18,33 +28,34 @@ struct Reader {
   std::string& error;
 
   bool fail(const YAML::Node& node, const std::string& key, const std::string& what) {
-    error = path + ":" + std::to_string(node.Mark().line + 1) + ": " + key + ": " + what;
+    // an empty document has no mark: its first line
+    error = path + ":" + std::to_string(std::max(node.Mark().line, 0) + 1) + ": " + (key.empty() ? "" : key + ": ") + what;
     return false;
   }
+  // Numbers and booleans as the shared YAML reading types them (yaml_strict.hpp); a plain
+  // decimal such as 1e-3, text in YAML 1.1, is a number here too.
   bool number(const YAML::Node& node, const std::string& key, double& out, double min = -INFINITY) {
-    try {
-      out = node.as<double>();
-    } catch (const YAML::Exception&) {
-      return fail(node, key, "expected a number");
+    static const std::regex decimal("[-+]?(?:[0-9]+\\.?[0-9]*|\\.[0-9]+)(?:[eE][-+]?[0-9]+)?");
+    if (!yaml_number(node, out)) {
+      if (!node.IsScalar() || node.Tag() != "?" || !std::regex_match(node.Scalar(), decimal))
+        return fail(node, key, "expected a number");
+      out = std::strtod(node.Scalar().c_str(), nullptr);
     }
     if (!std::isfinite(out)) return fail(node, key, "expected a finite number");
     if (out < min) return fail(node, key, "must be at least " + std::to_string(min));
     return true;
   }
   bool integer(const YAML::Node& node, const std::string& key, int& out) {
-    try {
-      out = node.as<int>();
-    } catch (const YAML::Exception&) {
-      return fail(node, key, "expected an integer");
-    }
+    if (resolve(node) != Yaml11::kInt) return fail(node, key, "expected an integer");
+    errno = 0;
+    const long long v = std::strtoll(node.Scalar().c_str(), nullptr, 10);
+    if (errno != 0 || v < INT_MIN || v > INT_MAX) return fail(node, key, "expected an integer");
+    out = static_cast<int>(v);
     return true;
   }
   bool boolean(const YAML::Node& node, const std::string& key, bool& out) {
-    try {
-      out = node.as<bool>();
-    } catch (const YAML::Exception&) {
-      return fail(node, key, "expected true or false");
-    }
+    if (resolve(node) != Yaml11::kBool) return fail(node, key, "expected true or false");
+    out = py_repr(node) == "True";
     return true;
   }
   bool text(const YAML::Node& node, const std::string& key, std::string& out) {
@@ -55,7 +66,7 @@ struct Reader {
   bool keys(const YAML::Node& node, const std::string& where, const std::set<std::string>& allowed) {
     if (!node.IsMap()) return fail(node, where, "expected a mapping");
     for (const auto& kv : node) {
-      const std::string k = kv.first.as<std::string>();
+      const std::string k = kv.first.IsScalar() ? kv.first.Scalar() : "None";
       if (!allowed.count(k)) {
         std::string list;
         for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
@@ -102,15 +113,14 @@ bool load_daemon_config(const MachineInfo& info, const std::string& path, Daemon
     return true;
   }
   YAML::Node doc;
-  try {
-    doc = YAML::LoadFile(path);
-  } catch (const YAML::BadFile&) {
-    error = path + ": cannot read file";
-    return false;
-  } catch (const YAML::Exception& e) {
-    error = path + ":" + std::to_string(e.mark.line + 1) + ": YAML syntax error: " + e.msg;
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    error = path + ": cannot read file: " + std::strerror(errno);
     return false;
   }
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (!load_strict_yaml(path, text.str(), doc, error)) return false;
   Reader r{path, error};
   if (!r.keys(doc, "", {"lcm_url", "channels", "status_period", "latency_window", "start_enabled", "ramp_time",
                         "out_of_limits", "linear_axes", "rotary_axes", "axes", "realtime", "recv_buf_size"}))
@@ -160,7 +170,7 @@ bool load_daemon_config(const MachineInfo& info, const std::string& path, Daemon
   if (const YAML::Node axes = doc["axes"]) {
     if (!axes.IsMap()) return r.fail(axes, "axes", "expected a mapping of axis names");
     for (const auto& kv : axes) {
-      const std::string name = kv.first.as<std::string>();
+      const std::string name = kv.first.IsScalar() ? kv.first.Scalar() : "None";
       int index = -1;
       for (int i = 0; i < info.num_axes; ++i) {
         if (name == info.axes[i].name) index = i;

@@ -2,13 +2,19 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <sys/stat.h>
+
+#include <cerrno>
 #include <cmath>
+#include <cstring>
+#include <regex>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
 
 #include "chaincomp/hash.hpp"
+#include "chaincomp/yaml_strict.hpp"
 
 namespace chaincomp {
 
@@ -21,9 +27,14 @@ std::string where(const std::string& path, const YAML::Node& node, const std::st
 }
 
 bool read_file(const std::string& path, std::string& text, std::string& error) {
+  struct stat st {};
+  if (stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
+    error = path + ": not a regular file";
+    return false;
+  }
   std::ifstream in(path, std::ios::binary);
   if (!in) {
-    error = path + ": cannot read file";
+    error = path + ": cannot read file: " + std::strerror(errno);
     return false;
   }
   std::ostringstream ss;
@@ -32,51 +43,59 @@ bool read_file(const std::string& path, std::string& text, std::string& error) {
   return true;
 }
 
-bool load_yaml(const std::string& path, const std::string& text, YAML::Node& doc, std::string& error) {
-  try {
-    doc = YAML::Load(text);
-  } catch (const YAML::Exception& e) {
-    error = path + ":" + std::to_string(e.mark.line + 1) + ": YAML syntax error: " + e.msg;
-    return false;
-  }
-  return true;
-}
-
 const char* kind_name(UnitKind k) {
   return k == UnitKind::kLength ? "length" : k == UnitKind::kAngle ? "angle" : "ratio";
 }
 
-// "12.5", "12.5 um", "-3arcsec": the value in internal units of a parameter.
-bool parse_value(const ParamInfo& p, const std::string& text, double& out, std::string& why) {
-  const char* s = text.c_str();
-  char* end = nullptr;
-  const double v = std::strtod(s, &end);
-  if (end == s) {
-    why = "expected a number optionally followed by a unit, got '" + text + "'";
+// "12.5", "12.5 um", "-3arcsec", 12.5: the value in internal units of a parameter, with the
+// checks and messages of chaincomp/params.py's parse_value, in its order.
+bool parse_value(const ParamInfo& p, const YAML::Node& node, double& out, std::string& why) {
+  static const std::regex value_re(
+      "\\s*([-+]?(?:[0-9]+\\.?[0-9]*|\\.[0-9]+)(?:[eE][-+]?[0-9]+)?)\\s*([^\\s0-9].*?)?\\s*");
+  const Yaml11 kind = resolve(node);
+  double v = 0, factor = p.to_internal;
+  UnitKind unit_kind = p.kind;
+  std::string unit_name = p.unit;
+  if (kind == Yaml11::kBool) {
+    why = "expected a number, got " + py_repr(node);
     return false;
   }
-  std::string unit(end);
-  unit.erase(0, unit.find_first_not_of(" \t"));
-  unit.erase(unit.find_last_not_of(" \t") + 1);
-  double factor = p.to_internal;
-  if (!unit.empty()) {
-    const UnitInfo* u = find_unit(unit.c_str());
-    if (u == nullptr) {
-      why = "unknown unit '" + unit + "'";
+  if (!yaml_number(node, v)) {
+    std::smatch m;
+    const std::string& text = node.Scalar();
+    if (!std::regex_match(text, m, value_re)) {
+      why = "expected a number optionally followed by a unit, got " + py_repr(node);
       return false;
     }
-    if (u->kind != p.kind) {
-      why = std::string("unit '") + unit + "' is a " + kind_name(u->kind) + " unit but " + p.name +
-            " is declared in '" + p.unit + "' (" + kind_name(p.kind) + ")";
-      return false;
+    v = std::strtod(m[1].str().c_str(), nullptr);
+    if (m[2].matched) {
+      const UnitInfo* u = find_unit(m[2].str().c_str());
+      if (u == nullptr) {
+        why = "unknown unit '" + m[2].str() + "'";
+        return false;
+      }
+      factor = u->to_internal;
+      unit_kind = u->kind;
+      unit_name = u->name;
     }
-    factor = u->to_internal;
   }
   if (!std::isfinite(v)) {
-    why = "expected a finite number, got '" + text + "'";
+    why = "expected a finite number, got " + py_repr(node);
+    return false;
+  }
+  if (unit_kind != p.kind) {
+    why = std::string("unit '") + unit_name + "' is a " + kind_name(unit_kind) + " unit but " + p.name +
+          " is declared in '" + p.unit + "' (" + kind_name(p.kind) + ")";
     return false;
   }
   out = v * factor;
+  // the Python loader's bound on any number (chaincomp/expressions.py MAX_LITERAL): it also
+  // refuses values that overflow in the conversion (1e308 m)
+  if (!(std::fabs(out) <= 1e15)) {
+    why = py_repr(node) + " is larger than 1e+15 " +
+          (p.kind == UnitKind::kLength ? "mm" : p.kind == UnitKind::kAngle ? "rad" : "1") + " in magnitude";
+    return false;
+  }
   return true;
 }
 
@@ -84,33 +103,23 @@ const char* a_kind(UnitKind k) {
   return k == UnitKind::kLength ? "a length" : k == UnitKind::kAngle ? "an angle" : "a ratio";
 }
 
+// A mapping key as Python's str() shows it (load_strict_yaml let only scalar keys through).
+std::string key_text(const YAML::Node& key) { return key.IsScalar() ? key.Scalar() : "None"; }
+
 int line_of(const YAML::Node& n) { return n.Mark().line >= 0 ? n.Mark().line + 1 : 0; }
 
 std::string at(const std::string& path, int line, const std::string& key) {
   return path + (line > 0 ? ":" + std::to_string(line) : std::string()) + ": " + key + ": ";
 }
 
-std::string show(const YAML::Node& n) {
-  if (n.IsScalar()) return "'" + n.Scalar() + "'";
-  if (n.IsSequence()) return "a list of " + std::to_string(n.size()) + (n.size() == 1 ? " item" : " items");
-  if (n.IsMap()) return "a mapping";
-  return "nothing";
-}
-
-// A plain YAML number (YAML's .nan and .inf included: they are refused as non-finite).
+// A plain YAML number, as chaincomp/varying.py's _number takes it.
 bool number(const YAML::Node& n, double& out, std::string& why) {
-  if (!n.IsScalar() || n.Tag() == "!") {
-    why = "expected a number, got " + show(n);
-    return false;
-  }
-  try {
-    out = n.as<double>();
-  } catch (const YAML::Exception&) {
-    why = "expected a number, got " + show(n);
+  if (!yaml_number(n, out)) {
+    why = "expected a number, got " + describe(n);
     return false;
   }
   if (!std::isfinite(out)) {
-    why = "expected finite numbers, got " + show(n);
+    why = "expected finite numbers, got " + py_repr(n);
     return false;
   }
   return true;
@@ -138,25 +147,26 @@ bool load_varying(const MachineInfo& info, int param, const std::string& path, c
   const char* const table_keys[] = {"axis", "units", "interpolation", "outside", "table"};
   const char* const poly_keys[] = {"axis", "units", "polynomial", "range", "outside"};
   for (const auto& kv : node) {
-    const std::string key = kv.first.as<std::string>();
+    const std::string key = key_text(kv.first);
     bool known = false;
     for (const char* k : is_table ? table_keys : poly_keys) known = known || key == k;
     if (!known) {
       return fail(kv.first, base + "." + key,
-                  std::string("unknown field '") + key + "' (expected one of: " +
+                  "unknown field " + py_repr(kv.first) + " (expected one of: " +
                       (is_table ? "axis, interpolation, outside, table, units" : "axis, outside, polynomial, range, units") +
                       ")");
     }
   }
   auto key_node = [&](const char* key) {
     for (const auto& kv : node) {
-      if (kv.first.as<std::string>() == key) return kv.first;
+      if (key_text(kv.first) == key) return kv.first;
     }
     return keynode;
   };
   // axis
   if (!node["axis"]) return fail(keynode, base, "missing required field 'axis'");
-  const std::string axis_name = node["axis"].IsScalar() ? node["axis"].Scalar() : "";
+  const bool axis_text = resolve(node["axis"]) == Yaml11::kStr;
+  const std::string axis_name = axis_text ? node["axis"].Scalar() : "";
   int axis = -1;
   std::string names;
   for (int i = 0; i < info.num_axes; ++i) {
@@ -164,16 +174,17 @@ bool load_varying(const MachineInfo& info, int param, const std::string& path, c
     names += std::string(i ? ", " : "") + info.axes[i].name;
   }
   if (axis < 0) {
-    return fail(key_node("axis"), base + ".axis", "'" + (node["axis"].IsScalar() ? axis_name : show(node["axis"])) +
-                                                       "' is not an axis of " + info.name + " (axes: " + names + ")");
+    return fail(key_node("axis"), base + ".axis", (axis_text ? py_repr(node["axis"]) : describe(node["axis"])) +
+                                                       " is not an axis of " + info.name + " (axes: " + names + ")");
   }
   const AxisInfo& a = info.axes[axis];
   // units: [position unit, value unit]
   const YAML::Node units = node["units"];
   if (!units) return fail(keynode, base, "missing required field 'units' ([position unit, value unit], e.g. [mm, um])");
-  if (!units.IsSequence() || units.size() != 2 || !units[0].IsScalar() || !units[1].IsScalar()) {
+  if (!units.IsSequence() || units.size() != 2 || resolve(units[0]) != Yaml11::kStr ||
+      resolve(units[1]) != Yaml11::kStr) {
     return fail(key_node("units"), base + ".units",
-                "expected [position unit, value unit], e.g. [mm, um], got " + show(units));
+                "expected [position unit, value unit], e.g. [mm, um], got " + describe(units));
   }
   const UnitInfo* pu = find_unit(units[0].Scalar().c_str());
   const UnitInfo* vu = find_unit(units[1].Scalar().c_str());
@@ -197,9 +208,9 @@ bool load_varying(const MachineInfo& info, int param, const std::string& path, c
   const bool has_range = is_poly && node["range"];
   if (is_table || has_range) {
     if (!node["outside"]) return fail(keynode, base, "missing required field 'outside' (hold or reject)");
-    const std::string o = node["outside"].IsScalar() ? node["outside"].Scalar() : "";
+    const std::string o = resolve(node["outside"]) == Yaml11::kStr ? node["outside"].Scalar() : "";
     if (o != "hold" && o != "reject") {
-      return fail(key_node("outside"), base + ".outside", "outside must be hold or reject, got " + show(node["outside"]));
+      return fail(key_node("outside"), base + ".outside", "outside must be hold or reject, got " + describe(node["outside"]));
     }
     outside = o == "hold" ? Outside::kHold : Outside::kReject;
   } else if (node["outside"]) {
@@ -212,14 +223,14 @@ bool load_varying(const MachineInfo& info, int param, const std::string& path, c
     if (!node["interpolation"]) {
       return fail(keynode, base, "missing required field 'interpolation' (linear or monotone_cubic)");
     }
-    const std::string it = node["interpolation"].IsScalar() ? node["interpolation"].Scalar() : "";
+    const std::string it = resolve(node["interpolation"]) == Yaml11::kStr ? node["interpolation"].Scalar() : "";
     if (it != "linear" && it != "monotone_cubic") {
       return fail(key_node("interpolation"), base + ".interpolation",
-                  "interpolation must be linear or monotone_cubic, got " + show(node["interpolation"]));
+                  "interpolation must be linear or monotone_cubic, got " + describe(node["interpolation"]));
     }
     const YAML::Node rows = node["table"];
     if (!rows.IsSequence()) {
-      return fail(key_node("table"), base + ".table", "expected a list of [position, value] rows, got " + show(rows));
+      return fail(key_node("table"), base + ".table", "expected a list of [position, value] rows, got " + describe(rows));
     }
     const int n = static_cast<int>(rows.size());
     if (n < 2 || n > kMaxTableKnots) {
@@ -231,19 +242,20 @@ bool load_varying(const MachineInfo& info, int param, const std::string& path, c
     for (int i = 0; i < n; ++i) {
       const YAML::Node row = rows[i];
       const std::string key = base + ".table[" + std::to_string(i) + "]";
-      if (!row.IsSequence() || row.size() != 2) return fail(row, key, "expected [position, value], got " + show(row));
+      if (!row.IsSequence() || row.size() != 2) return fail(row, key, "expected [position, value], got " + describe(row));
       if (!number(row[0], x[i], why) || !number(row[1], y[i], why)) return fail(row, key, why);
       x[i] *= pu->to_internal;
       y[i] *= vu->to_internal;
+      if (!std::isfinite(x[i]) || !std::isfinite(y[i])) return fail(row, key, "not finite in internal units (mm, rad)");
     }
     if (!add_table(varying, param, column, axis, x.data(), y.data(), n,
                    it == "linear" ? Interpolation::kLinear : Interpolation::kMonotoneCubic, outside, why, bad)) {
       // back to the declared units for the message
       if (bad >= 0) {
         const YAML::Node row = rows[bad];
-        if (why.rfind("duplicate", 0) == 0) why = "duplicate position " + row[0].Scalar();
-        else if (why.rfind("positions", 0) == 0) why = "positions must increase: " + row[0].Scalar() + " follows " +
-                                                       rows[bad - 1][0].Scalar();
+        if (why.rfind("duplicate", 0) == 0) why = "duplicate position " + py_repr(row[0]);
+        else if (why.rfind("positions", 0) == 0) why = "positions must increase: " + py_repr(row[0]) + " follows " +
+                                                       py_repr(rows[bad - 1][0]);
         return fail(row, base + ".table[" + std::to_string(bad) + "]", why);
       }
       return fail(key_node("table"), base + ".table", why);
@@ -254,7 +266,7 @@ bool load_varying(const MachineInfo& info, int param, const std::string& path, c
   if (!coeffs.IsSequence() || coeffs.size() < 1 || coeffs.size() > static_cast<std::size_t>(kMaxPolynomialCoefficients)) {
     return fail(key_node("polynomial"), base + ".polynomial",
                 "expected a list of 1 to " + std::to_string(kMaxPolynomialCoefficients) +
-                    " coefficients [c0, c1, ...] (c0 + c1*x + ...), got " + show(coeffs));
+                    " coefficients [c0, c1, ...] (c0 + c1*x + ...), got " + describe(coeffs));
   }
   std::vector<double> c(coeffs.size());
   for (std::size_t i = 0; i < coeffs.size(); ++i) {
@@ -264,11 +276,11 @@ bool load_varying(const MachineInfo& info, int param, const std::string& path, c
   if (has_range) {
     const YAML::Node r = node["range"];
     if (!r.IsSequence() || r.size() != 2) {
-      return fail(key_node("range"), base + ".range", "expected [low, high] in the position unit, got " + show(r));
+      return fail(key_node("range"), base + ".range", "expected [low, high] in the position unit, got " + describe(r));
     }
     if (!number(r[0], lower, why) || !number(r[1], upper, why)) return fail(key_node("range"), base + ".range", why);
     if (!(lower < upper)) {
-      return fail(key_node("range"), base + ".range", "low " + r[0].Scalar() + " must be below high " + r[1].Scalar());
+      return fail(key_node("range"), base + ".range", "low " + py_repr(r[0]) + " must be below high " + py_repr(r[1]));
     }
     lower *= pu->to_internal;
     upper *= pu->to_internal;
@@ -296,7 +308,7 @@ std::string file_hash_hex(const std::string& path) {
 
 bool read_machine_file(const std::string& path, std::string& text, std::string& name, std::string& error) {
   YAML::Node doc;
-  if (!read_file(path, text, error) || !load_yaml(path, text, doc, error)) return false;
+  if (!read_file(path, text, error) || !load_strict_yaml(path, text, doc, error)) return false;
   if (!doc.IsMap() || !doc["name"] || !doc["name"].IsScalar()) {
     error = path + ": name: missing machine name";
     return false;
@@ -337,41 +349,56 @@ bool load_params(const MachineInfo& info, const std::string& path, std::vector<d
   for (int i = 0; i < info.num_params; ++i) values[i] = info.params[i].nominal;
   std::string text;
   YAML::Node doc;
-  if (!read_file(path, text, error) || !load_yaml(path, text, doc, error)) return false;
+  if (!read_file(path, text, error) || !load_strict_yaml(path, text, doc, error)) return false;
   if (!doc.IsMap()) {
-    error = path + ": expected a mapping with 'values'";
+    error = path + ":1: expected a mapping with 'values'";
     return false;
   }
+  auto key_of = [&](const char* name) {  // the key node, for its line
+    for (const auto& kv : doc) {
+      if (key_text(kv.first) == name) return kv.first;
+    }
+    return YAML::Node();
+  };
   for (const auto& kv : doc) {
-    const std::string key = kv.first.as<std::string>();
+    const std::string key = key_text(kv.first);
     if (key != "machine" && key != "values" && key != "description") {
-      error = where(path, kv.first, key) + "unknown field (expected machine, values, description)";
+      error = where(path, kv.first, key) + "unknown field " + py_repr(kv.first) +
+              " (expected machine, values, description)";
       return false;
     }
   }
-  if (doc["machine"] && doc["machine"].as<std::string>() != info.name) {
-    error = where(path, doc["machine"], "machine") + "params are for machine '" +
-            doc["machine"].as<std::string>() + "', not '" + info.name + "'";
-    return false;
+  if (const YAML::Node m = doc["machine"]) {
+    if (resolve(m) != Yaml11::kStr) {
+      error = where(path, key_of("machine"), "machine") + "expected the machine's name, got " + describe(m);
+      return false;
+    }
+    if (m.Scalar() != info.name) {
+      error = where(path, key_of("machine"), "machine") + "params are for machine " + py_repr(m) + ", not '" +
+              info.name + "'";
+      return false;
+    }
   }
   const YAML::Node vals = doc["values"];
   if (!vals || !vals.IsMap()) {
-    error = path + ": values: expected a mapping of symbol names to values";
+    error = path + ":" + std::to_string(vals ? line_of(key_of("values")) : 1) +
+            ": values: expected a mapping of symbol names to values";
     return false;
   }
   for (const auto& kv : vals) {
-    const std::string name = kv.first.as<std::string>();
+    const std::string name = key_text(kv.first);
     const std::string key = "values." + name;
+    const bool text = resolve(kv.first) == Yaml11::kStr;
     int index = -1;
+    bool is_axis = false;
     for (int i = 0; i < info.num_params; ++i) {
-      if (name == info.params[i].name) index = i;
+      if (text && name == info.params[i].name) index = i;
     }
+    for (int i = 0; i < info.num_axes; ++i) is_axis = is_axis || (text && name == info.axes[i].name);
     if (index < 0) {
-      bool is_axis = false;
-      for (int i = 0; i < info.num_axes; ++i) is_axis = is_axis || name == info.axes[i].name;
       error = where(path, kv.first, key) +
-              (is_axis ? "'" + name + "' is an axis: axis values are commands, not parameters"
-                       : "unknown symbol '" + name + "' for machine '" + info.name + "'");
+              (is_axis ? py_repr(kv.first) + " is an axis: axis values are commands, not parameters"
+                       : "unknown symbol " + py_repr(kv.first) + " for machine '" + info.name + "'");
       return false;
     }
     if (kv.second.IsMap()) {
@@ -379,14 +406,16 @@ bool load_params(const MachineInfo& info, const std::string& path, std::vector<d
       values[index] = 0.0;
       continue;
     }
-    if (!kv.second.IsScalar() || kv.second.IsNull()) {
-      error = where(path, kv.first, key) + (kv.second.IsSequence()
-                                                ? "expected a number, or a mapping with 'table' or 'polynomial'"
-                                                : "missing value");
+    if (kv.second.IsSequence()) {
+      error = where(path, kv.first, key) + "expected a number, or a mapping with 'table' or 'polynomial'";
+      return false;
+    }
+    if (!kv.second.IsScalar()) {
+      error = where(path, kv.first, key) + "missing value";
       return false;
     }
     std::string why;
-    if (!parse_value(info.params[index], kv.second.Scalar(), values[index], why)) {
+    if (!parse_value(info.params[index], kv.second, values[index], why)) {
       error = where(path, kv.first, key) + why;
       return false;
     }
