@@ -5,7 +5,8 @@
   twins    a second daemon for the same machine: each reports the other on status and stderr;
   tiny     recv_buf_size 2048 and a burst: the loss is provoked, and the daemon's counters
            explain it exactly (commands missing = sent - received; kernel drops = those
-           commands + its own targets not heard back)."""
+           commands + its own targets not heard back);
+  capped   recv_buf_size beyond net.core.rmem_max: one warning, and status shows what was obtained."""
 
 import os
 import sys
@@ -126,10 +127,28 @@ def tiny() -> None:
     assert s.kernel_drops == s.seq_missing + (s.published - s.own_targets_heard), "drops not explained"
 
 
+def capped() -> None:
+    with open("/proc/sys/net/core/rmem_max") as f:
+        rmem_max = int(f.read())
+    config = os.path.join(tempfile.mkdtemp(), "capped.yaml")
+    with open(config, "w") as f:
+        f.write(f'lcm_url: "udpm://239.255.76.67:7667?ttl=0"\nrecv_buf_size: {4 * rmem_max}\n')
+    daemon = h.start_daemon(MACHINE, PARAMS, config)
+    listener = h.Listener()
+    daemon.terminate()
+    daemon.wait(5)
+    s = h.final_status(listener, daemon)
+    listener.close()
+    print(f"capped: asked {4 * rmem_max}, obtained {s.recv_buf_bytes // 2} (net.core.rmem_max {rmem_max})")
+    assert s.recv_buf_bytes == 2 * rmem_max
+    assert daemon.warnings == [f"chaincompd: warning: socket receive buffer {rmem_max} bytes, not the "
+                               f"{4 * rmem_max} asked (recv_buf_size; raise net.core.rmem_max); continuing"]
+
+
 def main() -> int:
     h.require_namespace()
     t0 = time.perf_counter()
-    for scenario in (lockout, twins, tiny):
+    for scenario in (lockout, twins, tiny, capped):
         scenario()
         print(f"{scenario.__name__}: {time.perf_counter() - t0:.1f} s")
     return 0

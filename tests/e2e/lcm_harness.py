@@ -32,15 +32,19 @@ def require_namespace() -> None:
 def start_daemon(machine: str, params: str, config: str, preload: bool = False,
                  model: str | None = None) -> subprocess.Popen:
     """chaincompd, once it says ready; the lines of a model build (and warnings) before that
-    are printed; its instance id is proc.instance."""
+    are printed (the warnings kept in proc.warnings); its instance id is proc.instance."""
     env = dict(os.environ)
     if preload:
         env["LD_PRELOAD"] = os.path.join(BUILD, "runtime", "libchaincomp_alloc_counter.so")
     cmd = [os.path.join(BUILD, "bin", "chaincompd"), "--machine", machine, "--params", params, "--config", config]
     proc = subprocess.Popen(cmd + (["--model", model] if model else []), stderr=subprocess.PIPE, text=True, env=env)
     line = proc.stderr.readline()
-    while line.startswith(("chaincomp build:", "chaincompd: warning:")):
+    proc.warnings = []
+    # before the ready line: a model build's lines, warnings (LCM's own run over lines)
+    while line and not line.startswith("chaincompd: error") and not line.rstrip().endswith("; ready"):
         print(line, end="")
+        if line.startswith("chaincompd: warning:"):
+            proc.warnings.append(line.strip())
         line = proc.stderr.readline()
     if "ready" not in line:
         proc.kill()
