@@ -8,6 +8,7 @@
 #include <netinet/in.h>
 #include <sys/socket.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <random>
@@ -153,12 +154,13 @@ void LcmNode::find_sockets() {
 }
 
 std::int64_t LcmNode::kernel_drops() const {
-  if (num_sockets_ == 0) return -1;
-  std::int64_t drops = 0;
+  std::int64_t drops = -1;  // no socket, or a kernel without SO_MEMINFO (before Linux 4.6)
   for (int i = 0; i < num_sockets_; ++i) {
     std::uint32_t info[SK_MEMINFO_VARS] = {};
     socklen_t len = sizeof info;
-    if (getsockopt(sockets_[i], SOL_SOCKET, SO_MEMINFO, info, &len) == 0) drops += info[SK_MEMINFO_DROPS];
+    if (getsockopt(sockets_[i], SOL_SOCKET, SO_MEMINFO, info, &len) == 0) {
+      drops = std::max<std::int64_t>(drops, 0) + info[SK_MEMINFO_DROPS];
+    }
   }
   return drops;
 }
