@@ -414,7 +414,7 @@ def test_identify_refuses_unreadable_input_and_an_output_that_is_an_input(tmp_pa
     (("--setups", "random:0"), "--setups: expected random:N with 1 <= N <= 20000"),
     (("--setups", "random:many"), "--setups: expected random:N"),
     (("--setups", "grid:"), "--setups: expected 'auto', 'grid:A,B,...', 'random:N'"),
-    (("--setups", "grid:0,nan"), "--setups: expected finite numbers"),
+    (("--setups", "grid:0,nan"), "--setups: expected a finite number"),
     (("--setups", "grid:500"), "no value within Ap's limits [-95, 95]"),
     (("--set", "X=9999"), "--set X: 9999 mm is outside the axis' limits [-400, 400]"),
     (("--set", "G=1"), "--set: 'G' is not an axis"),

@@ -138,7 +138,12 @@ def test_replay_refuses_to_write_over_its_input(tmp_path):
     os.symlink(log, tmp_path / "link.lcmlog")
     for flag, target in (("-o", log), ("--csv", tmp_path / "link.lcmlog")):
         proc = run_cli("replay", str(log), "--machine", FIVE, "--params", FIVE_PARAMS, flag, str(target), check=False)
-        assert proc.returncode == 2 and f"{target}: is the input log itself" in proc.stderr
+        assert proc.returncode == 2 and f"{flag} {target}: is also an input ({log})" in proc.stderr, proc.stderr
+        # the binary itself refuses too (called directly, as a controller integration may)
+        proc = subprocess.run([os.path.join(ROOT, "build", "bin", "chaincomp_replay"), "--machine", FIVE,
+                               "--params", FIVE_PARAMS, "--in", str(log), "--out" if flag == "-o" else flag,
+                               str(target)], capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 2 and f"{target}: is the input log itself" in proc.stderr, proc.stderr
     assert log.read_bytes() == before
 
 
