@@ -4,6 +4,8 @@
 
 #include <charconv>
 #include <cmath>
+#include <cstdio>
+#include <cstdint>
 #include <cstdlib>
 #include <regex>
 #include <map>
@@ -228,9 +230,69 @@ bool check_expansion(const std::vector<Checker::Node>& nodes, const std::string&
   return true;
 }
 
+// yamlsource.read_text and PyYAML's reader: UTF-8, and only the characters YAML allows (a
+// NUL byte also sent yaml-cpp 0.7 allocating without end: found by fuzz/fuzz_params).
+bool check_text(const std::string& path, const std::string& text, std::string& error) {
+  constexpr std::size_t kMaxBytes = 16u << 20;
+  if (text.size() > kMaxBytes) {
+    error = path + ": larger than 16 MiB";
+    return false;
+  }
+  const auto* p = reinterpret_cast<const unsigned char*>(text.data());
+  const std::size_t n = text.size();
+  int line = 1;
+  for (std::size_t i = 0; i < n;) {
+    const unsigned char c = p[i];
+    const int len = c < 0x80 ? 1 : (c >> 5) == 0x6 ? 2 : (c >> 4) == 0xe ? 3 : (c >> 3) == 0x1e ? 4 : 0;
+    std::uint32_t cp = len == 1 ? c : len == 2 ? c & 0x1f : len == 3 ? c & 0x0f : c & 0x07;
+    bool ok = len > 0 && i + len <= n;
+    for (int k = 1; ok && k < len; ++k) {
+      ok = (p[i + k] & 0xc0) == 0x80;
+      cp = (cp << 6) | (p[i + k] & 0x3f);
+    }
+    // no overlong forms, surrogates or code points past U+10FFFF (Python's strict decoder)
+    ok = ok && !(len == 2 && cp < 0x80) && !(len == 3 && cp < 0x800) && !(len == 4 && cp < 0x10000) &&
+         !(cp >= 0xd800 && cp <= 0xdfff) && cp <= 0x10ffff;
+    if (!ok) {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "%#04x", c);
+      error = path + ":" + std::to_string(line) + ": not UTF-8 text (byte " + buf + ")";
+      return false;
+    }
+    const bool printable = cp == 0x9 || cp == 0xa || cp == 0xd || (cp >= 0x20 && cp <= 0x7e) || cp == 0x85 ||
+                           (cp >= 0xa0 && cp <= 0xd7ff) || (cp >= 0xe000 && cp <= 0xfffd) || cp >= 0x10000;
+    if (!printable) {
+      char buf[16];
+      std::snprintf(buf, sizeof buf, "%04x", static_cast<unsigned>(cp));
+      error = path + ":" + std::to_string(line) + ": YAML syntax error: unacceptable character #x" + buf +
+              ": special characters are not allowed";
+      return false;
+    }
+    line += cp == '\n';
+    i += static_cast<std::size_t>(len);
+  }
+  return true;
+}
+
+// A parser's message on one line: control characters written as escapes.
+std::string one_line(const std::string& msg) {
+  std::string out;
+  for (unsigned char c : msg) {
+    if (c < 0x20 || c == 0x7f) {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\x%02x", c);
+      out += buf;
+    } else {
+      out += static_cast<char>(c);
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 bool load_strict_yaml(const std::string& path, const std::string& text, YAML::Node& doc, std::string& error) {
+  if (!check_text(path, text, error)) return false;
   Checker check;
   try {
     std::istringstream in(text);
@@ -241,10 +303,10 @@ bool load_strict_yaml(const std::string& path, const std::string& text, YAML::No
     error = path + ":" + std::to_string(r.line) + ": " + r.message;
     return false;
   } catch (const YAML::Exception& e) {
-    error = path + ":" + std::to_string(e.mark.line + 1) + ": YAML syntax error: " + e.msg;
+    error = path + ":" + std::to_string(e.mark.line + 1) + ": YAML syntax error: " + one_line(e.msg);
     return false;
   } catch (const std::exception& e) {  // std::out_of_range: an alias yaml-cpp let through undefined
-    error = path + ": YAML syntax error: " + e.what();
+    error = path + ": YAML syntax error: " + one_line(e.what());
     return false;
   }
   if (check.documents > 1) {
@@ -259,7 +321,7 @@ bool load_strict_yaml(const std::string& path, const std::string& text, YAML::No
   try {
     doc = YAML::Load(text);
   } catch (const YAML::Exception& e) {
-    error = path + ":" + std::to_string(e.mark.line + 1) + ": YAML syntax error: " + e.msg;
+    error = path + ":" + std::to_string(e.mark.line + 1) + ": YAML syntax error: " + one_line(e.msg);
     return false;
   }
   return true;
