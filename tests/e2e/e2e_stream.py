@@ -38,6 +38,10 @@ def main(rate: float, n: int) -> int:
         pub.publish("CHAINCOMP_COMMAND", h.command(i + 1, path[i]))
     elapsed = time.perf_counter() - t0
     ok = listener.wait_for(lambda: len(listener.targets) >= n, 10)
+    # the daemon hears its own last targets back a moment after the test does: let a periodic
+    # status show them all before stopping it (else the final count races the echo)
+    listener.wait_for(lambda: any(st.instance_id == daemon.instance and st.own_targets_heard >= n + warm
+                                  for st in listener.status), 5)
     daemon.terminate()
     daemon.wait(5)
     final = h.final_status(listener, daemon)
