@@ -75,16 +75,32 @@ def find_slides(machine: Machine) -> list[Slide]:
     base = {s.sym: 0.0 for s in machine.errors}
     base.update({s.sym: s.to_internal(s.nominal) for s in machine.constants})
     slides: list[Slide] = []
-    for chain in (machine.tool_chain, machine.workpiece_chain):
+
+    def error_block(g) -> bool:
+        syms = set().union(*(_free(e) for e in g)) if g else set()
+        return bool(syms) and all(roles[s].role == "error" for s in syms)
+
+    def negated(g) -> bool:  # every error entered with a minus sign: the inverse of a tool-side block
+        return all(float(sp.diff(v, sym).subs(base)) < 0 for el in g for sym in _free(el)
+                   for v in ((el.angle,) if isinstance(el, Rotation) else el.vector) if sym in v.free_symbols)
+
+    for chain, workpiece in ((machine.tool_chain, False), (machine.workpiece_chain, True)):
         groups = _groups(chain)
-        for g, nxt in zip(groups, groups[1:]):
+        for i, g in enumerate(groups):
             syms = set().union(*(_free(e) for e in g))
             axes = [s for s in syms if roles[s].role == "axis"]
             if len(axes) != 1 or roles[axes[0]].unit.kind != "length" or \
                     not all(isinstance(e, Translation) for e in g):
                 continue
-            nsyms = set().union(*(_free(e) for e in nxt))
-            if not nsyms or any(roles[s].role != "error" for s in nsyms):
+            before = groups[i - 1] if i > 0 else None
+            after = groups[i + 1] if i + 1 < len(groups) else None
+            # a moving table written as the docs say (errors negated, then the translation:
+            # the inverse of the tool-side pair) has its block before; otherwise it follows
+            if workpiece and error_block(before) and negated(before):
+                nxt = before
+            elif error_block(after):
+                nxt = after
+            else:
                 continue
             ax = axes[0]
             at0 = {**base, ax: 0.0}
