@@ -1,0 +1,257 @@
+"""``chaincomp status``: every chaincompd on the bus, from its status messages and targets."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import struct
+import sys
+import time
+
+from ..buildtree import _ROOT, import_lcmtypes
+from ..errors import ChaincompError
+from ..units import UNITS
+from .common import number, to_json
+
+# configs/runtime/default.yaml's lcm_url and channels: where a daemon with default settings is
+DEFAULT_URL = "udpm://239.255.76.67:7667?ttl=0"
+STATUS_CHANNEL = "CHAINCOMP_STATUS"
+TARGET_CHANNEL = "CHAINCOMP_CORRECTED"
+DEFAULT_TIMEOUT = 1.5      # the default status period (1 s) and a margin
+# lcmt_chaincomp_status.rejected[i], in the order the .lcm file lists them
+REASONS = ("undecodable", "wrong machine", "wrong axis count", "non-finite", "out of limits",
+           "step too large", "duplicate seq", "out-of-order seq", "compensation failed")
+COUNTERS = ("received", "published", "clamped", "clamped_input", "seq_gaps", "seq_missing",
+            "stream_restarts", "resets", "kernel_drops", "own_targets_heard", "foreign_targets")
+FLAGS = ((1, "compensating"), (2, "ramping"), (4, "clamped"), (8, "residual"), (16, "clamped input"))
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("status", help="live view of every chaincompd on the bus",
+                       description="Listen to the daemons' status and corrected-target channels and show, per "
+                                   "daemon (told apart by its instance id): machine, compensation on, off or "
+                                   "ramping, counters (rejections by reason), latency percentiles, the "
+                                   "current correction per axis (µm, arcsec) and the age of the last command. "
+                                   "The view redraws in place until Ctrl-C. With --once: listen for --timeout "
+                                   "seconds, print and exit 0, or exit 1 when no daemon was heard.")
+    p.add_argument("--url", default=DEFAULT_URL,
+                   help=f"LCM URL the daemons use (default {DEFAULT_URL}, configs/runtime/default.yaml's)")
+    p.add_argument("--once", action="store_true", help="print one view and exit (1: no daemon heard)")
+    p.add_argument("--format", choices=("text", "json"), default="text",
+                   help="text (default) or json (live: one JSON document per line and refresh)")
+    p.add_argument("--timeout", type=number(0, 3600, above=True), default=DEFAULT_TIMEOUT,
+                   help=f"with --once: seconds to listen, at least one daemon's status period (default "
+                        f"{DEFAULT_TIMEOUT} s, for the default period of 1 s)")
+    p.add_argument("--refresh", type=number(0.05, 3600), default=0.5,
+                   help="seconds between redraws of the live view (default 0.5)")
+    p.add_argument("--machine", dest="machines", action="append", default=[], metavar="MACHINE.yaml",
+                   help="machine description naming a daemon's axes and units (repeatable; default: "
+                        "configs/machines/NAME.yaml of this checkout for a daemon's machine NAME)")
+    p.set_defaults(run=run)
+
+
+class Bus:
+    """The last status and the last target of every daemon instance heard."""
+
+    def __init__(self, url: str):
+        self.types = import_lcmtypes()
+        import lcm
+        # liblcm prints its own line on stderr for a bad URL: ours is the one the user sees
+        with _quiet_stderr():
+            try:
+                self.lc = lcm.LCM(url)
+            except RuntimeError:
+                raise ChaincompError(f"--url: cannot open LCM at {url!r}") from None
+        self.status: dict[int, tuple[float, object]] = {}    # instance -> (monotonic time heard, status)
+        self.targets: dict[int, object] = {}
+        self.lc.subscribe(STATUS_CHANNEL, self._on_status).set_queue_capacity(1000)
+        self.lc.subscribe(TARGET_CHANNEL, self._on_target).set_queue_capacity(1000)
+
+    def _on_status(self, channel, data):
+        try:
+            s = self.types.lcmt_chaincomp_status.decode(data)
+        except (ValueError, struct.error):  # not our type (another program on the channel): nothing to show
+            return
+        self.status[s.instance_id] = (time.monotonic(), s)
+
+    def _on_target(self, channel, data):
+        try:
+            t = self.types.lcmt_corrected_target.decode(data)
+        except (ValueError, struct.error):
+            return
+        self.targets[t.instance_id] = t
+
+    def listen(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while (left := end - time.monotonic()) > 0:
+            self.lc.handle_timeout(max(1, int(left * 1000)))
+
+
+@contextlib.contextmanager
+def _quiet_stderr():
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+class Axes:
+    """Names and wire units of a machine's axes, by machine name: from --machine files, else
+    this checkout's configs/machines/NAME.yaml; unknown machines get numbered axes."""
+
+    def __init__(self, paths: list[str]):
+        from ..machine import load_machine
+        self._load = load_machine
+        self.known = {}
+        for path in paths:
+            m = load_machine(path)
+            self.known[m.name] = [(a.name, a.unit) for a in m.axes]
+
+    def of(self, name: str):
+        if name not in self.known:
+            path = os.path.join(_ROOT, "configs", "machines", f"{name}.yaml")
+            axes = None
+            if os.path.basename(name) == name and os.path.isfile(path):
+                with contextlib.suppress(ChaincompError):
+                    m = self._load(path)
+                    axes = [(a.name, a.unit) for a in m.axes] if m.name == name else None
+            self.known[name] = axes
+        return self.known[name]
+
+
+def correction(values, axes) -> list[dict]:
+    """Per axis the correction on the wire (the axis's unit) in µm or arcsec; unknown axes
+    keep the wire value (mm or deg, which one the machine file would tell)."""
+    out = []
+    for i, v in enumerate(values):
+        if axes is None or i >= len(axes):
+            out.append({"axis": f"#{i}", "value": v, "unit": "mm|deg"})
+            continue
+        name, unit = axes[i]
+        internal = v * unit.to_internal          # mm or rad
+        if unit.kind == "length":
+            out.append({"axis": name, "value": internal / UNITS["um"].to_internal, "unit": "um"})
+        else:
+            out.append({"axis": name, "value": internal / UNITS["arcsec"].to_internal, "unit": "arcsec"})
+    return out
+
+
+def describe(status, heard_at: float, target, axes, now: float, now_us: int) -> dict:
+    """One daemon as a plain document (JSON's, and what the text view shows)."""
+    s = status
+    if s.final:
+        state = "exited"
+    elif 0.0 < s.ramp < 1.0:
+        state = "ramping"
+    else:
+        state = "enabled" if s.compensating else "disabled"
+    doc = {
+        "instance": f"{s.instance_id & 0xFFFFFFFFFFFFFFFF:016x}",
+        "machine": s.machine, "state": state, "compensating": bool(s.compensating), "ramp": s.ramp,
+        "final": bool(s.final), "uptime_s": s.uptime_us / 1e6, "status_age_s": now - heard_at,
+        "counters": {name: getattr(s, name) for name in COUNTERS},
+        "rejected": dict(zip(REASONS, s.rejected)),
+        "latency_ns": {"window": s.window, "p50": s.latency_p50_ns, "p99": s.latency_p99_ns,
+                       "p999": s.latency_p999_ns, "max": s.latency_max_ns},
+        "recv_buf_bytes": s.recv_buf_bytes, "foreign_instance": f"{s.foreign_instance & 0xFFFFFFFFFFFFFFFF:016x}",
+        "model_hash": s.model_hash, "params_file": s.params_file, "params_hash": s.params_hash,
+        "config_file": s.config_file, "allocations": s.allocations,
+        "realtime": {"mlockall": bool(s.mlockall_ok), "sched_fifo": bool(s.sched_fifo_ok),
+                     "cpu_pinned": bool(s.cpu_pinned_ok)},
+        "last_target": None,
+    }
+    if target is not None:
+        n = max(0, min(target.num_axes, len(target.correction)))
+        doc["last_target"] = {
+            "seq": target.seq, "command_age_s": (now_us - target.utime) / 1e6,
+            "flags": [name for bit, name in FLAGS if target.flags & bit],
+            "correction": correction(list(target.correction[:n]), axes),
+        }
+    return doc
+
+
+def snapshot(bus: Bus, axes: Axes, url: str) -> dict:
+    now, now_us = time.monotonic(), int(time.time() * 1e6)
+    daemons = [describe(s, at, bus.targets.get(i), axes.of(s.machine), now, now_us)
+               for i, (at, s) in sorted(bus.status.items(), key=lambda kv: (kv[1][1].machine, kv[0]))]
+    return {"url": url, "daemons": daemons}
+
+
+def _us(ns: int) -> str:
+    return f"{ns / 1e3:.1f} µs" if ns >= 0 else "-"
+
+
+def render_text(doc: dict) -> str:
+    if not doc["daemons"]:
+        return f"no chaincompd heard on {doc['url']}\n"
+    lines = [f"{len(doc['daemons'])} chaincompd on {doc['url']}"]
+    for d in doc["daemons"]:
+        c, state = d["counters"], d["state"]
+        if state == "ramping":
+            state += f" {100 * d['ramp']:.0f}%"
+        rejected = sum(d["rejected"].values())
+        reasons = ", ".join(f"{k} {v}" for k, v in d["rejected"].items() if v)
+        lat = d["latency_ns"]
+        lines += [
+            "",
+            f"{d['machine']}  instance {d['instance']}  {state}  up {d['uptime_s']:.1f} s  "
+            f"status {d['status_age_s']:.1f} s ago",
+            f"  commands  received {c['received']}  published {c['published']}  rejected {rejected}"
+            + (f" ({reasons})" if reasons else "")
+            + f"  clamped {c['clamped']}  clamped input {c['clamped_input']}",
+            f"  stream    seq gaps {c['seq_gaps']} ({c['seq_missing']} missing)  restarts {c['stream_restarts']}  "
+            f"resets {c['resets']}  kernel drops {c['kernel_drops']}",
+            f"  targets   own heard back {c['own_targets_heard']}  foreign {c['foreign_targets']}",
+            f"  latency   p50 {_us(lat['p50'])}  p99 {_us(lat['p99'])}  p99.9 {_us(lat['p999'])}  "
+            f"max {_us(lat['max'])}  (last {lat['window']} commands)",
+        ]
+        t = d["last_target"]
+        if t is None:
+            lines.append("  last command: none heard")
+            continue
+        units = {"um": "µm", "arcsec": "arcsec", "mm|deg": "mm|deg"}
+        lines.append("  correction " + "  ".join(f"{a['axis']} {a['value']:+.3f} {units[a['unit']]}"
+                                                for a in t["correction"]))
+        flags = f" [{', '.join(t['flags'])}]" if t["flags"] else ""
+        lines.append(f"  last command seq {t['seq']}, {t['command_age_s']:.2f} s ago{flags}")
+    return "\n".join(lines) + "\n"
+
+
+def _render(doc: dict, fmt: str, live: bool) -> str:
+    if fmt == "text":
+        return render_text(doc)
+    text = to_json(doc)
+    return (json.dumps(json.loads(text), separators=(",", ":")) if live else text) + "\n"
+
+
+def run(args) -> int:
+    axes = Axes(args.machines)
+    bus = Bus(args.url)
+    if args.once:
+        bus.listen(args.timeout)
+        doc = snapshot(bus, axes, args.url)
+        if not doc["daemons"]:
+            print(f"chaincomp status: no chaincompd heard on {args.url} within {args.timeout:g} s", file=sys.stderr)
+            return 1
+        sys.stdout.write(_render(doc, args.format, live=False))
+        return 0
+    redraw = args.format == "text" and sys.stdout.isatty()
+    if redraw:
+        sys.stdout.write("\x1b[?25l\x1b[2J")   # a clear screen, no cursor flickering over the view
+    try:
+        while True:
+            bus.listen(args.refresh)
+            text = _render(snapshot(bus, axes, args.url), args.format, live=True)
+            # home, the view, then clear what an older, longer view left below it
+            sys.stdout.write("\x1b[H" + text.replace("\n", "\x1b[K\n") + "\x1b[J" if redraw else text)
+            sys.stdout.flush()
+    finally:
+        if redraw:
+            sys.stdout.write("\x1b[?25h\n")
+            sys.stdout.flush()
