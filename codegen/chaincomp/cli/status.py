@@ -184,7 +184,9 @@ def snapshot(bus: Bus, axes: Axes, url: str) -> dict:
 
 
 def _us(ns: int) -> str:
-    return f"{ns / 1e3:.1f} µs" if ns >= 0 else "-"
+    if ns < 0:
+        return "-"
+    return f"{ns / 1e3:.1f} µs" if ns < 1_000_000 else f"{ns / 1e6:.2f} ms"
 
 
 def render_text(doc: dict) -> str:
@@ -213,7 +215,7 @@ def render_text(doc: dict) -> str:
         ]
         t = d["last_target"]
         if t is None:
-            lines.append("  last command: none heard")
+            lines.append("  last command: none heard while listening")
             continue
         units = {"um": "µm", "arcsec": "arcsec", "mm|deg": "mm|deg"}
         lines.append("  correction " + "  ".join(f"{a['axis']} {a['value']:+.3f} {units[a['unit']]}"
