@@ -50,7 +50,7 @@ TEST_CASE("the cache folder follows XDG_CACHE_HOME, else HOME", "[open_model]") 
   if (old_xdg) setenv("XDG_CACHE_HOME", keep.c_str(), 1); else unsetenv("XDG_CACHE_HOME");
 }
 
-TEST_CASE("--model with a file that is not a library is refused in one line", "[open_model]") {
+TEST_CASE("a --model file that is not a library is refused in one line", "[open_model]") {
   std::string error;
   CHECK(chaincomp::open_model(kMachine, kMachine, error) == nullptr);
   CHECK(error.rfind("--model: " + kMachine + ": cannot load: ", 0) == 0);
