@@ -113,7 +113,7 @@ def test_a_machine_file_names_axes_in_its_units(tmp_path):
     assert "Z +0.500 µm" in status.render_text(doc)
 
 
-def _live(monkeypatch, tty: bool, frames: int = 2) -> str:
+def _live(monkeypatch, tty: bool, frames: int = 2, fmt: str = "text") -> str:
     """The live loop on a captured console over memq:// (no daemon), stopped by Ctrl-C."""
     out = io.StringIO()
     out.isatty = lambda: tty
@@ -125,7 +125,7 @@ def _live(monkeypatch, tty: bool, frames: int = 2) -> str:
             raise KeyboardInterrupt
         calls.append(seconds)
     monkeypatch.setattr(status.Bus, "listen", listen)
-    args = argparse.Namespace(url="memq://", once=False, format="text", timeout=1.0, refresh=0.2, machines=[])
+    args = argparse.Namespace(url="memq://", once=False, format=fmt, timeout=1.0, refresh=0.2, machines=[])
     with pytest.raises(KeyboardInterrupt):
         status.run(args)
     assert calls == [0.2] * frames
@@ -135,6 +135,16 @@ def _live(monkeypatch, tty: bool, frames: int = 2) -> str:
 def test_live_view_without_a_terminal_prints_plain_frames(monkeypatch):
     out = _live(monkeypatch, tty=False)
     assert out == "no chaincompd heard on memq://\n" * 2 and "\x1b" not in out
+
+
+def test_live_json_is_one_document_per_line(monkeypatch):
+    out = _live(monkeypatch, tty=True, frames=3, fmt="json")
+    assert out.splitlines() == ['{"url":"memq://","daemons":[]}'] * 3
+
+
+def test_twins_name_each_other():
+    text = status.render_text(_doc(_status(foreign_targets=5, foreign_instance=0xABC), None))
+    assert "own heard back 0  foreign 5 (last from instance 0000000000000abc)" in text
 
 
 def test_live_view_redraws_in_place_and_gives_the_cursor_back(monkeypatch):

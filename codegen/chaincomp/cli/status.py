@@ -209,7 +209,8 @@ def render_text(doc: dict) -> str:
             + f"  clamped {c['clamped']}  clamped input {c['clamped_input']}",
             f"  stream    seq gaps {c['seq_gaps']} ({c['seq_missing']} missing)  restarts {c['stream_restarts']}  "
             f"resets {c['resets']}  kernel drops {c['kernel_drops']}",
-            f"  targets   own heard back {c['own_targets_heard']}  foreign {c['foreign_targets']}",
+            f"  targets   own heard back {c['own_targets_heard']}  foreign {c['foreign_targets']}"
+            + (f" (last from instance {d['foreign_instance']})" if c["foreign_targets"] else ""),
             f"  latency   p50 {_us(lat['p50'])}  p99 {_us(lat['p99'])}  p99.9 {_us(lat['p999'])}  "
             f"max {_us(lat['max'])}  (last {lat['window']} commands)",
         ]
