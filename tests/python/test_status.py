@@ -99,6 +99,7 @@ def test_an_unknown_machine_keeps_wire_units(tmp_path):
     doc = _doc(_status(machine="no_such_machine"), _target([0.5, 2.0], machine="no_such_machine"))
     assert "correction #0 +0.500 mm|deg  #1 +2.000 mm|deg" in status.render_text(doc)
     assert "last command: none heard while listening" in status.render_text(_doc(_status(), None))
+    assert "latency   no command published yet" in status.render_text(_doc(_status(window=0), None))
 
 
 def test_a_machine_file_names_axes_in_its_units(tmp_path):

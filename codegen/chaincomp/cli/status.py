@@ -212,7 +212,8 @@ def render_text(doc: dict) -> str:
             f"  targets   own heard back {c['own_targets_heard']}  foreign {c['foreign_targets']}"
             + (f" (last from instance {d['foreign_instance']})" if c["foreign_targets"] else ""),
             f"  latency   p50 {_us(lat['p50'])}  p99 {_us(lat['p99'])}  p99.9 {_us(lat['p999'])}  "
-            f"max {_us(lat['max'])}  (last {lat['window']} commands)",
+            f"max {_us(lat['max'])}  (last {lat['window']} commands)" if lat["window"] else
+            "  latency   no command published yet",
         ]
         t = d["last_target"]
         if t is None:
