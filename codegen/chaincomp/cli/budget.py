@@ -10,8 +10,8 @@ from .. import budget as B
 from ..errors import ChaincompError
 from ..tolerances import from_params, load_tolerances
 from ..varying import varying_errors
-from .common import (add_machine_argument, add_values_arguments, check_finite, check_image, integer, load, seed,
-                     to_json, values_for)
+from .common import (add_format_argument, add_machine_argument, add_model_argument, add_seed_argument,
+                     add_values_arguments, check_finite, check_image, integer, load, to_json, values_for)
 
 MAX_SAMPLES = 2_000_000
 
@@ -33,12 +33,12 @@ def add_parser(sub) -> None:
     p.add_argument("--grid", type=integer(2, B.MAX_POINTS), default=9, metavar="N",
                    help=f"points per grid axis, limits included (default 9; at most {B.MAX_POINTS} points and "
                         f"{B.MAX_POINT_ERRORS} points x errors in all)")
-    p.add_argument("--order", default="1", choices=B.ORDERS, help="model of the gains (default 1)")
+    add_model_argument(p, B.ORDERS, what="model of the gains")
     p.add_argument("--samples", type=integer(0, MAX_SAMPLES), default=10000, metavar="N",
                    help=f"Monte Carlo samples of the exact model at each worst point (default 10000; 0: none; "
                         f"at most {MAX_SAMPLES})")
-    p.add_argument("--seed", type=seed, default=1, help="Monte Carlo seed (0 to 2^32-1, default 1)")
-    p.add_argument("--format", default="text", choices=("text", "json"))
+    add_seed_argument(p, "Monte Carlo seed")
+    add_format_argument(p)
     p.add_argument("--top", type=integer(0, 10**6), default=5, metavar="N",
                    help="contributors listed per component in text (default 5; 0: all)")
     p.add_argument("--plot", metavar="OUT.png", help="also write worst-case and RSS maps and a bar chart of "
@@ -77,7 +77,7 @@ def run(args) -> int:
     pick = _map_axes(grid, args.map)   # the plot's choices checked before the work
     if args.component and args.component not in B.components(machine):
         raise ChaincompError(f"--component {args.component}: this machine has no tool direction")
-    b = B.compute(machine, values, tol, grid, order=args.order, samples=args.samples, seed=args.seed,
+    b = B.compute(machine, values, tol, grid, order=args.model, samples=args.samples, seed=args.seed,
                   centre_on_params=centred)
     doc = B.to_json(b)
     check_finite(doc)

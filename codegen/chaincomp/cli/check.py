@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..check import Result, check, load_formulas
-from .common import add_machine_argument, add_order_argument, load, to_json
+from .common import add_format_argument, add_machine_argument, add_order_argument, load, to_json
 
 
 def add_parser(sub) -> None:
@@ -16,7 +16,7 @@ def add_parser(sub) -> None:
     add_machine_argument(p)
     p.add_argument("formulas", metavar="FORMULAS.yaml", help="hand-derived formulas (configs/checks/*.yaml)")
     add_order_argument(p, 1, "highest total degree in the errors compared")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    add_format_argument(p)
     p.set_defaults(run=run)
 
 
@@ -62,6 +62,6 @@ def run(args) -> int:
     order = args.order
     ff = load_formulas(args.formulas, machine)
     results = check(machine, ff, order, progress=True)
-    print(to_json(as_json(machine, ff, order, results)) if args.json
+    print(to_json(as_json(machine, ff, order, results)) if args.format == "json"
           else as_text(machine, ff, order, results))
     return 0 if all(r.equal for r in results) else 1

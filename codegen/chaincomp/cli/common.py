@@ -14,8 +14,69 @@ from ..machine import Machine, load_machine
 from ..params import load_params, parse_sets
 
 
-def add_machine_argument(p) -> None:
-    p.add_argument("machine", metavar="MACHINE.yaml", help="machine description (configs/machines/*.yaml)")
+def add_machine_argument(p, optional: bool = False, alias: bool = False) -> None:
+    """The machine file, the first positional argument of every verb that takes one. alias: also
+    --machine (the older spelling of replay and laser-to-params; resolve_machine joins the two)."""
+    p.add_argument("machine", metavar="MACHINE.yaml", nargs="?" if optional or alias else None,
+                   help="machine description (configs/machines/*.yaml)")
+    if alias:
+        p.add_argument("--machine", dest="machine_option", metavar="MACHINE.yaml",
+                       help="the machine file as an option (older spelling of the first argument)")
+
+
+def resolve_machine(args) -> None:
+    """args.machine from the positional or from --machine, given exactly once."""
+    if args.machine and args.machine_option:
+        raise ChaincompError(f"--machine {args.machine_option}: the machine is already given as the first "
+                             f"argument ({args.machine}); give it once")
+    args.machine = args.machine or args.machine_option
+    if not args.machine:
+        raise ChaincompError("a machine file is needed: give it as the first argument (or --machine)")
+
+
+def add_format_argument(p, choices: tuple[str, ...] = ("text", "json"), default: str | None = "text",
+                        what: str = "output format") -> None:
+    """--format, the same in every verb; --json kept as an alias of --format json."""
+    shown = f" (default {default})" if default else ""
+    p.add_argument("--format", choices=choices, default=default, help=f"{what}{shown}")
+    if "json" in choices:
+        p.add_argument("--json", dest="format", action="store_const", const="json",
+                       help="the same as --format json")
+
+
+# A seed of 1 in every verb: one default, so that one verb's output reproduces another's.
+DEFAULT_SEED = 1
+
+
+def add_seed_argument(p, what: str = "random seed") -> None:
+    p.add_argument("--seed", type=seed, default=DEFAULT_SEED,
+                   help=f"{what} (0 to 2^32-1, default {DEFAULT_SEED})")
+
+
+def add_assume_zero_argument(p, what: str = "errors held at zero") -> None:
+    p.add_argument("--assume-zero", action="append", default=[], metavar="E1,E2",
+                   help=f"{what}: names separated by commas (repeatable)")
+
+
+# The model of the error: its order in the errors, or the exact chain. plot's older spelling
+# (--model first|second|exact) maps onto these.
+MODEL_NAMES = {"first": "1", "second": "2", "exact": "exact"}
+
+
+def model_choice(allowed: tuple[str, ...]):
+    """'1', '2', 'exact' (or a difference such as 'exact-1' where allowed); the older names too."""
+    def parse(text: str) -> str:
+        value = "-".join(MODEL_NAMES.get(part, part) for part in text.strip().split("-"))
+        if value not in allowed:
+            raise argparse.ArgumentTypeError(f"expected one of {', '.join(allowed)}, got {text!r}")
+        return value
+    return parse
+
+
+def add_model_argument(p, allowed: tuple[str, ...] = ("1", "2", "exact"), names: tuple[str, ...] = ("--order",),
+                       what: str = "model") -> None:
+    p.add_argument(*names, dest="model", type=model_choice(allowed), default="1", metavar="{" + ",".join(allowed) + "}",
+                   help=f"{what}: 1 first order, 2 second order, exact the chain multiplied out (default 1)")
 
 
 def add_values_arguments(p) -> None:

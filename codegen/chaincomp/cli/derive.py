@@ -6,7 +6,7 @@ import sympy as sp
 
 from ..derive import COMPONENTS, Derivation, Progress, derive
 from ..machine import Rotation
-from .common import add_machine_argument, add_order_argument, load, to_json
+from .common import add_format_argument, add_machine_argument, add_order_argument, load, to_json
 
 
 def add_parser(sub) -> None:
@@ -17,7 +17,7 @@ def add_parser(sub) -> None:
                                    "with respect to the axes.")
     add_machine_argument(p)
     add_order_argument(p, 1)
-    p.add_argument("--format", choices=("text", "latex", "json"), default="text", help="output format")
+    add_format_argument(p, ("text", "latex", "json"))
     p.set_defaults(run=run)
 
 

@@ -6,7 +6,7 @@ from ..jets import JetModel
 from ..numeric import ExactModel
 from ..units import UNITS
 from ..varying import check_inside, resolve, varying_errors
-from .common import add_machine_argument, add_values_arguments, check_finite, load, to_json, values_for
+from .common import add_format_argument, add_machine_argument, add_values_arguments, check_finite, load, to_json, values_for
 
 
 def add_parser(sub) -> None:
@@ -17,7 +17,7 @@ def add_parser(sub) -> None:
                                    "table or polynomial over an axis takes its value at the axes given.")
     add_machine_argument(p)
     add_values_arguments(p)
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    add_format_argument(p)
     p.set_defaults(run=run)
 
 
@@ -61,7 +61,7 @@ def run(args) -> int:
     check_inside(values)
     out = evaluate(machine, values, with_errors)
     check_finite(out)   # the table too: a NaN tool point is no answer
-    print(to_json(out) if args.json else _text(out))
+    print(to_json(out) if args.format == "json" else _text(out))
     return 0
 
 

@@ -8,7 +8,7 @@ from ..machine import Symbol
 from ..params import parse_value
 from ..protocol import check_errors
 from ..units import UNITS
-from .common import add_machine_argument, check_output, load, to_json as json_text
+from .common import add_assume_zero_argument, add_format_argument, add_machine_argument, check_output, load, to_json as json_text
 from .protocol import names
 
 
@@ -38,15 +38,14 @@ def add_parser(sub) -> None:
                                    "identify no error, or that leave no redundancy without --sigma.")
     add_machine_argument(p)
     p.add_argument("measurements", metavar="MEAS.csv", help="measured tool-tip coordinates")
-    p.add_argument("--assume-zero", action="append", default=[], metavar="E1,E2",
-                   help="errors held at zero (not fitted)")
+    add_assume_zero_argument(p, "errors held at zero (not fitted)")
     p.add_argument("--sigma", metavar="LENGTH",
                    help="standard uncertainty of each measured coordinate, positive, e.g. 1um "
                         "(default: estimated from the residuals)")
     p.add_argument("-o", "--output", metavar="params.yaml",
                    help="write the identified values as a params file (for eval and chaincompd); "
                         "never one of the inputs")
-    p.add_argument("--format", choices=("text", "json"), default="text", help="report format")
+    add_format_argument(p, what="report format")
     p.set_defaults(run=run)
 
 

@@ -6,7 +6,7 @@ import sys
 import unicodedata
 
 from .. import iso230_2 as iso
-from .common import check_image, to_json
+from .common import add_format_argument, check_image, to_json
 
 # name in the JSON, label in the text report (the standard's symbols)
 AXIS_FIGURES = [
@@ -51,7 +51,7 @@ def add_parser(sub) -> None:
                                    "axis B, B̄, E↑, E↓, E, M, R↑, R↓, R, A↑, A↓, A. Deviations are reported "
                                    "in µm (angles in arcsec).")
     add_columns_arguments(p)
-    p.add_argument("--format", default="text", choices=("text", "json"), help="report format (default text)")
+    add_format_argument(p, what="report format")
     p.add_argument("--plot", metavar="OUT.png", help="also draw the standard's plot: mean deviations per "
                    "direction with their ±2s bands over the target positions")
     p.set_defaults(run=run)

@@ -17,7 +17,7 @@ from ..numeric import ExactModel
 from ..params import load_params
 from ..varying import INTERPOLATIONS, MAX_TABLE_KNOTS, OUTSIDE
 from ..yamlsource import load_yaml, read_text
-from .common import check_output, load
+from .common import add_machine_argument, check_output, load, resolve_machine
 from .iso230_2 import add_columns_arguments, read
 
 _ISO_NAME = re.compile(r"E[XYZABC]([A-Z])")   # ISO 230-1: E, the component, the axis (EXX, EBY, ...)
@@ -36,8 +36,8 @@ def add_parser(sub) -> None:
                                    "checked on its exact model and a table of an error written with the "
                                    "opposite sign is negated (with a warning), so that the model reproduces "
                                    "the measurement.")
+    add_machine_argument(p, alias=True)
     add_columns_arguments(p)
-    p.add_argument("--machine", required=True, metavar="M.yaml", help="machine description")
     p.add_argument("--error", required=True, metavar="NAME", help="the error symbol the runs measure (e.g. EXX)")
     p.add_argument("--axis", metavar="AXIS", help="the axis the error varies along (default: from an ISO 230-1 "
                    "name such as EXX or EBY, else the slide whose error block holds it)")
@@ -195,6 +195,7 @@ def merge(path: str, machine: Machine, error: str, make_entry) -> str:
 
 
 def run(args) -> int:
+    resolve_machine(args)
     check_output(args.output, args.runs, args.machine, args.merge)
     machine = load(args.machine)
     try:

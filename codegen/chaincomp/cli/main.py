@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 
+from .. import __version__
 from ..errors import ChaincompError
 from . import derive, eval as eval_, generate, testvectors
 
@@ -37,14 +38,31 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+class _VerbList(argparse.HelpFormatter):
+    """Every verb and its help on one line: argparse measures the verbs' names at the indent of
+    'VERB', two columns short of where it prints them, and wraps the longest ones."""
+
+    def __init__(self, prog):
+        super().__init__(prog, max_help_position=32, width=120)
+
+    def add_argument(self, action):
+        super().add_argument(action)
+        if action.help is not argparse.SUPPRESS:
+            self._action_max_length += 2
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="chaincomp",
+        formatter_class=_VerbList,
         description="Geometric error models of machine tools: derive, evaluate and generate "
-                    "compensation code from a machine description.",
+                    "compensation code from a machine description. The machine file is the first "
+                    "argument of every verb that takes one; 'chaincomp VERB --help' lists its options.",
         epilog="Exit codes: 0 done, 1 'check' found differences, 2 bad input (one line naming the file, "
                "line and field, or the option), 3 internal error (one line; set CHAINCOMP_DEBUG=1 for the "
                "traceback), 130 interrupted.")
+    parser.add_argument("--version", action="version", version=f"chaincomp {__version__}",
+                        help="print the version and exit")
     sub = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
     for verb in VERBS:
         verb.add_parser(sub)

@@ -12,12 +12,14 @@ from ..errors import ChaincompError
 from ..jets import JetModel
 from ..numeric import ExactModel
 from ..units import UNITS
-from .common import add_values_arguments, check_image, integer, load, parse_number, values_for
+from .common import (MODEL_NAMES, add_machine_argument, add_model_argument, add_values_arguments, check_image,
+                     integer, load, parse_number, values_for)
 
 COMPONENTS = ("dx", "dy", "dz", "dkx", "dky", "dkz", "norm")
 # 1000 x 1000 points: 4-5 s for one model, 39 s for exact minus second (five_axis_ac, 2026-12)
 MAX_GRID = 1000
-MODELS = ("first", "second", "exact", "second-first", "exact-first", "exact-second")
+MODELS = ("first", "second", "exact", "second-first", "exact-first", "exact-second")   # internal names
+ORDERS = ("1", "2", "exact", "2-1", "exact-1", "exact-2")   # the same, as --order takes them
 
 
 def add_parser(sub) -> None:
@@ -30,7 +32,7 @@ def add_parser(sub) -> None:
                                    "axis: its points and its interpolant (or polynomial) with the slope, "
                                    "past both ends to show what happens outside (MACHINE.yaml optional: "
                                    "given, the entry is checked against it).")
-    p.add_argument("machine", nargs="?", metavar="MACHINE.yaml")
+    add_machine_argument(p, optional=True)
     add_values_arguments(p)
     p.add_argument("--component", default="dy", choices=COMPONENTS, help="error component (default dy)")
     p.add_argument("--over", metavar="A1,A2", help="the two axes of the map (default: the first two axes)")
@@ -39,8 +41,10 @@ def add_parser(sub) -> None:
     p.add_argument("--range2", metavar="LO:HI", help="range of the second axis (default: --range, else limits)")
     p.add_argument("--grid", type=integer(2, MAX_GRID), default=41,
                    help=f"points per axis (2 to {MAX_GRID}, default 41)")
-    p.add_argument("--model", default="first", choices=MODELS, help="model, or a difference of two")
-    p.add_argument("--style", default="heatmap", choices=("heatmap", "surface"))
+    add_model_argument(p, ORDERS, ("--order", "--model"), "model, or a difference of two (e.g. exact-1); "
+                       "--model first|second|exact|second-first.. is the older spelling")
+    p.add_argument("--style", default="heatmap", choices=("heatmap", "surface"),
+                   help="heatmap (default) or a 3-D surface")
     p.add_argument("--replay", metavar="REPLAY.csv", help="plot a replay CSV instead of a map")
     p.add_argument("--table", metavar="P.yaml", help="plot an error of this params file that varies along an "
                    "axis (with --error)")
@@ -100,6 +104,8 @@ def run(args) -> int:
     import matplotlib
     matplotlib.use("Agg")
     check_image(args.output, args.machine, args.params, args.replay, args.table)
+    internal = {v: k for k, v in MODEL_NAMES.items()}
+    args.model = "-".join(internal[m] for m in args.model.split("-"))
     if args.replay:
         _plot_replay(args.replay, args.output)
     elif args.table or args.error:

@@ -6,7 +6,7 @@ from ..errors import ChaincompError
 from ..params import parse_sets
 from ..protocol import build_protocol, to_text
 from ..protocol import to_json as protocol_json
-from .common import MAX_ORDER, add_machine_argument, integer, load, number_list, to_json
+from .common import MAX_ORDER, add_assume_zero_argument, add_format_argument, add_machine_argument, integer, load, number_list, to_json
 
 
 def names(text: str | None, option: str = "list") -> list[str]:
@@ -31,8 +31,7 @@ def add_parser(sub) -> None:
     add_machine_argument(p)
     p.add_argument("--angles", default="0,90,180,270", metavar="A,B,...",
                    help="values of every rotary axis, in its declared unit (default 0,90,180,270)")
-    p.add_argument("--assume-zero", action="append", default=[], metavar="E1,E2",
-                   help="errors taken as zero (the paper sets DY = 0)")
+    add_assume_zero_argument(p, "errors taken as zero (the paper sets DY = 0)")
     p.add_argument("--measure", default="x,y,z", metavar="X,Y,Z",
                    help="tool-tip coordinates that are measured (default x,y,z)")
     p.add_argument("--prefer", action="append", default=[], metavar="E1,E2",
@@ -41,7 +40,7 @@ def add_parser(sub) -> None:
                    help="value of a non-rotary axis during the tests (default 0, or mid-range)")
     p.add_argument("--order", type=integer(1, MAX_ORDER), default=1,
                    help="order of the equations: 1 (the tests are linear in the errors)")
-    p.add_argument("--format", choices=("text", "json"), default="text", help="output format")
+    add_format_argument(p)
     p.set_defaults(run=run)
 
 

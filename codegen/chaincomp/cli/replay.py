@@ -7,7 +7,7 @@ import subprocess
 
 from ..buildtree import binary
 from ..errors import ChaincompError
-from .common import check_output, load
+from .common import add_machine_argument, check_output, load, resolve_machine
 
 
 def add_parser(sub) -> None:
@@ -18,11 +18,10 @@ def add_parser(sub) -> None:
                                    "the corrected targets, original timestamps kept) and/or a CSV of "
                                    "event, utime, seq, result, commanded, corrected, correction, residuals, "
                                    "flags, status. Rejected records are listed and counted by reason.")
-    p.add_argument("input", metavar="IN.lcmlog")
-    p.add_argument("--machine", required=True, metavar="M.yaml",
-                   help="machine description: its compiled-in model, else one built at start-up (chaincomp build)")
+    add_machine_argument(p, alias=True)
+    p.add_argument("input", metavar="IN.lcmlog", help="lcm-logger log of commands")
     p.add_argument("--model", metavar="LIB.so", help="a model library made by chaincomp build for this machine file")
-    p.add_argument("--params", required=True, metavar="P.yaml")
+    p.add_argument("--params", required=True, metavar="P.yaml", help="error values (configs/params/*.yaml)")
     p.add_argument("--config", metavar="R.yaml", help="runtime settings (default: built-in defaults)")
     p.add_argument("-o", "--output", metavar="OUT.lcmlog", help="corrected log")
     p.add_argument("--csv", metavar="OUT.csv", help="CSV of every command")
@@ -31,6 +30,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    resolve_machine(args)
     if not os.path.isfile(args.input):
         raise ChaincompError(f"{args.input}: no such log file")
     load(args.machine)  # the machine's mistakes with file, line and field, as every verb reports them

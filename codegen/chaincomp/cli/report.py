@@ -7,7 +7,8 @@ import sys
 from .. import report
 from ..derive import derive
 from ..errors import ChaincompError
-from .common import add_machine_argument, add_order_argument, check_output, load
+from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, add_order_argument,
+                     check_output, load)
 
 
 def add_parser(sub) -> None:
@@ -18,12 +19,10 @@ def add_parser(sub) -> None:
     add_machine_argument(p)
     add_order_argument(p, 1)
     p.add_argument("-o", "--output", metavar="FILE", help="write here (default: standard output)")
-    p.add_argument("--format", choices=("markdown", "latex"),
-                   help="output format (default: latex for a .tex output, else markdown)")
+    add_format_argument(p, ("markdown", "latex"), None, "output format (latex for a .tex output, else markdown)")
     p.add_argument("--protocol", action="store_true",
                    help="append the measurement protocol (chaincomp protocol with its defaults)")
-    p.add_argument("--assume-zero", action="append", default=[], metavar="E1,E2",
-                   help="with --protocol: errors taken as zero (repeatable)")
+    add_assume_zero_argument(p, "with --protocol: errors taken as zero")
     p.set_defaults(run=run)
 
 

@@ -10,7 +10,7 @@ import numpy as np
 from .. import calibration
 from ..params import load_params
 from ..varying import INTERPOLATIONS, MAX_TABLE_KNOTS, OUTSIDE
-from .common import add_machine_argument, check_output, integer, load, seed
+from .common import add_machine_argument, add_seed_argument, check_output, integer, load
 
 # Plausible sizes of the errors that are not tabulated, without --base (internal units).
 _CONSTANT_SCALE = {"length": 3e-3, "angle": 5 * calibration.ARCSEC, "ratio": 5e-6}
@@ -30,7 +30,7 @@ def add_parser(sub) -> None:
     p.add_argument("-o", "--output", required=True, metavar="P.yaml", help="params file to write")
     p.add_argument("--knots", type=integer(2, MAX_TABLE_KNOTS), default=101,
                    help=f"points per table, over the axis limits (2 to {MAX_TABLE_KNOTS}, default 101)")
-    p.add_argument("--seed", type=seed, default=1, help="random seed (0 to 2^32-1, default 1)")
+    add_seed_argument(p)
     p.add_argument("--base", metavar="P.yaml", help="constants for the errors that are not tabulated")
     p.add_argument("--interpolation", default="monotone_cubic", choices=INTERPOLATIONS,
                    help="interpolation written into each table (default monotone_cubic)")

@@ -31,7 +31,7 @@ def add_parser(sub) -> None:
                                    "along a smooth toolpath within the machine's limits (a circle with the "
                                    "tool tilted and turning), sampled at --rate.")
     add_machine_argument(p)
-    p.add_argument("-o", "--output", required=True, metavar="OUT.lcmlog")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.lcmlog", help="log file to write")
     # timestamps are whole µs: above 1 MHz two samples would share one
     p.add_argument("--rate", type=number(0, 1e6, above=True), default=1000.0,
                    help="samples per second (up to 1e6, default 1000)")

@@ -12,7 +12,7 @@ from ..errors import ChaincompError
 from ..expressions import MAX_LITERAL
 from ..identify import MAX_ROWS, coordinate_named_axes, read_table, simulate, write_table
 from ..params import load_params, parse_sets
-from .common import add_machine_argument, check_output, load, number_list, seed
+from .common import add_machine_argument, add_seed_argument, check_output, load, number_list
 from .identify import length
 from .protocol import names
 
@@ -28,7 +28,7 @@ def add_parser(sub) -> None:
                                    "coordinates (the machine's length unit).")
     add_machine_argument(p)
     p.add_argument("--params", metavar="P.yaml", help="error values (errors not given are zero)")
-    p.add_argument("--setups", default="auto", metavar="SPEC",
+    p.add_argument("--setups", "--set-ups", dest="setups", default="auto", metavar="SPEC",
                    help="'auto': every axis at its two limits and mid-range (a rotary axis whose limits "
                         "span a turn at 0, 90, 180, 270 deg instead), all combinations; 'grid:A,B,...': "
                         "every rotary axis over these values (in its declared unit), other axes at 0 (or "
@@ -40,7 +40,7 @@ def add_parser(sub) -> None:
     p.add_argument("--noise", default="0", metavar="LENGTH",
                    help="standard deviation of the noise on each coordinate, e.g. 1um (default 0)")
     p.add_argument("--measure", default="x,y,z", metavar="x,y,z", help="coordinates written (default x,y,z)")
-    p.add_argument("--seed", type=seed, default=0, help="random seed, 0 to 2^32-1 (default 0)")
+    add_seed_argument(p, "random seed of the noise and of random:N set-ups")
     p.add_argument("-o", "--output", required=True, metavar="MEAS.csv",
                    help="CSV file to write (never one of the inputs)")
     p.set_defaults(run=run)

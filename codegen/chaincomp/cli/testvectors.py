@@ -10,7 +10,7 @@ import mpmath
 from ..jets import JetModel
 from ..numeric import ExactModel
 from ..errors import ChaincompError
-from .common import add_machine_argument, check_output, integer, load, seed
+from .common import add_machine_argument, add_seed_argument, check_output, integer, load
 
 # Realistic error sizes: lengths of a few µm, angles of a few arcsec (internal units).
 _ERROR_SCALE = {"length": 5e-3, "angle": 20 * 4.8481368110953599e-06, "ratio": 20e-6}
@@ -27,8 +27,8 @@ def add_parser(sub) -> None:
     add_machine_argument(p)
     p.add_argument("--count", type=integer(1, MAX_COUNT), default=50,
                    help=f"number of vectors (1 to {MAX_COUNT}, default 50)")
-    p.add_argument("--seed", type=seed, default=1, help="random seed (0 to 2^32-1, default 1)")
-    p.add_argument("-o", "--output", required=True, metavar="FILE")
+    add_seed_argument(p)
+    p.add_argument("-o", "--output", required=True, metavar="FILE", help="file to write")
     p.set_defaults(run=run)
 
 
