@@ -10,6 +10,7 @@ not identically zero vanishes at all of them only by coincidence of measure zero
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -84,4 +85,30 @@ def lint(machine: Machine, model: ExactModel | None = None) -> list[Finding]:
         else:
             message = f"axis {s.name} never moves the {what} (line {line})"
         findings.append(Finding("warning", message, s.line, f"symbols.{s.name}"))
-    return findings
+    return findings + _parallel_axes(machine)
+
+
+def _parallel_axes(machine: Machine) -> list[Finding]:
+    """A d error next to (nearly) parallel consecutive joint axes is ill-conditioned: the
+    common normal is then barely defined, and a tilt of micro-radians moves it by metres (the
+    d values of calibrations that fit it run to hundreds of metres). Hayati's beta, a rotation
+    about y, describes the same freedom well."""
+    at = {s.sym: s.to_internal(s.default_position if s.role == "axis" else s.nominal or 0.0)
+          for s in machine.symbols}
+    joints = {j[0]: j for j in machine.joints}
+    out = []
+    for number, kind, alpha, _errors, line in machine.joints:
+        if abs(math.sin(float(alpha.xreplace(at)))) > 1e-3:
+            continue
+        # dh: joint J's alpha turns to joint J+1's axis, whose d is then ill-conditioned;
+        # mdh: joint J's alpha is the twist from joint J-1's axis to its own, its own d
+        target = joints.get(number + 1) if kind == "dh" else joints[number]
+        if target is None or "d" not in target[3]:
+            continue
+        name = target[3]["d"]
+        out.append(Finding("warning", f"joint {target[0]}'s axis is (nearly) parallel to joint "
+                                      f"{number if kind == 'dh' else number - 1}'s (alpha {float(alpha.xreplace(at)):g} "
+                                      f"rad, line {line}): its d error {name} is ill-conditioned; drop it and add "
+                                      f"Hayati's {{beta: 0, errors: auto}} after joint {target[0]}",
+                           machine.symbol(name).line, f"symbols.{name}"))
+    return out

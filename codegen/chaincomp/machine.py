@@ -92,6 +92,8 @@ class Machine:
     tool_point: tuple[sp.Expr, sp.Expr, sp.Expr]
     tool_direction: tuple[sp.Expr, sp.Expr, sp.Expr] | None
     source_text: str = field(repr=False, default="")
+    # dh/mdh joints as written: (number, kind, nominal alpha, {parameter: error name}, line)
+    joints: tuple = field(repr=False, default=())
 
     def by_role(self, role: str) -> list[Symbol]:
         return [s for s in self.symbols if s.role == role]
@@ -141,6 +143,25 @@ class _Ctx:
         self.path = path
         self.at: dict = {}        # every symbol at its nominal value (axes: default position)
         self.errors: set = set()  # the error symbols
+        self.symbols: list = []   # the declared symbols, and the errors dh/mdh/beta name themselves
+        self.table: dict = {}     # name -> sympy symbol, of the same
+        self.joints: list = []    # the dh/mdh joints, for lint: (number, kind, alpha, error names, line)
+        self.joint = 0            # the last dh/mdh joint's number in the chain being read
+
+    def declare_error(self, name: str, unit: str, meaning: str, line: int, fld: str) -> sp.Symbol:
+        """An error named by a dh/mdh/beta element: the declared one of that name, or a new one."""
+        if name in self.table:
+            sym = next(s for s in self.symbols if s.name == name)
+            if sym.role != "error":
+                raise self.fail(f"{name!r} is declared as {'an' if sym.role == 'axis' else 'a'} {sym.role}; "
+                                f"the error this element names must be an error", line, fld)
+            return self.table[name]
+        s = Symbol(name, "error", units.unit(unit), meaning, line=line)
+        self.symbols.append(s)
+        self.table[name] = s.sym
+        self.errors.add(s.sym)
+        self.at[s.sym] = sp.Float(0)
+        return s.sym
 
     def fail(self, message: str, line: int | None, fld: str) -> ChaincompError:
         return ChaincompError(message, self.path, line, fld)
@@ -299,13 +320,16 @@ def _parse_element(ctx: _Ctx, node, fld: str, line, symbols, default_sense: int 
     if not isinstance(node, dict):
         raise ctx.fail(f"expected a chain element (rotate / translate / errors), got {describe(node)}",
                        line, fld)
-    kinds = [k for k in ("rotate", "translate", "errors") if k in node]
+    kinds = [k for k in ("rotate", "translate", "dh", "mdh", "beta") if k in node] or \
+        (["errors"] if "errors" in node else [])
     if len(kinds) != 1:
-        raise ctx.fail("each chain element has exactly one of 'rotate', 'translate' or 'errors'"
-                       + (f" (found {', '.join(kinds)})" if kinds else
-                          f" (found fields: {', '.join(map(str, node)) or 'none'})"), line, fld)
+        raise ctx.fail("each chain element has exactly one of 'rotate', 'translate', 'errors', 'dh', 'mdh' "
+                       "or 'beta'" + (f" (found {', '.join(kinds)})" if kinds else
+                                      f" (found fields: {', '.join(map(str, node)) or 'none'})"), line, fld)
     kind = kinds[0]
     common = {"label"}
+    if kind in _JOINT_PARAMS:
+        return _parse_joint(ctx, node, kind, fld, line, symbols)
     if kind == "rotate":
         _require_map(ctx, node, fld, line, common | {"rotate", "angle", "sense"}, {"angle"})
         axis = node["rotate"]
@@ -341,6 +365,66 @@ def _parse_element(ctx: _Ctx, node, fld: str, line, symbols, default_sense: int 
                 out.append(Translation((vals["dx"], vals["dy"], vals["dz"]), line or 0))
         elif vals["e" + factor] != 0:
             out.append(Rotation(factor, sense * vals["e" + factor], line or 0))
+    return out
+
+
+# dh: standard Denavit-Hartenberg, Rz(theta)·Tz(d)·Tx(a)·Rx(alpha); mdh: Craig's modified,
+# Rx(alpha)·Tx(a)·Rz(theta)·Tz(d); beta: Hayati's rotation about y, for nearly parallel
+# consecutive axes. Parameters in internal units (mm, rad), right-handed whatever the
+# machine's rotation_sense (the conventions define them so).
+_JOINT_PARAMS = {"dh": ("theta", "d", "a", "alpha"), "mdh": ("alpha", "a", "theta", "d"), "beta": ("beta",)}
+_JOINT_FACTOR = {"theta": ("rot", "z"), "d": ("trans", 2), "a": ("trans", 0), "alpha": ("rot", "x"),
+                 "beta": ("rot", "y")}
+_AUTO_UNIT = {"theta": "arcsec", "alpha": "arcsec", "beta": "arcsec", "d": "um", "a": "um"}
+
+
+def _parse_joint(ctx: _Ctx, node, kind: str, fld: str, line, symbols) -> list[Elementary]:
+    names = _JOINT_PARAMS[kind]
+    _require_map(ctx, node, fld, line, {"label", kind, "errors"})
+    if kind == "beta":
+        values = {"beta": node["beta"]}
+        vline = {"beta": line_of(node, "beta")}
+    else:
+        values = _require_map(ctx, node[kind], f"{fld}.{kind}", line_of(node, kind), set(names), set(names))
+        vline = {k: line_of(values, k) for k in names}
+        ctx.joint += 1
+    joint = ctx.joint
+    raw = node.get("errors", {})
+    eline = line_of(node, "errors")
+    if raw == "auto":
+        raw = {k: "auto" for k in names}
+    if not isinstance(raw, dict):
+        raise ctx.fail(f"expected 'auto' or a mapping of {', '.join(names)} to error names, got {describe(raw)}",
+                       eline, f"{fld}.errors")
+    _require_map(ctx, raw, f"{fld}.errors", eline, set(names))
+    errors: dict[str, str] = {}
+    nominal: dict[str, sp.Expr] = {}
+    out: list[Elementary] = []
+    for k in names:
+        value = _expr(ctx, values[k], symbols, f"{fld}.{kind}.{k}" if kind != "beta" else f"{fld}.beta", vline[k])
+        nominal[k] = value
+        if k in raw:
+            err = raw[k]
+            efld = f"{fld}.errors.{k}"
+            if err == "auto":
+                err = f"d{k}{joint}"
+            elif not isinstance(err, str) or not NAME.match(err):
+                raise ctx.fail(f"expected an error name or 'auto', got {describe(err)}", line_of(raw, k), efld)
+            if err in RESERVED:
+                raise ctx.fail(f"error name {err!r} is reserved", line_of(raw, k), efld)
+            value = value + ctx.declare_error(err, _AUTO_UNIT[k], f"joint {joint} {k} error ({kind})",
+                                              line_of(raw, k) or line or 0, efld)
+            errors[k] = err
+        what, where = _JOINT_FACTOR[k]
+        if what == "rot":
+            if value != 0:
+                out.append(Rotation(where, value, line or 0))
+        elif value != 0:
+            vec = [sp.Integer(0)] * 3
+            vec[where] = value
+            out.append(Translation(tuple(vec), line or 0))
+    if kind != "beta":
+        ctx.joints.append((joint, kind, nominal["alpha"], errors, line or 0))
     return out
 
 
@@ -423,6 +507,7 @@ def load_machine(path: str) -> Machine:
         seen[s.name] = s.line
         symbols.append(s)
     table = {s.name: s.sym for s in symbols}
+    ctx.symbols, ctx.table = symbols, table   # dh/mdh/beta elements may add errors to both
     ctx.errors = {s.sym for s in symbols if s.role == "error"}
     ctx.at = {s.sym: sp.Float(s.to_internal(s.default_position if s.role == "axis" else s.nominal or 0.0))
               for s in symbols}
@@ -438,6 +523,7 @@ def load_machine(path: str) -> Machine:
         loop = _require_map(ctx, doc["loop"], "loop", line_of(doc, "loop"), {"tool", "workpiece"},
                             {"tool", "workpiece"})
         tool_chain = _parse_chain(ctx, loop["tool"], "loop.tool", line_of(loop, "tool"), table, sense, order)
+        ctx.joint = 0   # joints are numbered per branch
         work_chain = _parse_chain(ctx, loop["workpiece"], "loop.workpiece", line_of(loop, "workpiece"),
                                   table, sense, order)
 
@@ -453,8 +539,11 @@ def load_machine(path: str) -> Machine:
         if norm == 0:
             raise ctx.fail("the tool direction must not be zero", line_of(tool, "direction"), "tool.direction")
         direction = tuple(sp.nsimplify(d / norm) for d in direction)
+    if len(symbols) > MAX_SYMBOLS:
+        raise ctx.fail(f"{len(symbols)} symbols with the errors dh/mdh/beta elements name (at most {MAX_SYMBOLS})",
+                       line_of(doc, "chain") or line_of(doc, "loop"), "chain" if "chain" in doc else "loop")
     machine = Machine(name, str(doc.get("description", "")), path, length_unit, tuple(symbols),
-                      tool_chain, work_chain, point, direction, read_text(path))
+                      tool_chain, work_chain, point, direction, read_text(path), tuple(ctx.joints))
     _check_usage(ctx, machine)
     return machine
 
