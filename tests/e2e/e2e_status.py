@@ -113,6 +113,7 @@ def main() -> int:
         assert final.received == expected["received"] and final.published == expected["published"]
         assert final.rejected[1] == 2 and final.rejected[6] == 1 and sum(final.rejected) == 3
         assert final.foreign_instance in finals and final.foreign_instance != instance
+        assert abs(got["status_period_s"] - 0.05) < 0.025, got["status_period_s"]   # config_test.yaml's
         print(f"final: {instance:016x} status --once shows the final counters: {got['counters']}")
         assert f"instance {instance:016x}  enabled" in text.stdout, text.stdout
     assert text.stdout.startswith(f"2 chaincompd on {h.URL}\n"), text.stdout

@@ -64,9 +64,9 @@ def _target(correction, machine="five_axis_ac", utime=1_000_000_000, flags=1):
     return t
 
 
-def _doc(s, t, axes=None, now_us=1_000_250_000):
+def _doc(s, t, axes=None, now_us=1_000_250_000, period=1.0, now=10.5):
     axes = axes or status.Axes([])
-    return {"url": "memq://", "daemons": [status.describe(s, 10.0, t, axes.of(s.machine), 10.5, now_us)]}
+    return {"url": "memq://", "daemons": [status.describe(s, 10.0, period, t, axes.of(s.machine), now, now_us)]}
 
 
 def test_the_view_of_one_daemon():
@@ -93,6 +93,14 @@ def test_the_view_of_one_daemon():
     ({"final": True}, "exited")])
 def test_states(kw, state):
     assert f"instance 0000000000001234  {state}  up" in status.render_text(_doc(_status(**kw), None))
+
+
+def test_a_daemon_that_stops_publishing_is_silent():
+    # heard at 10.0 s with a 1 s period: silent once 3 periods and the margin have passed
+    assert _doc(_status(), None, now=13.4)["daemons"][0]["state"] == "enabled"
+    assert _doc(_status(), None, now=13.6)["daemons"][0]["state"] == "silent"
+    assert _doc(_status(), None, now=99.0, period=None)["daemons"][0]["state"] == "enabled"   # one status heard
+    assert _doc(_status(final=True), None, now=99.0)["daemons"][0]["state"] == "exited"
 
 
 def test_an_unknown_machine_keeps_wire_units(tmp_path):

@@ -65,6 +65,7 @@ class Bus:
                 raise ChaincompError(f"--url: cannot open LCM at {url!r}") from None
         self.status: dict[int, tuple[float, object]] = {}    # instance -> (monotonic time heard, status)
         self.targets: dict[int, object] = {}
+        self.period: dict[int, float] = {}     # instance -> seconds between its last two statuses
         self.lc.subscribe(STATUS_CHANNEL, self._on_status).set_queue_capacity(1000)
         self.lc.subscribe(TARGET_CHANNEL, self._on_target).set_queue_capacity(1000)
 
@@ -73,6 +74,9 @@ class Bus:
             s = self.types.lcmt_chaincomp_status.decode(data)
         except (ValueError, struct.error):  # not our type (another program on the channel): nothing to show
             return
+        last = self.status.get(s.instance_id)
+        if last and s.utime > last[1].utime:   # the daemon's period, to tell when it falls silent
+            self.period[s.instance_id] = (s.utime - last[1].utime) / 1e6
         self.status[s.instance_id] = (time.monotonic(), s)
 
     def _on_target(self, channel, data):
@@ -142,11 +146,16 @@ def correction(values, axes) -> list[dict]:
     return out
 
 
-def describe(status, heard_at: float, target, axes, now: float, now_us: int) -> dict:
+SILENT_PERIODS = 3     # statuses missed before a daemon (killed, stopped, cut off) shows as silent
+
+
+def describe(status, heard_at: float, period: float | None, target, axes, now: float, now_us: int) -> dict:
     """One daemon as a plain document (JSON's, and what the text view shows)."""
     s = status
     if s.final:
         state = "exited"
+    elif period is not None and now - heard_at > SILENT_PERIODS * period + 0.5:
+        state = "silent"
     elif 0.0 < s.ramp < 1.0:
         state = "ramping"
     else:
@@ -155,6 +164,7 @@ def describe(status, heard_at: float, target, axes, now: float, now_us: int) -> 
         "instance": f"{s.instance_id & 0xFFFFFFFFFFFFFFFF:016x}",
         "machine": s.machine, "state": state, "compensating": bool(s.compensating), "ramp": s.ramp,
         "final": bool(s.final), "uptime_s": s.uptime_us / 1e6, "status_age_s": now - heard_at,
+        "status_period_s": period,
         "counters": {name: getattr(s, name) for name in COUNTERS},
         "rejected": dict(zip(REASONS, s.rejected)),
         "latency_ns": {"window": s.window, "p50": s.latency_p50_ns, "p99": s.latency_p99_ns,
@@ -178,7 +188,7 @@ def describe(status, heard_at: float, target, axes, now: float, now_us: int) -> 
 
 def snapshot(bus: Bus, axes: Axes, url: str) -> dict:
     now, now_us = time.monotonic(), int(time.time() * 1e6)
-    daemons = [describe(s, at, bus.targets.get(i), axes.of(s.machine), now, now_us)
+    daemons = [describe(s, at, bus.period.get(i), bus.targets.get(i), axes.of(s.machine), now, now_us)
                for i, (at, s) in sorted(bus.status.items(), key=lambda kv: (kv[1][1].machine, kv[0]))]
     return {"url": url, "daemons": daemons}
 
