@@ -107,6 +107,8 @@ def test_an_unknown_machine_keeps_wire_units(tmp_path):
     doc = _doc(_status(machine="no_such_machine"), _target([0.5, 2.0], machine="no_such_machine"))
     assert "correction #0 +0.500 mm|deg  #1 +2.000 mm|deg" in status.render_text(doc)
     assert "last command: none heard while listening" in status.render_text(_doc(_status(), None))
+    for odd in ("", "../machines/five_axis_ac", "five_axis_ac\0x"):   # names off the bus are not paths
+        assert status.Axes([]).of(odd) is None
     assert "latency   no command published yet" in status.render_text(_doc(_status(window=0), None))
 
 

@@ -121,7 +121,8 @@ class Axes:
         if name not in self.known:
             path = os.path.join(_ROOT, "configs", "machines", f"{name}.yaml")
             axes = None
-            if os.path.basename(name) == name and os.path.isfile(path):
+            # the name comes off the bus: a plain file name only
+            if name and "\0" not in name and os.path.basename(name) == name and os.path.isfile(path):
                 with contextlib.suppress(ChaincompError):
                     m = self._load(path)
                     axes = [(a.name, a.unit) for a in m.axes] if m.name == name else None
