@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "chaincomp/params_io.hpp"
+#include "chaincomp/yaml_strict.hpp"
 
 namespace {
 
@@ -226,4 +227,16 @@ TEST_CASE("bad tables and polynomials name file, line and key", "[params][varyin
     CHECK(error.find(path + c.line_key + ": ") != std::string::npos);
     CHECK(error.find(c.words) != std::string::npos);
   }
+}
+
+TEST_CASE("numbers in messages are written as Python's repr writes them", "[params]") {
+  // Python's repr(float), from its documented rule: the shortest digits that read back,
+  // fixed notation for decimal exponents -4 <= e < 16, else d.ddde+XX
+  const std::pair<double, const char*> cases[] = {
+      {1e16, "1e+16"},        {1e15, "1000000000000000.0"}, {0.0001, "0.0001"}, {1e-05, "1e-05"},
+      {0.1, "0.1"},           {-0.0, "-0.0"},               {123.456, "123.456"}, {2e18, "2e+18"},
+      {1.5e-300, "1.5e-300"}, {5e-324, "5e-324"},           {1.7976931348623157e308, "1.7976931348623157e+308"},
+      {170.0, "170.0"},       {-2.5, "-2.5"},               {INFINITY, "inf"},    {-INFINITY, "-inf"},
+      {NAN, "nan"},           {123456789012345680000.0, "1.2345678901234568e+20"}};
+  for (const auto& [v, text] : cases) CHECK(chaincomp::py_float_repr(v) == text);
 }
