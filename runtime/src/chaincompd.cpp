@@ -32,7 +32,8 @@ const char* kUsage =
     "                    (chaincomp build; cached in $XDG_CACHE_HOME/chaincomp)\n"
     "  --model LIB.so    a model library made by chaincomp build for exactly this machine file\n"
     "  --params P.yaml   error values of the machine (configs/params/)\n"
-    "  --config R.yaml   runtime settings (configs/runtime/default.yaml documents every key)\n";
+    "  --config R.yaml   runtime settings (configs/runtime/default.yaml documents every key)\n"
+    "  --version         print the version and exit\n";
 
 // Each setting degrades with one warning when the system does not permit it.
 chaincomp::RealtimeObtained realtime_settings(const chaincomp::DaemonConfig& cfg) {
@@ -75,6 +76,10 @@ int main(int argc, char** argv) {
     const std::string a = argv[i];
     if (a == "-h" || a == "--help") {
       std::fputs(kUsage, stdout);
+      return 0;
+    }
+    if (a == "--version") {
+      std::puts("chaincompd " CHAINCOMP_VERSION);
       return 0;
     }
     if ((a == "--machine" || a == "--params" || a == "--config" || a == "--model") && i + 1 < argc) {

@@ -21,7 +21,8 @@ namespace {
 
 const char* kUsage =
     "usage: chaincomp_replay --machine M.yaml --params P.yaml --in IN.lcmlog [--out OUT.lcmlog]\n"
-    "                        [--csv OUT.csv] [--config R.yaml] [--channel NAME] [--model LIB.so] [--quiet]\n";
+    "                        [--csv OUT.csv] [--config R.yaml] [--channel NAME] [--model LIB.so] [--quiet]\n"
+    "       chaincomp_replay --version\n";
 
 int fail(const std::string& msg) {
   std::fprintf(stderr, "chaincomp replay: error: %s\n", msg.c_str());
@@ -77,6 +78,9 @@ int main(int argc, char** argv) {
                                                         : nullptr;
     if (a == "-h" || a == "--help") {
       std::fputs(kUsage, stdout);
+      return 0;
+    } else if (a == "--version") {
+      std::puts("chaincomp_replay " CHAINCOMP_VERSION);
       return 0;
     } else if (a == "--quiet") {
       quiet = true;

@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from chaincomp.cli.common import resolve_machine
+from chaincomp.errors import ChaincompError
 from chaincomp.cli.main import build_parser, main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -157,6 +158,7 @@ def test_setups_has_both_spellings():
 
 
 def _pyproject_version() -> str:
+    # pyproject.toml names __init__.py as the source (dynamic); a literal there would be read first
     return tomllib.loads((ROOT / "codegen/pyproject.toml").read_text())["project"].get("version") or \
         re.search(r'__version__ = "([^"]+)"', (ROOT / "codegen/chaincomp/__init__.py").read_text()).group(1)
 
@@ -174,3 +176,14 @@ def test_top_level_help_lists_every_verb_on_one_line():
         help_text = next(c.help for c in sub._choices_actions if c.dest == verb)
         assert re.search(rf"^    {re.escape(verb)} +{re.escape(help_text)}$", text, re.M), verb
     assert "--version" in text
+
+
+@pytest.mark.parametrize("program", ["chaincompd", "chaincomp_replay"])
+def test_the_programs_version_is_the_package_version(program):
+    from chaincomp.buildtree import binary
+    try:
+        path = binary(program)
+    except ChaincompError as exc:   # no C++ build here
+        pytest.skip(str(exc))
+    out = subprocess.run([path, "--version"], capture_output=True, text=True, timeout=30)
+    assert (out.returncode, out.stdout) == (0, f"{program} {_pyproject_version()}\n")
