@@ -187,3 +187,32 @@ def test_the_programs_version_is_the_package_version(program):
         pytest.skip(str(exc))
     out = subprocess.run([path, "--version"], capture_output=True, text=True, timeout=30)
     assert (out.returncode, out.stdout) == (0, f"{program} {_pyproject_version()}\n")
+
+
+COMPLETION = ROOT / "tools/chaincomp-completion.bash"
+
+
+def test_the_bash_completion_is_up_to_date():
+    from chaincomp.cli.completion import bash_script
+    assert COMPLETION.read_text() == bash_script(), \
+        "regenerate: python -m chaincomp.cli.completion > tools/chaincomp-completion.bash"
+
+
+def _complete(*words: str) -> list[str]:
+    """What bash offers after `words` (the last one being typed), with the script sourced."""
+    line = " ".join(f"'{w}'" for w in words)
+    script = (f"source '{COMPLETION}'; COMP_WORDS=({line}); COMP_CWORD=$(({len(words)} - 1)); _chaincomp; "
+              "printf '%s\\n' \"${COMPREPLY[@]}\"")
+    out = subprocess.run(["bash", "--norc", "-c", script], capture_output=True, text=True, timeout=30, check=True)
+    return out.stdout.split()
+
+
+def test_bash_completes_verbs_options_and_values():
+    assert _complete("chaincomp", "simulate-") == ["simulate-measurements", "simulate-log", "simulate-calibration"]
+    assert _complete("chaincomp", "--ver") == ["--version"]
+    assert _complete("chaincomp", "budget", M, "--se") == ["--set", "--seed"]
+    assert _complete("chaincomp", "budget", M, "--order", "") == ["1", "2", "exact"]
+    assert _complete("chaincomp", "plot", M, "--model", "e") == ["exact", "exact-1", "exact-2"]
+    assert _complete("chaincomp", "eval", M, "--format", "") == ["text", "json"]
+    assert _complete("chaincomp", "replay", "--mach") == ["--machine"]
+    assert _complete("chaincomp", "eval", "") == []   # a file name: bash's own completion (-o default)

@@ -1,0 +1,69 @@
+"""Bash completion written from the parser itself, so that it lists what the verbs take now:
+
+    python -m chaincomp.cli.completion > tools/chaincomp-completion.bash
+    source tools/chaincomp-completion.bash     # or copy it to /etc/bash_completion.d/chaincomp
+
+Verbs, each verb's options, and the values of options with a fixed set of them; anything
+else (files) falls back to bash's own completion."""
+
+from __future__ import annotations
+
+import argparse
+import re
+import shlex
+
+from .main import build_parser
+
+
+def _values(action: argparse.Action) -> list[str]:
+    if action.choices:
+        return [str(c) for c in action.choices]
+    metavar = action.metavar if isinstance(action.metavar, str) else ""
+    m = re.fullmatch(r"\{(.+)\}", metavar)   # a type= function listing its values, e.g. {1,2,exact}
+    return m.group(1).split(",") if m else []
+
+
+def bash_script(parser: argparse.ArgumentParser | None = None) -> str:
+    parser = parser or build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    top = [s for a in parser._actions for s in a.option_strings]
+    cases = []
+    for verb, p in sub.choices.items():
+        opts = [s for a in p._actions for s in a.option_strings]
+        values = []
+        for a in p._actions:
+            words = _values(a)
+            if a.option_strings and words and a.nargs != 0:
+                values.append(f"            {'|'.join(a.option_strings)}) words={shlex.quote(' '.join(words))};;")
+        cases.append(f"        {verb})\n"
+                     f"          case \"$prev\" in\n" + "".join(v + "\n" for v in values) +
+                     f"            *) words={shlex.quote(' '.join(opts))}; [[ $cur == -* ]] || return 0;;\n"
+                     f"          esac;;")
+    verbs = " ".join(sub.choices)
+    return f"""# bash completion for chaincomp; generated from its parser by
+#   python -m chaincomp.cli.completion > tools/chaincomp-completion.bash
+# (tests/python/test_cli_consistency.py checks that it is up to date). Source it, or copy it
+# to /etc/bash_completion.d/chaincomp.
+_chaincomp() {{
+    local cur="${{COMP_WORDS[COMP_CWORD]}}" prev="${{COMP_WORDS[COMP_CWORD-1]}}" verb="" words i
+    COMPREPLY=()
+    for ((i = 1; i < COMP_CWORD; i++)); do
+        case "${{COMP_WORDS[i]}}" in -*) ;; *) verb="${{COMP_WORDS[i]}}"; break;; esac
+    done
+    if [[ -z $verb ]]; then
+        words={shlex.quote(verbs + " " + " ".join(top))}
+    else
+        case "$verb" in
+{chr(10).join(cases)}
+        *) return 0;;
+        esac
+    fi
+    COMPREPLY=($(compgen -W "$words" -- "$cur"))
+}}
+# -o default: file names where no word fits (machine files, params, outputs)
+complete -o default -F _chaincomp chaincomp
+"""
+
+
+if __name__ == "__main__":
+    print(bash_script(), end="")

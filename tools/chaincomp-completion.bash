@@ -1,0 +1,116 @@
+# bash completion for chaincomp; generated from its parser by
+#   python -m chaincomp.cli.completion > tools/chaincomp-completion.bash
+# (tests/python/test_cli_consistency.py checks that it is up to date). Source it, or copy it
+# to /etc/bash_completion.d/chaincomp.
+_chaincomp() {
+    local cur="${COMP_WORDS[COMP_CWORD]}" prev="${COMP_WORDS[COMP_CWORD-1]}" verb="" words i
+    COMPREPLY=()
+    for ((i = 1; i < COMP_CWORD; i++)); do
+        case "${COMP_WORDS[i]}" in -*) ;; *) verb="${COMP_WORDS[i]}"; break;; esac
+    done
+    if [[ -z $verb ]]; then
+        words='derive eval generate testvectors protocol identify simulate-measurements simulate-log replay plot check report budget simulate-calibration build lint iso230-2 laser-to-params status -h --help --version'
+    else
+        case "$verb" in
+        derive)
+          case "$prev" in
+            --format) words='text latex json';;
+            *) words='-h --help --order --format --json'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        eval)
+          case "$prev" in
+            --format) words='text json';;
+            *) words='-h --help --params --set --format --json'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        generate)
+          case "$prev" in
+            *) words='-h --help --order -o --output --registry --registry-only'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        testvectors)
+          case "$prev" in
+            *) words='-h --help --count --seed -o --output'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        protocol)
+          case "$prev" in
+            --format) words='text json';;
+            *) words='-h --help --angles --assume-zero --measure --prefer --set --order --format --json'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        identify)
+          case "$prev" in
+            --format) words='text json';;
+            *) words='-h --help --assume-zero --sigma -o --output --format --json'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        simulate-measurements)
+          case "$prev" in
+            *) words='-h --help --params --setups --set-ups --set --noise --measure --seed -o --output'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        simulate-log)
+          case "$prev" in
+            *) words='-h --help -o --output --rate --seconds --channel --start-utime'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        replay)
+          case "$prev" in
+            *) words='-h --help --machine --model --params --config -o --output --csv --channel'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        plot)
+          case "$prev" in
+            --component) words='dx dy dz dkx dky dkz norm';;
+            --order|--model) words='1 2 exact 2-1 exact-1 exact-2';;
+            --style) words='heatmap surface';;
+            *) words='-h --help --params --set --component --over --range --range2 --grid --order --model --style --replay --table --error -o --output'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        check)
+          case "$prev" in
+            --format) words='text json';;
+            *) words='-h --help --order --format --json'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        report)
+          case "$prev" in
+            --format) words='markdown latex';;
+            *) words='-h --help --order -o --output --format --protocol --assume-zero'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        budget)
+          case "$prev" in
+            --order) words='1 2 exact';;
+            --format) words='text json';;
+            --component) words='dx dy dz dkx dky dkz';;
+            *) words='-h --help --params --set --tolerances --over --grid --order --samples --seed --format --json --top --plot --map --component'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        simulate-calibration)
+          case "$prev" in
+            --interpolation) words='linear monotone_cubic';;
+            --outside) words='hold reject';;
+            *) words='-h --help -o --output --knots --seed --base --interpolation --outside'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        build)
+          case "$prev" in
+            *) words='-h --help -o --output'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        lint)
+          case "$prev" in
+            *) words='-h --help --strict'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        iso230-2)
+          case "$prev" in
+            --format) words='text json';;
+            *) words='-h --help --columns --units --format --json --plot'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        laser-to-params)
+          case "$prev" in
+            --direction) words='mean up down';;
+            --interpolation) words='linear monotone_cubic';;
+            --outside) words='hold reject';;
+            *) words='-h --help --machine --columns --units --error --axis --direction -o --output --merge --interpolation --outside'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        status)
+          case "$prev" in
+            --format) words='text json';;
+            *) words='-h --help --url --once --format --timeout --refresh --machine'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        *) return 0;;
+        esac
+    fi
+    COMPREPLY=($(compgen -W "$words" -- "$cur"))
+}
+# -o default: file names where no word fits (machine files, params, outputs)
+complete -o default -F _chaincomp chaincomp
