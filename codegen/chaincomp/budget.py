@@ -34,8 +34,9 @@ from .derive import derive
 from .errors import ChaincompError
 from .machine import Machine, Symbol
 from .numeric import ExactModel, TruncatedModel
-from .tolerances import Tolerances
+from .tolerances import Tolerance, Tolerances
 from .units import UNITS
+from .varying import Table, Varying, varying_errors
 
 POSITION = ("dx", "dy", "dz")
 DIRECTION = ("dkx", "dky", "dkz")
@@ -233,6 +234,55 @@ class Budget:
     components: dict[str, ComponentBudget] = field(default_factory=dict)
     samples: int = 0
     seed: int = 0
+    tables: dict[str, float] = field(default_factory=dict)   # error -> its largest |value| on the grid
+
+
+# ----------------------------------------------------------------------------- tables
+
+# Points per grid axis at which a table or polynomial is evaluated for its range, besides the
+# grid's own values and a table's knots: the peak of a cubic between knots is then within
+# (span/TABLE_SAMPLES)^2 of the true one.
+TABLE_SAMPLES = 2001
+
+
+def table_bounds(values: dict, grid: Grid) -> dict[str, float]:
+    """For each error given as a table or polynomial (values[name] a Varying): its largest
+    |value| where the grid takes its axis (the axis' span on the grid, or its fixed value),
+    internal units. A budget states one bound per error; this is the one a table implies."""
+    out = {}
+    axes = {a.name: (a, p) for a, p in zip(grid.axes, grid.points)}
+    for name, v in varying_errors(values).items():
+        if v.axis in axes:
+            a, p = axes[v.axis]
+            lo, hi = a.to_internal(float(p[0])), a.to_internal(float(p[-1]))
+            t = np.concatenate([a.to_internal(np.asarray(p, float)), np.linspace(lo, hi, TABLE_SAMPLES)])
+            if isinstance(v, Table):
+                t = np.concatenate([t, v.x[(v.x >= lo) & (v.x <= hi)]])
+        else:
+            lo = hi = float(values[v.axis])
+            t = np.array([lo])
+        v.check_inside(lo)
+        v.check_inside(hi)
+        out[name] = float(np.max(np.abs(np.asarray(v(t), float))))
+    return out
+
+
+def with_tables(values: dict, tolerances: Tolerances | None, tables: dict[str, float],
+                machine: Machine) -> tuple[dict, Tolerances | None]:
+    """The values with each table replaced by 0 (it has no one systematic value to centre on),
+    and the tolerances with each table's range as its bound where the file gives none."""
+    values = {k: (0.0 if k in tables else v) for k, v in values.items()}
+    if tolerances is None or not tables:
+        return values, tolerances
+    have = tolerances.by_name()
+    items = tuple(have.get(s.name) or Tolerance(s.name, tables[s.name], "uniform", tolerances.sigmas)
+                  for s in machine.errors if s.name in have or (s.name in tables and tables[s.name]))
+    return values, Tolerances(tolerances.file, tolerances.sigmas, items, tolerances.source)
+
+
+def identically_zero(cb: "ComponentBudget") -> bool:
+    """No error moves this component anywhere on the grid, in the model of the gains."""
+    return not bool(np.any(cb.worst))
 
 
 def _as_grid(x, shape) -> np.ndarray:
@@ -266,7 +316,7 @@ def _grouped_sum(terms: list) -> np.ndarray:
 
 def compute(machine: Machine, values: dict, tolerances: Tolerances, grid: Grid, order: str = "1",
             samples: int = 10000, seed: int = 1, centre_on_params: bool = True,
-            gains=None) -> Budget:
+            gains=None, tables: dict[str, float] | None = None) -> Budget:
     """The budget on ``grid``. ``values``: internal values of every symbol (constants and the
     --params error values); errors deviate about those values when ``centre_on_params``,
     about zero otherwise (the params' values were read as bounds)."""
@@ -292,7 +342,7 @@ def compute(machine: Machine, values: dict, tolerances: Tolerances, grid: Grid, 
 
     shape = grid.shape
     out = Budget(machine, order, tolerances, grid, dict(values), centre, params_errors,
-                 samples=samples, seed=seed)
+                 samples=samples, seed=seed, tables=dict(tables or {}))
     length_scale = 1.0 / UNITS[machine.length_unit].to_internal
     for comp, g, qb in model.gains(args, centre, bounds):
         terms_w, terms_q, terms_s = [], [], []
@@ -391,7 +441,8 @@ def _mc_stats(dev: np.ndarray, p: float, cb: ComponentBudget) -> dict:
         "quantile": q,
         "quantile_se": q_se,
         "max": float(a[-1]),
-        "bracketed": bool(rss - 3 * q_se - 1e-15 <= q <= worst + 3 * q_se + 1e-15),
+        # nothing to bracket where the model has the component zero: null, not a failure
+        "bracketed": None if identically_zero(cb) else bool(rss - 3 * q_se - 1e-15 <= q <= worst + 3 * q_se + 1e-15),
     }
 
 
@@ -469,6 +520,9 @@ def to_json(b: Budget) -> dict:
         },
         "centre": {s: b.centre[s] / m.symbol(s).unit.to_internal for s in b.centre},
         "params_errors": {s: b.params_errors[s] / m.symbol(s).unit.to_internal for s in b.params_errors},
+        # errors given as tables: the largest |value| on the grid, declared units (their bound
+        # unless the tolerance file gives one)
+        "tables": {s: v / m.symbol(s).unit.to_internal for s, v in b.tables.items()},
         "grid": {"axes": [{"name": a.name, "unit": a.unit.name, "from": float(p[0]), "to": float(p[-1]),
                            "points": len(p)} for a, p in zip(b.grid.axes, b.grid.points)],
                  "fixed": b.grid.fixed, "points": b.grid.size},
@@ -494,6 +548,7 @@ def to_json(b: Budget) -> dict:
                              "share_variance": r["share_variance"]})
         out["components"][comp] = {
             "unit": unit,
+            "identically_zero": identically_zero(cb),
             "systematic": {"min": float(cb.systematic.min()) * k, "max": float(cb.systematic.max()) * k},
             "worst": {"max": float(cb.worst[iw]) * k, "min": float(cb.worst.min()) * k, "at": _axes_at(b, iw)},
             "rss": {"max": float(cb.rss[ir]) * k, "min": float(cb.rss.min()) * k, "at": _axes_at(b, ir)},
@@ -526,6 +581,10 @@ def _fmt(v: float, digits: int = 3) -> str:
     return f"{v:.{digits}f}"
 
 
+def _bracketed(flag: bool | None) -> str:
+    return "zero" if flag is None else "yes" if flag else "NO"
+
+
 def to_text(b: Budget, top: int = 5) -> str:
     m, tol = b.machine, b.tolerances
     order = {"1": "first-order gains", "2": "second-order model (gradient at the centre + a bound of "
@@ -540,6 +599,13 @@ def to_text(b: Budget, top: int = 5) -> str:
     lines.append(f"Tolerances: {src}: {len(tol.items)} of {len(m.errors)} errors ({n_u} uniform, {n_n} normal"
                  f"{f', normal bound = {tol.sigmas:g} sigma' if n_n or tol.source == 'file' else ''}); "
                  f"RSS and quantiles at coverage {100 * tol.coverage:.2f} %")
+    if b.tables:
+        def cell(n):
+            s = m.symbol(n)
+            return f"{n} {b.tables[n] / s.unit.to_internal:.4g} {s.unit.name}"
+        lines.append("  tables in --params, not systematic (a table has no one value); their largest |value| on the "
+                     "grid is their bound" + (" where the tolerance file gives none" if tol.source == "file" else "")
+                     + ": " + ", ".join(cell(n) for n in b.tables))
     not_tol = [s.name for s in m.errors if s.name not in tol.by_name()]
     if not_tol and tol.source == "file":
         lines.append(f"  not toleranced (taken as exact): {', '.join(not_tol)}")
@@ -563,6 +629,10 @@ def to_text(b: Budget, top: int = 5) -> str:
         lo, hi = float(cb.systematic.min()) * k, float(cb.systematic.max()) * k
         sysx = f"{lo:+.3f} everywhere" if abs(hi - lo) <= 1e-9 * max(1.0, abs(hi)) else f"{lo:+.3f}..{hi:+.3f}"
         at = ", ".join(f"{v:g}" for v in _axes_at(b, cb.worst_index).values())
+        if identically_zero(cb):
+            lines.append(f"  {comp:<5} {'0':>10} {'0':>10} {'0':>10} {'0':>10} {sysx:>22}   identically zero: "
+                         f"no error moves {comp} in this model")
+            continue
         lines.append(f"  {comp:<5} {_fmt(float(cb.worst.max()) * k):>10} {_fmt(float(cb.worst.min()) * k):>10} "
                      f"{_fmt(float(cb.rss.max()) * k):>10} {_fmt(float(cb.sigma.max()) * k):>10} {sysx:>22}   ({at})")
     if b.samples:
@@ -578,10 +648,15 @@ def to_text(b: Budget, top: int = 5) -> str:
             mc, i = cb.monte_carlo, cb.worst_index
             lines.append(f"  {comp:<5} {_fmt(float(cb.rss[i]) * k):>9} "
                          f"{_fmt(mc['quantile'] * k) + ' ± ' + _fmt(mc['quantile_se'] * k):>18} "
-                         f"{_fmt(float(cb.worst[i]) * k):>9}  {'yes' if mc['bracketed'] else 'NO':<9} "
+                         f"{_fmt(float(cb.worst[i]) * k):>9}  {_bracketed(mc['bracketed']):<9} "
                          f"{_fmt(float(cb.sigma[i]) * k):>9} "
                          f"{_fmt(mc['sigma'] * k) + ' ± ' + _fmt(mc['sigma_se'] * k):>17} "
                          f"{_fmt(mc['mean'] * k):>9} {_fmt(mc['max'] * k):>9}")
+        for comp, cb in b.components.items():
+            if identically_zero(cb):
+                lines.append(f"  {comp}: zero in this model, so nothing to bracket; the Monte Carlo's "
+                             f"{_fmt(cb.monte_carlo['max'] * _display(b, comp)[0])} {_display(b, comp)[1]} at most is "
+                             f"the exact model's part of higher order")
     for comp, cb in b.components.items():
         rows = contributors(b, comp)
         if not rows or float(cb.worst[cb.worst_index]) == 0.0:

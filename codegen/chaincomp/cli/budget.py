@@ -9,7 +9,6 @@ import numpy as np
 from .. import budget as B
 from ..errors import ChaincompError
 from ..tolerances import from_params, load_tolerances
-from ..varying import varying_errors
 from .common import (add_format_argument, add_machine_argument, add_model_argument, add_seed_argument,
                      add_values_arguments, check_finite, check_image, integer, load, to_json, values_for)
 
@@ -55,30 +54,28 @@ def run(args) -> int:
     over = [n.strip() for n in args.over.split(",")] if args.over else None
     set_names = {item.partition("=")[0].strip() for item in args.sets}
     values, _ = values_for(machine, args.params, args.sets)
-    for name, v in varying_errors(values).items():
-        # bounds and centres that change over the grid: not what a budget of constants states
-        raise ChaincompError(f"{name} varies along {v.axis} ({v.describe()}): the budget takes constant error "
-                             "values (give constants in --params, or the bounds in --tolerances)",
-                             v.file, v.line, v.key)
     grid_names = over or [a.name for a in machine.axes]
     clash = [n for n in grid_names if n in set_names]
     if clash:
         raise ChaincompError(f"--set {clash[0]}: {clash[0]} is an axis of the grid; leave it out of --over "
                              f"to hold it at a value")
+    grid = B.make_grid(machine, over, args.grid, values)
+    # a table (or polynomial) in --params: its largest |value| on the grid is its bound
+    tables = B.table_bounds(values, grid)
     if args.tolerances:
-        tol = load_tolerances(args.tolerances, machine)
+        values, tol = B.with_tables(values, load_tolerances(args.tolerances, machine), tables, machine)
         centred = True
     else:
-        tol = from_params(values, machine)
+        tol = from_params({**values, **tables}, machine)
+        values, _ = B.with_tables(values, None, tables, machine)
         centred = False
         if not tol.items:
             raise ChaincompError("nothing to budget: give --tolerances T.yaml, or error values in --params")
-    grid = B.make_grid(machine, over, args.grid, values)
     pick = _map_axes(grid, args.map)   # the plot's choices checked before the work
     if args.component and args.component not in B.components(machine):
         raise ChaincompError(f"--component {args.component}: this machine has no tool direction")
     b = B.compute(machine, values, tol, grid, order=args.model, samples=args.samples, seed=args.seed,
-                  centre_on_params=centred)
+                  centre_on_params=centred, tables=tables)
     doc = B.to_json(b)
     check_finite(doc)
     print(to_json(doc) if args.format == "json" else B.to_text(b, args.top))
