@@ -21,8 +21,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       const auto& a = config.compensator.axes[i];
       if (!(a.lower < a.upper) || !(a.max_step >= 0) || !(a.max_correction >= 0)) std::abort();
     }
-  } else if (error.rfind(path + ":", 0) != 0 || error.find('\n') != std::string::npos) {
-    std::abort();
+  } else if (error.rfind(path + ":", 0) != 0) {
+    std::abort();  // every refusal names the file
   }
   return 0;
 }
