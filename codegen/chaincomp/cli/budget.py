@@ -23,7 +23,10 @@ def add_parser(sub) -> None:
                                    "(uniform or normal, from the tolerance file), a seeded Monte Carlo of the "
                                    "exact model at the worst point, the dominant contributors there, and the "
                                    "largest |gain| of every error over the grid. Without --tolerances the "
-                                   "error values of --params are read as bounds (uniform on +-|value|).")
+                                   "error values of --params are read as bounds (uniform on +-|value|); an "
+                                   "error given as a table (or polynomial) is bounded by its largest |value| on "
+                                   "the grid, unless the tolerance file bounds it. A component that no error "
+                                   "moves is reported as identically zero.")
     add_machine_argument(p)
     add_values_arguments(p)
     p.add_argument("--tolerances", metavar="T.yaml", help="bounds and distributions (configs/tolerances/*.yaml)")
