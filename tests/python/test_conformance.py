@@ -7,7 +7,8 @@ hand from YAML 1.1/1.2 and the params format (not from either loader):
 ``# expect: ok NAME=VALUE ...`` (values in internal units: mm, rad; ``varying=NAME`` for an
 error given as a table) or ``# expect: LINE: FIELD: message`` (the refusal after ``FILE:``).
 params/ files are read by both loaders, which must agree with each other and with that line;
-config/ files (runtime settings, read only by C++) must match it.
+config/ files (runtime settings, read only by C++) and tolerances/ files (read only by Python,
+through the same YAML rules and value grammar) must match it.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import pytest
 from chaincomp.errors import ChaincompError
 from chaincomp.machine import load_machine
 from chaincomp.params import load_params
+from chaincomp.tolerances import load_tolerances
 from chaincomp.varying import Varying
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
@@ -100,3 +102,17 @@ def test_runtime_config_corpus(path):
         assert (rc, out.strip()) == (0, "ok"), err
     else:
         assert (rc, err) == (2, f"{path}:{expect}")
+
+
+@pytest.mark.parametrize("path", _files("tolerances"), ids=lambda p: os.path.basename(p)[:-5])
+def test_tolerance_corpus(path, machine):
+    expect = _expect(path)
+    try:
+        bounds = {t.name: t.bound for t in load_tolerances(path, machine).items}
+    except ChaincompError as exc:
+        assert str(exc) == f"{path}:{expect}"
+        return
+    assert expect.startswith("ok"), bounds
+    for item in expect.split()[1:]:
+        name, value = item.split("=")
+        assert bounds[name] == pytest.approx(float(value), rel=1e-15, abs=0), name
