@@ -32,3 +32,15 @@ def eval_json(*args: str) -> dict:
 def bundled(request):
     from chaincomp import load_machine
     return load_machine(machine_path(request.param))
+
+
+def _netns_available() -> bool:
+    try:
+        return subprocess.run(["unshare", "-rn", "true"], capture_output=True).returncode == 0
+    except FileNotFoundError:
+        return False
+
+
+# LCM tests across processes run inside a network namespace they make (tests/e2e/netns.sh)
+needs_netns = pytest.mark.skipif(not _netns_available(),
+                                 reason="unprivileged network namespaces (unshare -rn) are not permitted here")

@@ -9,23 +9,13 @@ import time
 
 import pytest
 
-from conftest import ROOT, machine_path
+from conftest import ROOT, machine_path, needs_netns
 
 DAEMON = os.path.join(ROOT, "build", "bin", "chaincompd")
 NETNS = os.path.join(ROOT, "tests", "e2e", "netns.sh")
 PY = os.path.join(ROOT, ".venv", "bin", "python")
 PARAMS = os.path.join(ROOT, "configs", "params", "five_axis_ac-demo.yaml")
 
-
-def _netns_available() -> bool:
-    try:
-        return subprocess.run(["unshare", "-rn", "true"], capture_output=True).returncode == 0
-    except FileNotFoundError:
-        return False
-
-
-needs_netns = pytest.mark.skipif(not _netns_available(),
-                                 reason="unprivileged network namespaces (unshare -rn) are not permitted here")
 
 
 def run_daemon(*args):

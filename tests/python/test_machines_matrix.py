@@ -27,7 +27,7 @@ from chaincomp.cli.main import main as chaincomp_main
 from chaincomp.numeric import ExactModel
 from chaincomp.units import unit
 
-from conftest import MACHINES, PARAMS, ROOT, machine_path
+from conftest import MACHINES, PARAMS, ROOT, machine_path, needs_netns
 
 NAMES = sorted(os.path.splitext(os.path.basename(p))[0] for p in glob.glob(os.path.join(MACHINES, "*.yaml")))
 TOLERANCES = os.path.join(ROOT, "configs", "tolerances")
@@ -366,14 +366,7 @@ def test_simulate_log_replay(name, logs, tmp_path):
         assert np.allclose(miss, [float(r["residual_point_mm"]) for r in rows], rtol=1e-6, atol=1e-10)
 
 
-def _netns_available() -> bool:
-    try:
-        return subprocess.run(["unshare", "-rn", "true"], capture_output=True).returncode == 0
-    except FileNotFoundError:
-        return False
-
-
-@pytest.mark.skipif(not _netns_available(), reason="unprivileged network namespaces (unshare -rn) are not permitted")
+@needs_netns
 @machine
 def test_chaincompd_end_to_end(name, logs, tmp_path):
     """The same 200 commands through chaincompd over LCM (udpm, ttl=0, in a network

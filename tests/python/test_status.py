@@ -12,7 +12,7 @@ import sys
 import pytest
 import yaml
 
-from conftest import ROOT, machine_path, run_cli
+from conftest import ROOT, machine_path, needs_netns, run_cli
 from chaincomp.buildtree import import_lcmtypes
 from chaincomp.cli import status
 
@@ -184,14 +184,7 @@ def test_refusals_are_one_line(args, line):
     assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr and proc.stdout == ""
 
 
-def _netns_available() -> bool:
-    try:
-        return subprocess.run(["unshare", "-rn", "true"], capture_output=True).returncode == 0
-    except FileNotFoundError:
-        return False
-
-
-@pytest.mark.skipif(not _netns_available(), reason="unprivileged network namespaces (unshare -rn) are not permitted")
+@needs_netns
 def test_status_against_daemons_in_a_namespace():
     proc = subprocess.run([os.path.join(ROOT, "tests", "e2e", "netns.sh"), os.path.join(ROOT, ".venv", "bin", "python"),
                            "tests/e2e/e2e_status.py"], capture_output=True, text=True, cwd=ROOT, timeout=120)

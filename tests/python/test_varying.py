@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-from conftest import PARAMS, ROOT, machine_path, run_cli
+from conftest import PARAMS, ROOT, machine_path, needs_netns, run_cli
 
 FIVE = machine_path("five_axis_ac")
 LASER = os.path.join(PARAMS, "five_axis_ac-laser.yaml")
@@ -458,14 +458,7 @@ def test_compensation_with_tables_puts_the_tool_point_on_the_nominal_one(tmp_pat
     assert np.linalg.norm(off - nominal, axis=1).max() > 1e-3
 
 
-def _netns_available() -> bool:
-    try:
-        return subprocess.run(["unshare", "-rn", "true"], capture_output=True).returncode == 0
-    except FileNotFoundError:
-        return False
-
-
-@pytest.mark.skipif(not _netns_available(), reason="unprivileged network namespaces are not permitted here")
+@needs_netns
 def test_daemon_with_tables_streams_exact_targets_without_allocating(monkeypatch):
     """tests/e2e/e2e_stream.py with the laser tables: chaincompd (in a network namespace)
     checked target by target against the exact model with the tables; zero allocations."""
@@ -477,7 +470,7 @@ def test_daemon_with_tables_streams_exact_targets_without_allocating(monkeypatch
     assert "heap allocations after warm-up 0" in proc.stdout
 
 
-@pytest.mark.skipif(not _netns_available(), reason="unprivileged network namespaces are not permitted here")
+@needs_netns
 def test_daemon_with_tables_equals_replay_bit_for_bit(tmp_path, monkeypatch):
     monkeypatch.setenv("CHAINCOMP_E2E_PARAMS", LASER)
     log = tmp_path / "axes.lcmlog"
