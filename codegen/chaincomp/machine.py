@@ -147,6 +147,7 @@ class _Ctx:
         self.table: dict = {}     # name -> sympy symbol, of the same
         self.joints: list = []    # the dh/mdh joints, for lint: (number, kind, alpha, error names, line)
         self.joint = 0            # the last dh/mdh joint's number in the chain being read
+        self.auto: dict = {}      # error name -> line of the element that auto-named it
 
     def declare_error(self, name: str, unit: str, meaning: str, line: int, fld: str) -> sp.Symbol:
         """An error named by a dh/mdh/beta element: the declared one of that name, or a new one."""
@@ -283,6 +284,10 @@ def _check_at_nominal(expr: sp.Expr, at: dict, errors: set) -> None:
             arg = _numeric(node.base, at)
             if arg is not None and abs(arg) < 1e-300:
                 bad = "divides by" if node.exp.is_negative else f"takes a power {node.exp} of"
+        elif isinstance(node, sp.Abs):   # sqrt(e^2) is |e|: no derivative at zero
+            arg = _numeric(node.args[0], at)
+            if arg is not None and abs(arg) < 1e-300:
+                bad = "takes the absolute value of"
         elif isinstance(node, (sp.asin, sp.acos)):
             arg = _numeric(node.args[0], at)
             if arg is not None and abs(abs(arg.real) - 1) < 1e-12:
@@ -408,6 +413,13 @@ def _parse_joint(ctx: _Ctx, node, kind: str, fld: str, line, symbols) -> list[El
             efld = f"{fld}.errors.{k}"
             if err == "auto":
                 err = f"d{k}{joint}"
+                # J restarts in each loop branch and a beta takes its joint's J: two elements
+                # auto-naming one error would silently share it.
+                if err in ctx.auto:
+                    raise ctx.fail(f"'auto' names this error {err!r}, already auto-named by the element at "
+                                   f"line {ctx.auto[err]}; name this element's errors explicitly",
+                                   line_of(raw, k) or eline, efld)
+                ctx.auto[err] = line or 0
             elif not isinstance(err, str) or not NAME.match(err):
                 raise ctx.fail(f"expected an error name or 'auto', got {describe(err)}", line_of(raw, k), efld)
             if err in RESERVED:
