@@ -32,6 +32,7 @@ import numpy as np
 
 from . import units as U
 from .errors import ChaincompError
+from .expressions import MAX_LITERAL
 from .yamlsource import read_text
 
 FIELDS = ("target", "run", "direction", "deviation", "actual")
@@ -254,8 +255,12 @@ def read_runs(path: str, column_map: dict[str, str] | None = None,
             dev = (v * val_unit.to_internal - target * pos_unit.to_internal) / report.to_internal
         else:
             dev = v * val_unit.to_internal / report.to_internal
-        if not math.isfinite(dev):
-            raise ChaincompError(f"deviation {dev!r} is not finite", path, line, wanted[value])
+        # the bound of every value in the project (1e15 mm or rad), so that s and R stay finite
+        for field, internal in (("target", target * pos_unit.to_internal), (value, dev * report.to_internal)):
+            if not abs(internal) <= MAX_LITERAL:
+                raise ChaincompError(f"{cell(field).strip()!r} is larger than {MAX_LITERAL:g} "
+                                     f"{U.INTERNAL[pos_unit.kind if field == 'target' else val_unit.kind]} "
+                                     "in magnitude", path, line, wanted[field])
         key = (target, d, run)
         if key in readings:
             raise ChaincompError(f"a second reading for target {target:g}, run {run}, {d} (the first on line "

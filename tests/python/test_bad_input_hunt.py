@@ -1,0 +1,52 @@
+"""Bad input found by a hunt over the verbs added in 2026-12 (iso230-2, laser-to-params, build,
+lint, status, replay, dh elements): each test is one case that used to give a traceback, a
+silent wrong value or a message without file, line and field."""
+
+import os
+import subprocess
+import sys
+
+ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
+RUNS = os.path.join(ROOT, "configs", "measurements", "five_axis_ac-X-positioning.csv")
+
+
+def run(*args, cwd=ROOT, timeout=60):
+    return subprocess.run([sys.executable, "-m", "chaincomp.cli.main", *args], capture_output=True,
+                          text=True, cwd=cwd, timeout=timeout)
+
+
+def runs_csv(tmp_path, name, value_of_row):
+    """The bundled runs with each reading's deviation replaced by value_of_row(run)."""
+    out = ["target [mm],run,direction,deviation [um]"]
+    for line in open(RUNS, encoding="utf-8").read().splitlines():
+        if line.startswith("#") or line.startswith("target") or not line.strip():
+            continue
+        target, r, d, dev = line.split(",")
+        out.append(f"{target},{r},{d},{value_of_row(int(r), dev)}")
+    p = tmp_path / name
+    p.write_text("\n".join(out) + "\n", encoding="utf-8")
+    return p
+
+
+def one_error_line(res, verb, *words):
+    assert res.returncode == 2, (res.returncode, res.stdout[-500:], res.stderr[-2000:])
+    assert "Traceback" not in res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"chaincomp {verb}: error: "), res.stderr
+    for w in words:
+        assert w in lines[0], (w, lines[0])
+    return lines[0]
+
+
+def test_iso230_2_deviations_whose_spread_overflows_are_refused_in_text_too(tmp_path):
+    # ±1.7e308 um: finite as written, but s = inf; the text report used to print it (exit 0)
+    # while --format json refused it without naming the file
+    p = runs_csv(tmp_path, "ovf.csv", lambda r, dev: "1.7e308" if r % 2 else "-1.7e308")
+    for fmt in ("text", "json"):
+        one_error_line(run("iso230-2", str(p), "--format", fmt), "iso230-2", "ovf.csv:", "deviation", "1e+15")
+
+
+def test_iso230_2_target_beyond_the_value_bound_is_refused(tmp_path):
+    p = tmp_path / "t.csv"
+    p.write_text(open(RUNS, encoding="utf-8").read().replace("\n-400,", "\n-1e300,"), encoding="utf-8")
+    one_error_line(run("iso230-2", str(p)), "iso230-2", "t.csv:", "target", "1e+15")
