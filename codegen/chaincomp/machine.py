@@ -419,9 +419,17 @@ def _parse_joint(ctx: _Ctx, node, kind: str, fld: str, line, symbols) -> list[El
                     raise ctx.fail(f"'auto' names this error {err!r}, already auto-named by the element at "
                                    f"line {ctx.auto[err]}; name this element's errors explicitly",
                                    line_of(raw, k) or eline, efld)
+                if err in ctx.table:   # declared, or named by an earlier element: sharing it is as silent
+                    sym = next(s for s in ctx.symbols if s.name == err)
+                    raise ctx.fail(f"'auto' names this error {err!r}, already declared "
+                                   f"{f'on line {sym.line}' if sym.line else 'elsewhere'}; name this element's "
+                                   "errors explicitly", line_of(raw, k) or eline, efld)
                 ctx.auto[err] = line or 0
             elif not isinstance(err, str) or not NAME.match(err):
                 raise ctx.fail(f"expected an error name or 'auto', got {describe(err)}", line_of(raw, k), efld)
+            elif err in ctx.auto:
+                raise ctx.fail(f"{err!r} is the error 'auto' named for the element at line {ctx.auto[err]}; "
+                               "give each element its own errors", line_of(raw, k), efld)
             if err in RESERVED:
                 raise ctx.fail(f"error name {err!r} is reserved", line_of(raw, k), efld)
             value = value + ctx.declare_error(err, _AUTO_UNIT[k], f"joint {joint} {k} error ({kind})",

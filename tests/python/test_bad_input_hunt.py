@@ -50,3 +50,28 @@ def test_iso230_2_target_beyond_the_value_bound_is_refused(tmp_path):
     p = tmp_path / "t.csv"
     p.write_text(open(RUNS, encoding="utf-8").read().replace("\n-400,", "\n-1e300,"), encoding="utf-8")
     one_error_line(run("iso230-2", str(p)), "iso230-2", "t.csv:", "target", "1e+15")
+
+
+def arm(tmp_path, name, symbols, chain):
+    axes = "".join(f"  - {{name: q{i}, role: axis, unit: deg, limits: [-360, 360]}}\n" for i in (1, 2))
+    p = tmp_path / f"{name}.yaml"
+    p.write_text(f"name: {name}\nsymbols:\n{axes}{symbols}chain:\n{chain}"
+                 "tool:\n  point: [0, 0, 0]\n  direction: [0, 0, 1]\n", encoding="utf-8")
+    return p
+
+
+def test_auto_error_colliding_with_a_declared_error_is_refused(tmp_path):
+    # joint 1's auto dd1 and joint 2's named dd1 used to be one symbol, silently: two physical
+    # errors that calibration could never tell apart
+    p = arm(tmp_path, "collide", "  - {name: dd1, role: error, unit: um}\n",
+            "  - {dh: {theta: q1, d: 5, a: 10, alpha: pi/2}, errors: auto}\n"
+            "  - {dh: {theta: q2, d: 0, a: 10, alpha: 0}, errors: {d: dd1}}\n")
+    line = one_error_line(run("lint", str(p)), "lint", "collide.yaml:7:", "chain[0].errors.d", "dd1", "line 5")
+    assert "auto" in line
+
+
+def test_named_error_equal_to_an_earlier_auto_name_is_refused(tmp_path):
+    p = arm(tmp_path, "collide2", "",
+            "  - {dh: {theta: q1, d: 5, a: 10, alpha: pi/2}, errors: auto}\n"
+            "  - {dh: {theta: q2, d: 0, a: 10, alpha: 0}, errors: {d: dd1}}\n")
+    one_error_line(run("lint", str(p)), "lint", "collide2.yaml:7:", "chain[1].errors.d", "dd1", "line 6")
