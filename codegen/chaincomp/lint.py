@@ -101,14 +101,18 @@ def _parallel_axes(machine: Machine) -> list[Finding]:
         if abs(math.sin(float(alpha.xreplace(at)))) > 1e-3:
             continue
         # dh: joint J's alpha turns to joint J+1's axis, whose d is then ill-conditioned;
-        # mdh: joint J's alpha is the twist from joint J-1's axis to its own, its own d
+        # mdh: joint J's alpha is the twist from joint J-1's axis to its own, its own d (joint
+        # 1's is from the base frame, which fixes d1). The beta tilting the later axis of the
+        # pair about y sits after the earlier joint (Hayati's beta_J in link J); one after the
+        # later joint tilts the next pair instead, where nothing is missing.
+        first = number if kind == "dh" else number - 1
         target = joints.get(number + 1) if kind == "dh" else joints[number]
-        if target is None or "d" not in target[3]:
+        if first not in joints or target is None or "d" not in target[3]:
             continue
         name = target[3]["d"]
         out.append(Finding("warning", f"joint {target[0]}'s axis is (nearly) parallel to joint "
-                                      f"{number if kind == 'dh' else number - 1}'s (alpha {float(alpha.xreplace(at)):g} "
+                                      f"{first}'s (alpha {float(alpha.xreplace(at)):g} "
                                       f"rad, line {line}): its d error {name} is ill-conditioned; drop it and add "
-                                      f"Hayati's {{beta: 0, errors: auto}} after joint {target[0]}",
+                                      f"Hayati's {{beta: 0, errors: auto}} after joint {first}",
                            machine.symbol(name).line, f"symbols.{name}"))
     return out

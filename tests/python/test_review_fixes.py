@@ -75,3 +75,83 @@ def test_two_betas_after_one_joint_do_not_share_an_error(tmp_path):
                   "  - {beta: 0, errors: auto}\n  - {beta: 0, errors: auto}\n"
                   "tool:\n  point: [0, 0, 0]\n  direction: [0, 0, 1]\n")
     refused(proc, "chain[2].errors.beta", "already")
+
+
+# --- the parallel-axes lint's advice, checked by the rank of an independent numpy model ---
+
+import math  # noqa: E402
+import re  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from test_dh import mod_link, roty, std_link  # noqa: E402
+
+# A UR5 in both conventions (joints 2, 3, 4 parallel), and the same arm written in Craig's.
+ARM = {"dh": {"d": [89.159, 0, 0, 109.15, 94.65, 82.3], "a": [0, -425.0, -392.25, 0, 0, 0],
+              "alpha": [math.pi / 2, 0, 0, math.pi / 2, -math.pi / 2, 0]},
+       "mdh": {"d": [89.159, 0, 0, 109.15, 94.65, 82.3], "a": [0, 0, -425.0, -392.25, 0, 0],
+               "alpha": [0, math.pi / 2, 0, 0, math.pi / 2, -math.pi / 2]}}
+
+
+def arm_text(kind, no_d=(), betas=()):
+    p = ARM[kind]
+    s = "name: arm\nsymbols:\n" + "".join(f"  - {{name: q{j}, role: axis, unit: deg, limits: [-360, 360]}}\n"
+                                        for j in range(1, 7)) + "chain:\n"
+    for i in range(6):
+        j = i + 1
+        err = "{theta: auto, a: auto, alpha: auto}" if j in no_d else "auto"
+        body = (f"theta: q{j}, d: {p['d'][i]}, a: {p['a'][i]}, alpha: {p['alpha'][i]!r}" if kind == "dh" else
+                f"alpha: {p['alpha'][i]!r}, a: {p['a'][i]}, theta: q{j}, d: {p['d'][i]}")
+        s += f"  - {{{kind}: {{{body}}}, errors: {err}}}\n" + ("  - {beta: 0, errors: auto}\n" if j in betas else "")
+    return s + "  - {translate: [10, 0, 50]}\ntool:\n  point: [0, 0, 0]\n  direction: [0, 0, 1]\n"
+
+
+def numpy_rank(kind, no_d, betas):
+    """Rank of d(point, direction)/d(errors) over random poses, by central differences of the
+    textbook link product (theta, d, a, alpha errors per joint, less the dropped d; betas)."""
+    p = ARM[kind]
+    cols = [(j, k) for j in range(1, 7) for k in ("theta", "d", "a", "alpha") if not (k == "d" and j in no_d)]
+    cols += [(j, "beta") for j in betas]
+
+    def pose(q, e):
+        T = np.eye(4)
+        for i in range(6):
+            j = i + 1
+            th, d, a, al = (q[i] + e.get((j, "theta"), 0), p["d"][i] + e.get((j, "d"), 0),
+                            p["a"][i] + e.get((j, "a"), 0), p["alpha"][i] + e.get((j, "alpha"), 0))
+            T = T @ (std_link(th, d, a, al) if kind == "dh" else mod_link(al, a, th, d))
+            if j in betas:
+                T = T @ roty(e.get((j, "beta"), 0))
+        T = T @ np.array([[1, 0, 0, 10], [0, 1, 0, 0], [0, 0, 1, 50], [0, 0, 0, 1.0]])
+        return np.concatenate([T[:3, 3], T[:3, 2]])
+
+    rng = np.random.default_rng(7)
+    rows = []
+    for _ in range(30):
+        q = rng.uniform(-math.pi, math.pi, 6)
+        rows.append(np.array([(pose(q, {c: 1e-6}) - pose(q, {c: -1e-6})) / 2e-6 for c in cols]).T)
+    s = np.linalg.svd(np.vstack(rows), compute_uv=False)
+    return int((s > 1e-7 * s[0]).sum())
+
+
+@pytest.mark.parametrize("kind", ["dh", "mdh"])
+def test_following_the_parallel_axes_advice_adds_a_freedom_per_beta(tmp_path, kind):
+    from chaincomp import load_machine
+    from chaincomp.lint import lint
+    path = tmp_path / "arm.yaml"
+    path.write_text(arm_text(kind))
+    advice = [f.message for f in lint(load_machine(str(path))) if "parallel" in f.message]
+    assert len(advice) == 2, advice
+    no_d = [int(re.search(r"d error dd(\d+)", a).group(1)) for a in advice]
+    betas = [int(re.search(r"after joint (\d+)", a).group(1)) for a in advice]
+    # each beta must describe the missing tilt (a beta where none is missing is redundant)
+    assert numpy_rank(kind, no_d, betas) == numpy_rank(kind, (), ()) + 2, (no_d, betas)
+
+
+def test_no_parallel_warning_against_the_base_frame(tmp_path):
+    # mdh joint 1's alpha is the twist from the base frame, not from a joint: d1 is defined.
+    from chaincomp import load_machine
+    from chaincomp.lint import lint
+    path = tmp_path / "arm.yaml"
+    path.write_text(arm_text("mdh"))
+    assert not [f for f in lint(load_machine(str(path))) if f.field == "symbols.dd1"]
