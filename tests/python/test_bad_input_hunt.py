@@ -75,3 +75,12 @@ def test_named_error_equal_to_an_earlier_auto_name_is_refused(tmp_path):
             "  - {dh: {theta: q1, d: 5, a: 10, alpha: pi/2}, errors: auto}\n"
             "  - {dh: {theta: q2, d: 0, a: 10, alpha: 0}, errors: {d: dd1}}\n")
     one_error_line(run("lint", str(p)), "lint", "collide2.yaml:7:", "chain[1].errors.d", "dd1", "line 6")
+
+
+def test_status_empty_url_is_refused():
+    # an empty --url used to open liblcm's default (LCM_DEFAULT_URL, else UDP multicast) without
+    # a word; the environment here keeps even that in-process
+    env = dict(os.environ, LCM_DEFAULT_URL="memq://")
+    res = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "status", "--once", "--timeout", "0.1",
+                          "--url", " "], capture_output=True, text=True, cwd=ROOT, timeout=60, env=env)
+    one_error_line(res, "status", "--url", "empty")

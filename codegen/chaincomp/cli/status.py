@@ -58,6 +58,8 @@ class Bus:
         self.types = import_lcmtypes()
         import lcm
         # liblcm prints its own line on stderr for a bad URL: ours is the one the user sees
+        if not url.strip():   # liblcm would open its default (LCM_DEFAULT_URL, else multicast) unasked
+            raise ChaincompError(f"--url: empty (the default is {DEFAULT_URL})")
         with _quiet_stderr():
             try:
                 self.lc = lcm.LCM(url)
