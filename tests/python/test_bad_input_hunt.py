@@ -84,3 +84,12 @@ def test_status_empty_url_is_refused():
     res = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "status", "--once", "--timeout", "0.1",
                           "--url", " "], capture_output=True, text=True, cwd=ROOT, timeout=60, env=env)
     one_error_line(res, "status", "--url", "empty")
+
+
+MACHINE = os.path.join(ROOT, "configs", "machines", "five_axis_ac.yaml")
+DEMO = os.path.join(ROOT, "configs", "params", "five_axis_ac-demo.yaml")
+
+
+def test_replay_input_that_is_a_folder_says_so(tmp_path):
+    one_error_line(run("replay", MACHINE, str(tmp_path), "--params", DEMO, "--csv", str(tmp_path / "o.csv")),
+                   "replay", "is a folder")

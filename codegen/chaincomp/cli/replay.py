@@ -31,6 +31,8 @@ def add_parser(sub) -> None:
 
 def run(args) -> int:
     resolve_machine(args)
+    if os.path.isdir(args.input):
+        raise ChaincompError(f"{args.input}: is a folder, expected a log file")
     if not os.path.isfile(args.input):
         raise ChaincompError(f"{args.input}: no such log file")
     load(args.machine)  # the machine's mistakes with file, line and field, as every verb reports them
