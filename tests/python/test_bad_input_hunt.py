@@ -6,6 +6,8 @@ import os
 import subprocess
 import sys
 
+import yaml
+
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 RUNS = os.path.join(ROOT, "configs", "measurements", "five_axis_ac-X-positioning.csv")
 
@@ -93,3 +95,18 @@ DEMO = os.path.join(ROOT, "configs", "params", "five_axis_ac-demo.yaml")
 def test_replay_input_that_is_a_folder_says_so(tmp_path):
     one_error_line(run("replay", MACHINE, str(tmp_path), "--params", DEMO, "--csv", str(tmp_path / "o.csv")),
                    "replay", "is a folder")
+
+
+def test_laser_to_params_a_file_name_cannot_write_a_value(tmp_path):
+    # the CSV's name goes into a comment line of the output: its line breaks used to end the
+    # comment, and the rest of the name was read as an entry (here EZX = 999 um)
+    name = tmp_path / "x\n  EZX: 999 um\n  #\u2028  EYZ: 5 um\n.csv"
+    name.write_text(open(RUNS, encoding="utf-8").read(), encoding="utf-8")
+    base = tmp_path / "p.yaml"
+    base.write_text("machine: five_axis_ac\nvalues:\n  EYX: 1 um\n", encoding="utf-8")
+    for merge in (["--merge", str(base)], []):
+        out = tmp_path / f"o{len(merge)}.yaml"
+        res = run("laser-to-params", str(name), "--machine", MACHINE, "--error", "EXX", "-o", str(out), *merge)
+        assert res.returncode == 0, res.stderr
+        values = yaml.safe_load(out.read_text(encoding="utf-8"))["values"]
+        assert sorted(values) == (["EXX", "EYX"] if merge else ["EXX"]), values

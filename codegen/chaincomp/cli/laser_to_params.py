@@ -137,10 +137,16 @@ def _num(v: float) -> str:
     return "0" if text == "-0" else text
 
 
+def _one_line(text: str) -> str:
+    """text for a comment line: a file name's line breaks (YAML also breaks at U+0085, U+2028,
+    U+2029) and other control characters escaped, so that a name cannot write a value."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 def entry_lines(machine: Machine, error: str, axis: str, targets, values, unit: str, interpolation: str,
                 outside: str, indent: str, comment: str) -> list[str]:
     sym = machine.symbol(error)
-    return [f"{indent}# {comment}",
+    return [f"{indent}# {_one_line(comment)}",
             f"{indent}{error}:   # {sym.meaning}" if sym.meaning else f"{indent}{error}:",
             f"{indent}  axis: {axis}",
             f"{indent}  units: [{machine.symbol(axis).unit.name}, {unit}]",
@@ -243,7 +249,7 @@ def run(args) -> int:
     else:
         command = ["chaincomp", "laser-to-params", args.runs, "--machine", args.machine, "--error", args.error,
                    "--axis", axis, "--direction", args.direction, "-o", args.output]
-        text = "\n".join([f"# Written by: {' '.join(shlex.quote(c) for c in command)}",
+        text = "\n".join([f"# Written by: {_one_line(' '.join(shlex.quote(c) for c in command))}",
                           f"machine: {machine.name}",
                           f"description: laser calibration of {args.error} (chaincomp laser-to-params)",
                           "values:"] + make_entry("  ")) + "\n"
