@@ -72,7 +72,8 @@ RESERVED = set(FUNCTIONS) | set(keyword.kwlist) | _CXX | {
 
 # An identifier, matched on the whole string (\Z: '$' would also match before a final newline).
 NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
-_TOKEN = re.compile(r"\s*(?:(?P<num>(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)|(?P<name>[A-Za-z_][A-Za-z0-9_]*)"
+# [0-9], not \d: \d takes every script's digits, which float() then reads as numbers.
+_TOKEN = re.compile(r"\s*(?:(?P<num>(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?)|(?P<name>[A-Za-z_][A-Za-z0-9_]*)"
                     r"|(?P<op>\*\*|[-+*/^(),]))")
 
 
@@ -262,7 +263,8 @@ def parse(text: object, symbols: dict[str, sp.Symbol]) -> sp.Expr:
         raise p.fail(f"unexpected {p.tokens[p.pos][1]!r}")
     if expr.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
         raise ExpressionError(f"{_shown(source)} is not finite")
-    if expr.has(sp.I):
+    # I itself, and constants sympy keeps unevaluated off the real line: (-8)^(1/3), acos(2)
+    if expr.has(sp.I) or any(n.is_number and n.is_real is False for n in sp.preorder_traversal(expr)):
         raise ExpressionError(f"{_shown(source)} is not real")
     for n in expr.atoms(sp.Number):
         if abs(n) > MAX_MAGNITUDE:

@@ -155,3 +155,27 @@ def test_no_parallel_warning_against_the_base_frame(tmp_path):
     path = tmp_path / "arm.yaml"
     path.write_text(arm_text("mdh"))
     assert not [f for f in lint(load_machine(str(path))) if f.field == "symbols.dd1"]
+
+
+# --- the expression parser ---
+
+@pytest.mark.parametrize("text", ["\u0663", "1\u0663", "\u0663.5"])   # Arabic-Indic three
+def test_only_ascii_digits_are_numbers(text):
+    # float('\u0663') is 3.0, but the grammar (and the C++ side, and parse_number) know 0-9 only
+    from chaincomp.expressions import ExpressionError, parse
+    with pytest.raises(ExpressionError):
+        parse(text, {})
+
+
+@pytest.mark.parametrize("text", ["(-8)^(1/3)", "acos(2)", "asin(3/2)", "2 + (-1)^(1/2)"])
+def test_complex_constants_are_not_real(text):
+    # (-8)^(1/3) is 1 + 1.732i in sympy's principal branch; acos(2) is 1.317i
+    from chaincomp.expressions import ExpressionError, parse
+    with pytest.raises(ExpressionError, match="not real"):
+        parse(text, {})
+
+
+def test_real_constants_still_parse():
+    import sympy as sp
+    from chaincomp.expressions import parse
+    assert parse("8^(1/3)", {}) == 2 and parse("acos(1/2)", {}) == sp.pi / 3 and parse("(-2)^2", {}) == 4
