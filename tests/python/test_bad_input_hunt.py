@@ -110,3 +110,16 @@ def test_laser_to_params_a_file_name_cannot_write_a_value(tmp_path):
         assert res.returncode == 0, res.stderr
         values = yaml.safe_load(out.read_text(encoding="utf-8"))["values"]
         assert sorted(values) == (["EXX", "EYX"] if merge else ["EXX"]), values
+
+
+def test_laser_to_params_merges_into_a_file_ending_with_a_document_end_marker(tmp_path):
+    # the new entry used to go after '...', and the output was refused as not loading back,
+    # naming the output (which is not there) instead of anything the user wrote
+    base = tmp_path / "p.yaml"
+    base.write_text("---\nmachine: five_axis_ac\nvalues:\n  EYX: 1 um\n...\n", encoding="utf-8")
+    out = tmp_path / "o.yaml"
+    res = run("laser-to-params", RUNS, "--machine", MACHINE, "--error", "EXX", "-o", str(out), "--merge", str(base))
+    assert res.returncode == 0, res.stderr
+    text = out.read_text(encoding="utf-8")
+    assert text.startswith("---\nmachine: five_axis_ac\nvalues:\n  EYX: 1 um\n") and text.endswith("\n...\n")
+    assert sorted(yaml.safe_load(text)["values"]) == ["EXX", "EYX"]

@@ -168,7 +168,8 @@ def merge(path: str, machine: Machine, error: str, make_entry) -> str:
 
     if not re.fullmatch(r"values:\s*(#.*)?", lines[doc.lines["values"] - 1]):
         fail("'values' must be a block mapping (one entry per line) to merge into", doc.lines["values"])
-    starts = sorted([values.lines[k] for k in values] + [doc.lines[k] for k in doc if k != "values"])
+    starts = sorted([values.lines[k] for k in values] + [doc.lines[k] for k in doc if k != "values"] +
+                    [i for i, t in enumerate(lines, 1) if re.match(r"(\.\.\.|---)(\s|$)", t)])  # document markers
 
     def end_of(start: int, indent: int) -> int:
         """0-based index past the entry starting on line ``start``: up to the next key, less the
