@@ -123,3 +123,14 @@ def test_laser_to_params_merges_into_a_file_ending_with_a_document_end_marker(tm
     text = out.read_text(encoding="utf-8")
     assert text.startswith("---\nmachine: five_axis_ac\nvalues:\n  EYX: 1 um\n") and text.endswith("\n...\n")
     assert sorted(yaml.safe_load(text)["values"]) == ["EXX", "EYX"]
+
+
+def test_laser_to_params_merge_keeps_crlf_line_ends(tmp_path):
+    # "every other line is kept byte for byte": a Windows-written file's \r\n became \n
+    base = tmp_path / "p.yaml"
+    base.write_bytes(b"# from the shop PC\r\nmachine: five_axis_ac\r\nvalues:\r\n  EYX: 1 um\r\n")
+    out = tmp_path / "o.yaml"
+    res = run("laser-to-params", RUNS, "--machine", MACHINE, "--error", "EXX", "-o", str(out), "--merge", str(base))
+    assert res.returncode == 0, res.stderr
+    data = out.read_bytes()
+    assert data.startswith(base.read_bytes()) and b"\n" not in data.replace(b"\r\n", b"")

@@ -161,7 +161,9 @@ def merge(path: str, machine: Machine, error: str, make_entry) -> str:
     load_params(path, machine)   # a broken file is reported as itself, line and field
     doc = load_yaml(path)
     values = doc["values"]
-    lines = read_text(path).splitlines()
+    text = read_text(path)
+    lines = text.splitlines()
+    eol = "\r\n" if "\r\n" in text else "\n"   # a file written on Windows stays so
 
     def fail(msg, line):
         raise ChaincompError(f"--merge: {msg}", path, line, "values")
@@ -198,7 +200,7 @@ def merge(path: str, machine: Machine, error: str, make_entry) -> str:
         last = max(values.lines[k] for k in values)
         at = end_of(last, indent)
         new = lines[:at] + make_entry(" " * indent) + lines[at:]
-    return "\n".join(new) + "\n"
+    return eol.join(new) + eol
 
 
 def run(args) -> int:
