@@ -214,6 +214,9 @@ def read_runs(path: str, column_map: dict[str, str] | None = None,
         return u
 
     pos_unit = unit_of("target", units[0])
+    if pos_unit.kind not in ("length", "angle"):   # a slide's or a rotary axis' position
+        raise ChaincompError(f"targets in {pos_unit.name}: a target is a length or an angle (mm, deg, ...)",
+                             path, hline, wanted["target"])
     if value == "actual":
         # without a unit of its own, the actual position is in the target's unit
         val_unit = pos_unit if head_units.get("actual") is None else unit_of("actual", None)

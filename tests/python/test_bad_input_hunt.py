@@ -134,3 +134,12 @@ def test_laser_to_params_merge_keeps_crlf_line_ends(tmp_path):
     assert res.returncode == 0, res.stderr
     data = out.read_bytes()
     assert data.startswith(base.read_bytes()) and b"\n" not in data.replace(b"\r\n", b"")
+
+
+def test_iso230_2_targets_must_be_positions(tmp_path):
+    # targets in ppm or '1' (a ratio) were evaluated as if they were positions along an axis
+    text = open(RUNS, encoding="utf-8").read()
+    for unit in ("ppm", "1"):
+        p = tmp_path / "r.csv"
+        p.write_text(text.replace("target [mm]", f"target [{unit}]"), encoding="utf-8")
+        one_error_line(run("iso230-2", str(p)), "iso230-2", "r.csv:", "target", "length or an angle")
