@@ -185,6 +185,12 @@ def read_runs(path: str, column_map: dict[str, str] | None = None,
                                          path, hline, want)
                 col[field] = k
                 head_units[field] = unit
+    taken: dict[int, str] = {}
+    for field, k in col.items():
+        if k in taken:   # e.g. --columns actual=target: every deviation would be 0
+            raise ChaincompError(f"column {k + 1} ({header[k].strip()!r}) is both {taken[k]} and {field}", path,
+                                 hline, wanted[field])
+        taken[k] = field
     if "deviation" in col and "actual" in col:
         raise ChaincompError("give either a deviation or an actual column, not both", path, hline,
                              wanted["actual"])

@@ -143,3 +143,9 @@ def test_iso230_2_targets_must_be_positions(tmp_path):
         p = tmp_path / "r.csv"
         p.write_text(text.replace("target [mm]", f"target [{unit}]"), encoding="utf-8")
         one_error_line(run("iso230-2", str(p)), "iso230-2", "r.csv:", "target", "length or an angle")
+
+
+def test_iso230_2_two_fields_from_one_column_are_refused():
+    # --columns actual=target read the targets as the actual positions: every deviation 0, exit 0
+    one_error_line(run("iso230-2", RUNS, "--columns", "actual=target [mm]"), "iso230-2",
+                   "five_axis_ac-X-positioning.csv:", "actual", "target", "column 1")
