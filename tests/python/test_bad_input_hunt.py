@@ -149,3 +149,16 @@ def test_iso230_2_two_fields_from_one_column_are_refused():
     # --columns actual=target read the targets as the actual positions: every deviation 0, exit 0
     one_error_line(run("iso230-2", RUNS, "--columns", "actual=target [mm]"), "iso230-2",
                    "five_axis_ac-X-positioning.csv:", "actual", "target", "column 1")
+
+
+def test_laser_to_params_targets_equal_as_written_are_refused_in_the_csv(tmp_path):
+    # -400 and -399.99999999999 are one knot at the table's 10 digits: the refusal named the
+    # output file (not written) and a line in it, not the CSV
+    text = open(RUNS, encoding="utf-8").read().replace("\n-380,", "\n-399.99999999999,")
+    p = tmp_path / "close.csv"
+    p.write_text(text, encoding="utf-8")
+    line = 1 + text.splitlines().index(next(t for t in text.splitlines() if t.startswith("-399.99999999999,")))
+    out = tmp_path / "o.yaml"
+    res = run("laser-to-params", str(p), "--machine", MACHINE, "--error", "EXX", "-o", str(out))
+    one_error_line(res, "laser-to-params", f"close.csv:{line}: target", "-400")
+    assert not out.exists()

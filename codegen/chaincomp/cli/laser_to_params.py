@@ -236,6 +236,11 @@ def run(args) -> int:
     field, described = _FIELD[args.direction]
     values = np.asarray(getattr(ev, field)) / sign
     targets = runs.targets * runs.position_unit.to_internal / a.unit.to_internal
+    for k in range(1, len(targets)):   # the table's knots are written with _num's 10 digits
+        if _num(targets[k]) == _num(targets[k - 1]):
+            raise ChaincompError(f"target {float(runs.targets[k])!r} and {float(runs.targets[k - 1])!r} are one table position "
+                                 f"({_num(targets[k])} {a.unit.name}) at 10 significant digits", args.runs,
+                                 int(runs.lines[k]), "target")
     lo, hi = a.limits
     if targets[0] < lo or targets[-1] > hi:
         print(f"chaincomp laser-to-params: warning: targets [{targets[0]:g}, {targets[-1]:g}] {a.unit.name} reach "
