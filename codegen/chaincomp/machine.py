@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from typing import Union
 
@@ -181,7 +182,15 @@ def _require_map(ctx: _Ctx, node, fld: str, line, allowed: set[str], required: s
     return node
 
 
+# YAML 1.1 (PyYAML) wants a dot and a signed exponent (1.0e+3): 1e3 and 1.5e3 come as text.
+_EXPONENT_NUMBER = re.compile(r"[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+")
+
+
 def _number(ctx: _Ctx, value, fld: str, line) -> float:
+    if isinstance(value, str) and _EXPONENT_NUMBER.fullmatch(value):
+        if not math.isfinite(float(value)):
+            raise ctx.fail(f"expected a finite number, got {value!r}", line, fld)
+        value = float(value)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ctx.fail(f"expected a number, got {describe(value)}", line, fld)
     if isinstance(value, float) and not math.isfinite(value):

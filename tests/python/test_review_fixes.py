@@ -179,3 +179,18 @@ def test_real_constants_still_parse():
     import sympy as sp
     from chaincomp.expressions import parse
     assert parse("8^(1/3)", {}) == 2 and parse("acos(1/2)", {}) == sp.pi / 3 and parse("(-2)^2", {}) == 4
+
+
+# --- YAML numbers ---
+
+@pytest.mark.parametrize("written,value", [("1.5e3", 1500.0), ("1e3", 1000.0), ("-2.5E-1", -0.25), ("1.5e+3", 1500.0)])
+def test_exponent_numbers_are_numbers(tmp_path, written, value):
+    # YAML 1.1 (PyYAML) reads 1e3 and 1.5e3 as text, YAML 1.2 (yaml-cpp, the runtime) as
+    # numbers: 'expected a number, got str' for a number as written was the message.
+    from chaincomp import load_machine
+    path = tmp_path / "m.yaml"
+    path.write_text("name: num_test\nsymbols:\n  - {name: x, role: axis, unit: mm, limits: [-100, 100]}\n"
+                    f"  - {{name: L, role: constant, unit: mm, nominal: {written}}}\n"
+                    "  - {name: e, role: error, unit: um}\nchain:\n  - {translate: [x + L + e, 0, 0]}\n"
+                    "tool:\n  point: [0, 0, 0]\n")
+    assert load_machine(str(path)).symbol("L").nominal == value
