@@ -95,9 +95,21 @@ def _parallel_axes(machine: Machine) -> list[Finding]:
     about y, describes the same freedom well."""
     at = {s.sym: s.to_internal(s.default_position if s.role == "axis" else s.nominal or 0.0)
           for s in machine.symbols}
-    joints = {j[0]: j for j in machine.joints}
+    # joints are numbered per loop branch: each branch starts again at 1
+    branches: list[dict] = []
+    for j in machine.joints:
+        if j[0] == 1 or not branches:
+            branches.append({})
+        branches[-1][j[0]] = j
     out = []
-    for number, kind, alpha, _errors, line in machine.joints:
+    for joints in branches:
+        out += _parallel_in_branch(machine, joints, at)
+    return out
+
+
+def _parallel_in_branch(machine: Machine, joints: dict, at: dict) -> list[Finding]:
+    out = []
+    for number, kind, alpha, _errors, line in joints.values():
         if abs(math.sin(float(alpha.xreplace(at)))) > 1e-3:
             continue
         # dh: joint J's alpha turns to joint J+1's axis, whose d is then ill-conditioned;

@@ -194,3 +194,22 @@ def test_exponent_numbers_are_numbers(tmp_path, written, value):
                     "  - {name: e, role: error, unit: um}\nchain:\n  - {translate: [x + L + e, 0, 0]}\n"
                     "tool:\n  point: [0, 0, 0]\n")
     assert load_machine(str(path)).symbol("L").nominal == value
+
+
+def test_parallel_axes_lint_keeps_loop_branches_apart(tmp_path):
+    # joints are numbered per branch: the workpiece's joint 2 is not the tool's
+    from chaincomp import load_machine
+    from chaincomp.lint import lint
+    path = tmp_path / "loop.yaml"
+    path.write_text("name: loop_dh\nsymbols:\n" + "".join(
+        f"  - {{name: q{j}, role: axis, unit: deg, limits: [-360, 360]}}\n" for j in range(1, 5)) +
+        "  - {name: td2, role: error, unit: um}\n  - {name: wd2, role: error, unit: um}\n"
+        "loop:\n  tool:\n"
+        "    - {dh: {theta: q1, d: 10, a: 300, alpha: 0}}\n"
+        "    - {dh: {theta: q2, d: 20, a: 200, alpha: 0}, errors: {d: td2}}\n"
+        "  workpiece:\n"
+        "    - {dh: {theta: q3, d: 30, a: 100, alpha: 1.5707963267948966}}\n"
+        "    - {dh: {theta: q4, d: 40, a: 50, alpha: 1.5707963267948966}, errors: {d: wd2}}\n"
+        "tool:\n  point: [0, 0, 0]\n  direction: [0, 0, 1]\n")
+    warned = {f.field for f in lint(load_machine(str(path))) if "parallel" in f.message}
+    assert warned == {"symbols.td2"}
