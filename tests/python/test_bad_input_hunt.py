@@ -162,3 +162,19 @@ def test_laser_to_params_targets_equal_as_written_are_refused_in_the_csv(tmp_pat
     res = run("laser-to-params", str(p), "--machine", MACHINE, "--error", "EXX", "-o", str(out))
     one_error_line(res, "laser-to-params", f"close.csv:{line}: target", "-400")
     assert not out.exists()
+
+
+def test_build_never_copies_the_library_over_its_machine_file(tmp_path):
+    # build M -o DIR writes DIR/NAME.so: a machine file of that very name was overwritten by the library
+    m = tmp_path / "tiny.so"
+    text = ("name: tiny\nsymbols:\n  - {name: X, role: axis, unit: mm, limits: [-1, 1]}\n"
+            "  - {name: EXX, role: error, unit: um}\nchain:\n  - {translate: [X + EXX, 0, 0]}\n"
+            "tool:\n  point: [0, 0, 0]\n  direction: [0, 0, 1]\n")
+    m.write_text(text, encoding="utf-8")
+    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "cache"))
+    res = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "build", str(m), "-o", str(tmp_path)],
+                         capture_output=True, text=True, cwd=ROOT, timeout=300, env=env)
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+    last = res.stderr.strip().splitlines()[-1]   # after the build's progress lines
+    assert last.startswith("chaincomp build: error: -o ") and "tiny.so" in last and "input" in last, last
+    assert m.read_text(encoding="utf-8") == text

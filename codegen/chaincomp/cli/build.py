@@ -7,6 +7,7 @@ import sys
 
 from ..build import build, copy_to
 from ..errors import ChaincompError
+from .common import _same_file
 
 
 def add_parser(sub) -> None:
@@ -34,5 +35,10 @@ def run(args) -> int:
     path, cached = build(args.machine)
     if cached:
         print(f"chaincomp build: {args.machine}: cached", file=sys.stderr)
+    if args.output:   # DIR/NAME.so may be the machine file itself (the name is known only now)
+        target = os.path.join(args.output, os.path.basename(path))
+        if _same_file(target, args.machine):
+            raise ChaincompError(f"-o {args.output}: {target} is also an input ({args.machine}); "
+                                 "refusing to overwrite it")
     print(copy_to(path, args.output) if args.output else path)
     return 0
