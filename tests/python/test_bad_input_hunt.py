@@ -178,3 +178,8 @@ def test_build_never_copies_the_library_over_its_machine_file(tmp_path):
     last = res.stderr.strip().splitlines()[-1]   # after the build's progress lines
     assert last.startswith("chaincomp build: error: -o ") and "tiny.so" in last and "input" in last, last
     assert m.read_text(encoding="utf-8") == text
+
+
+def test_laser_to_params_error_that_is_an_axis_reads_right():
+    one_error_line(run("laser-to-params", RUNS, "--machine", MACHINE, "--error", "X", "-o", "/tmp/never.yaml"),
+                   "laser-to-params", "--error: 'X' is an axis of five_axis_ac, not an error")

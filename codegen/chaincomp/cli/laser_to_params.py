@@ -213,7 +213,7 @@ def run(args) -> int:
         raise ChaincompError(f"--error: {args.error!r} is not a symbol of {machine.name} (errors: "
                              f"{', '.join(s.name for s in machine.errors)})") from None
     if sym.role != "error":
-        raise ChaincompError(f"--error: {args.error!r} is a {sym.role} of {machine.name}, not an error")
+        raise ChaincompError(f"--error: {args.error!r} is {'an' if sym.role == 'axis' else 'a'} {sym.role} of {machine.name}, not an error")
     axis = _axis_for(machine, args.error, args.axis)
     runs = read(args)
     a = machine.symbol(axis)
