@@ -164,10 +164,13 @@ def read_runs(path: str, column_map: dict[str, str] | None = None,
     hline, htext = rows[0]
     delimiter = ";" if htext.count(";") > htext.count(",") else "\t" if "\t" in htext and "," not in htext else ","
 
-    def cells(line: str) -> list[str]:
-        return next(csv.reader([line], delimiter=delimiter))
+    def cells(number: int, line: str) -> list[str]:
+        try:
+            return next(csv.reader([line], delimiter=delimiter))
+        except csv.Error as exc:   # e.g. a field past the csv module's limit of 131072 characters
+            raise ChaincompError(f"unreadable CSV row: {exc}", path, number) from None
 
-    header = cells(htext)
+    header = cells(hline, htext)
     column_map = column_map or {}
     wanted = {f: f for f in FIELDS}
     for mapped, other in (("deviation", "actual"), ("actual", "deviation")):
@@ -237,7 +240,7 @@ def read_runs(path: str, column_map: dict[str, str] | None = None,
     first_line: dict[float, int] = {}
     where: dict[tuple[float, str, int], int] = {}
     for line, raw in rows[1:]:
-        row = cells(raw)
+        row = cells(line, raw)
 
         def cell(field: str) -> str:
             k = col[field]

@@ -183,3 +183,11 @@ def test_build_never_copies_the_library_over_its_machine_file(tmp_path):
 def test_laser_to_params_error_that_is_an_axis_reads_right():
     one_error_line(run("laser-to-params", RUNS, "--machine", MACHINE, "--error", "X", "-o", "/tmp/never.yaml"),
                    "laser-to-params", "--error: 'X' is an axis of five_axis_ac, not an error")
+
+
+def test_iso230_2_a_cell_beyond_the_csv_field_limit_is_bad_input(tmp_path):
+    # Python's csv module raises its own Error past 131072 characters a field: exit 3 (internal error)
+    p = tmp_path / "long.csv"
+    lines = open(RUNS, encoding="utf-8").read().splitlines()
+    p.write_text("\n".join(lines[:6] + ["-400,1,up," + "1" * 200_000] + lines[6:]) + "\n", encoding="utf-8")
+    one_error_line(run("iso230-2", str(p)), "iso230-2", "long.csv:7:")
