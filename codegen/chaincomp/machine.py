@@ -309,6 +309,8 @@ def _check_at_nominal(expr: sp.Expr, at: dict, errors: set) -> None:
             y, x = (_numeric(a, at) for a in node.args)
             if y is not None and x is not None and abs(y) < 1e-300 and abs(x) < 1e-300:
                 bad = "takes atan2(0, 0) of"
+            elif y is not None and x is not None and abs(y) < 1e-300 and x.real < 0 and node.args[0].free_symbols & errors:
+                bad = "takes atan2 on its branch cut (y = 0, x < 0: it jumps by 2 pi) of"
         if bad:
             raise ExpressionError(f"{expr} is not analytic in the errors at zero: it {bad} an expression "
                                   f"that vanishes with {names}{where}; errors must enter through sums, "

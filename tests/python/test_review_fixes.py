@@ -213,3 +213,12 @@ def test_parallel_axes_lint_keeps_loop_branches_apart(tmp_path):
         "tool:\n  point: [0, 0, 0]\n  direction: [0, 0, 1]\n")
     warned = {f.field for f in lint(load_machine(str(path))) if "parallel" in f.message}
     assert warned == {"symbols.td2"}
+
+
+def test_atan2_on_its_branch_cut_is_not_analytic(tmp_path):
+    # atan2(e, -1) is pi for e >= 0 and -pi for e < 0: a jump of 2 pi mm at zero error
+    machine = ("name: cut_test\nsymbols:\n  - {name: x, role: axis, unit: mm, limits: [-100, 100]}\n"
+               "  - {name: e, role: error, unit: um}\n"
+               "chain:\n  - {translate: [x, 0, 0]}\n  - {translate: ['atan2(e, X)', 0, 0]}\ntool:\n  point: [0, 0, 0]\n")
+    refused(derive(tmp_path, machine.replace("X", "-1")), "chain[1].translate[0]", "branch cut")
+    assert derive(tmp_path, machine.replace("X", "1")).returncode == 0
