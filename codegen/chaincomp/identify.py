@@ -65,7 +65,10 @@ def read_table(path: str, machine: Machine, coords_required: bool = True) -> Tab
         raw = raw.rstrip("\r")
         if not raw.strip() or raw.lstrip().startswith("#"):
             continue
-        cells = [c.strip() for c in next(csv.reader([raw]))]
+        try:
+            cells = [c.strip() for c in next(csv.reader([raw]))]
+        except csv.Error as exc:   # e.g. a field past the csv module's limit of 131072 characters
+            raise ChaincompError(f"unreadable CSV row: {exc}", path, lineno) from None
         if header is None:
             header = _header(cells, machine, coords_required, path, lineno)
             continue

@@ -191,3 +191,10 @@ def test_iso230_2_a_cell_beyond_the_csv_field_limit_is_bad_input(tmp_path):
     lines = open(RUNS, encoding="utf-8").read().splitlines()
     p.write_text("\n".join(lines[:6] + ["-400,1,up," + "1" * 200_000] + lines[6:]) + "\n", encoding="utf-8")
     one_error_line(run("iso230-2", str(p)), "iso230-2", "long.csv:7:")
+
+
+def test_identify_a_cell_beyond_the_csv_field_limit_is_bad_input(tmp_path):
+    p = tmp_path / "meas.csv"
+    p.write_text("X,Y,Z,x\n" + "1" * 200_000 + ",0,0,0\n", encoding="utf-8")
+    res = run("identify", os.path.join(ROOT, "configs", "machines", "vmc_xyz.yaml"), str(p))
+    one_error_line(res, "identify", "meas.csv:2:")
