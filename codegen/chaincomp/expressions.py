@@ -26,6 +26,8 @@ import re
 
 import sympy as sp
 
+from .yamlsource import describe
+
 FUNCTIONS = {
     "sin": sp.sin, "cos": sp.cos, "tan": sp.tan, "asin": sp.asin, "acos": sp.acos,
     "atan": sp.atan, "atan2": sp.atan2, "sqrt": sp.sqrt, "pi": sp.pi,
@@ -243,7 +245,7 @@ def parse(text: object, symbols: dict[str, sp.Symbol]) -> sp.Expr:
     ExpressionError, with the text, for anything outside the grammar or its bounds.
     """
     if isinstance(text, bool) or not isinstance(text, (str, int, float)):
-        raise ExpressionError(f"expected a number or an expression, got {type(text).__name__}")
+        raise ExpressionError(f"expected a number or an expression, got {describe(text)}")
     if isinstance(text, (int, float)):
         if not (isinstance(text, int) or math.isfinite(text)):
             raise ExpressionError(f"expected a finite number, got {text!r}")

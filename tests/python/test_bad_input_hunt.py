@@ -198,3 +198,10 @@ def test_identify_a_cell_beyond_the_csv_field_limit_is_bad_input(tmp_path):
     p.write_text("X,Y,Z,x\n" + "1" * 200_000 + ",0,0,0\n", encoding="utf-8")
     res = run("identify", os.path.join(ROOT, "configs", "machines", "vmc_xyz.yaml"), str(p))
     one_error_line(res, "identify", "meas.csv:2:")
+
+
+def test_an_expression_of_the_wrong_shape_is_named_plainly(tmp_path):
+    # the loader's own class name leaked: "expected a number or an expression, got LineList"
+    p = arm(tmp_path, "shape", "", "  - {dh: {theta: q1, d: 0, a: 1, alpha: 0}}\n  - {beta: [1], errors: auto}\n")
+    line = one_error_line(run("lint", str(p)), "lint", "shape.yaml:7:", "chain[1].beta", "a list")
+    assert "LineList" not in line
