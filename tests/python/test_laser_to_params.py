@@ -203,7 +203,7 @@ def _refused(capsys, *argv):
 
 @pytest.mark.parametrize("options,message", [
     (("--error", "EXQ"), "--error: 'EXQ' is not a symbol of five_axis_ac"),
-    (("--error", "X"), "--error: 'X' is a axis of five_axis_ac, not an error"),
+    (("--error", "X"), "--error: 'X' is an axis of five_axis_ac, not an error"),
     (("--error", "EXX", "--axis", "W"), "--axis: 'W' is not an axis of five_axis_ac"),
     (("--error", "EBX"), "the deviations are in um (lengths) but EBX is declared in arcsec"),
     (("--error", "EXX", "--axis", "Cp"), "targets are in mm but axis Cp is declared in deg"),
