@@ -93,8 +93,7 @@ def _parallel_axes(machine: Machine) -> list[Finding]:
     common normal is then barely defined, and a tilt of micro-radians moves it by metres (the
     d values of calibrations that fit it run to hundreds of metres). Hayati's beta, a rotation
     about y, describes the same freedom well."""
-    at = {s.sym: s.to_internal(s.default_position if s.role == "axis" else s.nominal or 0.0)
-          for s in machine.symbols}
+    at = {s.sym: s.reference_value for s in machine.symbols}
     # joints are numbered per loop branch: each branch starts again at 1
     branches: list[dict] = []
     for j in machine.joints:

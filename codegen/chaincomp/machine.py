@@ -50,6 +50,14 @@ class Symbol:
         lo, hi = self.limits
         return 0.0 if lo <= 0.0 <= hi else 0.5 * (lo + hi)
 
+    @property
+    def reference_value(self) -> float:
+        """Internal value at the reference pose the load checks and lint use: an axis at its
+        default position, a constant at its nominal, an error at zero."""
+        if self.role == "axis":
+            return self.to_internal(self.default_position)
+        return self.to_internal(self.nominal) if self.role == "constant" else 0.0
+
     def to_internal(self, value: float) -> float:
         return value * self.unit.to_internal
 
@@ -540,8 +548,7 @@ def load_machine(path: str) -> Machine:
     table = {s.name: s.sym for s in symbols}
     ctx.symbols, ctx.table = symbols, table   # dh/mdh/beta elements may add errors to both
     ctx.errors = {s.sym for s in symbols if s.role == "error"}
-    ctx.at = {s.sym: sp.Float(s.to_internal(s.default_position if s.role == "axis" else s.nominal or 0.0))
-              for s in symbols}
+    ctx.at = {s.sym: sp.Float(s.reference_value) for s in symbols}
 
     if ("chain" in doc) == ("loop" in doc):
         both = "loop" in doc
