@@ -165,6 +165,11 @@ class _Ctx:
             if sym.role != "error":
                 raise self.fail(f"{name!r} is declared as {'an' if sym.role == 'axis' else 'a'} {sym.role}; "
                                 f"the error this element names must be an error", line, fld)
+            want = units.unit(unit).kind
+            if sym.unit.kind != want:  # a twist error declared in um would be read as radians
+                raise self.fail(f"{name!r} is declared in {sym.unit.name} on line {sym.line}, but this element "
+                                f"uses it as its {meaning}, which is {'an' if want == 'angle' else 'a'} {want}",
+                                line, fld)
             return self.table[name]
         s = Symbol(name, "error", units.unit(unit), meaning, line=line)
         self.symbols.append(s)

@@ -157,3 +157,14 @@ def test_bad_joint_elements(tmp_path, old, new, field, word):
                           text=True, cwd=ROOT, timeout=120)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert f" {field}: " in proc.stderr and word in proc.stderr, proc.stderr
+
+
+@pytest.mark.parametrize("unit,param,kind", [("um", "theta", "an angle"), ("arcsec", "d", "a length")])
+def test_named_error_of_the_wrong_kind(tmp_path, unit, param, kind):
+    # a twist error declared in um would otherwise be read as radians (1 um -> 1e-3 rad)
+    extra = f"  - {{name: e1, role: error, unit: {unit}}}\n"
+    text = ur5_text(errors="{}", extra=extra).replace("errors: {}", f"errors: {{{param}: e1}}", 1)
+    with pytest.raises(ChaincompError) as err:
+        load_machine(write(tmp_path, "kind", text))
+    msg = str(err.value)
+    assert f"chain[0].errors.{param}" in msg and f"declared in {unit}" in msg and kind in msg, msg
