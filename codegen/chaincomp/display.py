@@ -15,6 +15,7 @@ API (``kind`` is a unit kind of ``chaincomp.units``: "length", "angle" or "ratio
 - ``quantity(value, kind, units="people", decimals=None)``: ``"2.405 µm"`` with the unit's
   fixed number of decimals (``DECIMALS``: a column of values lines up and shows the same
   resolution, 1 nm, 0.001 arcsec; internal units keep 9 to 12 decimals).
+- ``fixed(value, decimals, width=0)``: ``f"{value:{width}.{decimals}f}"`` without a ``-0.000``.
 - ``plus_minus(value, u)``: ``"4.60 ± 0.21"``: the uncertainty rounded to 2 significant digits,
   the estimate rounded to the same decimal place (half away from zero, on the shortest decimal
   text of each float, so 0.0041 is 0.0041 and not its binary neighbour). Outside 1e-4..1e6 a
@@ -57,9 +58,11 @@ def convert(value, kind: str, units: str = DEFAULT_UNITS):
 
 def quantity(value: float, kind: str, units: str = DEFAULT_UNITS, decimals: int | None = None) -> str:
     v, name = convert(value, kind, units)
-    d = DECIMALS[name] if decimals is None else decimals
-    text = f"{v:.{d}f}"
-    return f"{_no_negative_zero(text)} {name}"
+    return f"{fixed(v, DECIMALS[name] if decimals is None else decimals)} {name}"
+
+
+def fixed(value: float, decimals: int, width: int = 0) -> str:
+    return f"{_no_negative_zero(f'{value:.{decimals}f}'):>{width}}"
 
 
 def uncertain(value: float, u: float, kind: str | None = None, units: str = DEFAULT_UNITS) -> str:

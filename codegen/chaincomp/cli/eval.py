@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import numpy as np
+
+from ..display import add_units_argument, convert, display_unit, fixed
 from ..jets import JetModel
 from ..numeric import ExactModel
 from ..units import UNITS
@@ -14,10 +17,15 @@ def add_parser(sub) -> None:
                        description="Evaluate the nominal tool point (and tool direction) at given axis "
                                    "values and, when error values are given, the tool-point error of "
                                    "the first-order, second-order and exact models. An error given as a "
-                                   "table or polynomial over an axis takes its value at the axes given.")
+                                   "table or polynomial over an axis takes its value at the axes given. "
+                                   "Text shows the errors in µm and arcsec (--units internal: mm and "
+                                   "rad); the direction error as the tilt of the tool axis towards x, y "
+                                   "and z and the angle between the actual and nominal axes. JSON is in "
+                                   "the machine's length unit and rad, named under 'units'.")
     add_machine_argument(p)
     add_values_arguments(p)
     add_format_argument(p)
+    add_units_argument(p)
     p.set_defaults(run=run)
 
 
@@ -28,7 +36,8 @@ def evaluate(machine, values: dict, with_errors: bool) -> dict:
     point, direction = exact.pose(nominal_values)
     out = {
         "machine": machine.name,
-        "units": {"length": machine.length_unit},
+        # direction: unit vectors and their differences (small ones are tilts in rad)
+        "units": {"length": machine.length_unit, "direction": "1", "angle": "rad"},
         "axes": {s.name: float(f"{s.from_internal(values[s.name]):.15g}") for s in machine.axes},
         "position": [float(v) * scale for v in point],
     }
@@ -52,7 +61,15 @@ def evaluate(machine, values: dict, with_errors: bool) -> dict:
         out["error"] = err
         if derr:
             out["direction_error"] = derr
+            out["direction_angle"] = {name: _angle(direction, d) for name, d in derr.items()}
     return out
+
+
+def _angle(nominal, error) -> float:
+    """Angle (rad) between the nominal tool axis and nominal + error, stable for tiny angles."""
+    n = np.asarray(nominal, float)
+    a = n + np.asarray(error, float)
+    return float(np.arctan2(np.linalg.norm(np.cross(n, a)), n @ a))
 
 
 def run(args) -> int:
@@ -61,23 +78,32 @@ def run(args) -> int:
     check_inside(values)
     out = evaluate(machine, values, with_errors)
     check_finite(out)   # the table too: a NaN tool point is no answer
-    print(to_json(out) if args.format == "json" else _text(out))
+    print(to_json(out) if args.format == "json" else _text(out, args.units))
     return 0
 
 
-def _text(out: dict) -> str:
+def _text(out: dict, units: str = "people") -> str:
+    """The errors in µm and arcsec (units "people") or mm and rad with 9 decimals ("internal")."""
     unit = out["units"]["length"]
+    to_mm = UNITS[unit].to_internal
     axes = ", ".join(f"{k} = {v:g}" for k, v in out["axes"].items())
-    fmt = lambda v: "[" + ", ".join(f"{x:14.9f}" for x in v) + "]"  # noqa: E731
-    lines = [f"{out['machine']} at {axes}", f"  tool point       {fmt(out['position'])} {unit}"]
+    vec = lambda v, w, d: "[" + ", ".join(fixed(x, d, w) for x in v) + "]"  # noqa: E731
+    lines = [f"{out['machine']} at {axes}", f"  tool point       {vec(out['position'], 14, 9)} {unit}"]
     if "direction" in out:
-        lines.append(f"  tool direction   {fmt(out['direction'])}")
+        lines.append(f"  tool direction   {vec(out['direction'], 14, 9)}")
     if "varying" in out:
         lines.append("  errors that vary along an axis, here: "
                      + ", ".join(f"{k} = {v['value']:.6g} {v['unit']}" for k, v in out["varying"].items()))
-    for key, title, u in (("error", "tool point error", unit), ("direction_error", "direction error", "")):
-        if key in out:
-            lines.append(f"  {title} ({u or 'unit vector'}):")
-            for name, v in out[key].items():
-                lines.append(f"    {name:<12} {fmt(v)}")
+    width, digits = (14, 9) if units == "internal" else (10, 3)
+    if "error" in out:
+        lines.append(f"  tool point error ({display_unit('length', units).name}): dx, dy, dz")
+        for name, v in out["error"].items():
+            lines.append(f"    {name:<12} {vec(convert(np.asarray(v) * to_mm, 'length', units)[0], width, digits)}")
+    if "direction_error" in out:
+        lines.append(f"  tool direction error ({display_unit('angle', units).name}): tilt towards x, y, z; "
+                     "angle between actual and nominal axis")
+        for name, v in out["direction_error"].items():
+            tilt = convert(np.asarray(v), "angle", units)[0]
+            angle = convert(out["direction_angle"][name], "angle", units)[0]
+            lines.append(f"    {name:<12} {vec(tilt, width, digits)}   angle {fixed(angle, digits, width)}")
     return "\n".join(lines)
