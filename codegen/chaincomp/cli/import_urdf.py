@@ -1,0 +1,85 @@
+"""``chaincomp import-urdf``: a machine file from the kinematic path of a URDF (chaincomp.urdf)."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import tempfile
+
+from .. import __version__
+from ..errors import ChaincompError
+from ..lint import lint
+from ..machine import load_machine
+from ..urdf import ERROR_MODES, machine_text
+from .common import add_format_argument, check_output, number_list
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("import-urdf", help="write a machine file from a URDF's joints between two links",
+                       description="Read ROBOT.urdf (with yourdfpy; meshes are not loaded), walk the joints from "
+                                   "--base down to --tip and write them as a machine file: each joint's origin "
+                                   "(xyz in mm, rpy as rotations), its motion (revolute and continuous in deg, "
+                                   "prismatic in mm, limits converted) and, with --errors, zero offsets and 6-DOF "
+                                   "origin errors. Floating, planar and mimic joints are refused. The file is "
+                                   "loaded back and linted before it is written.")
+    p.add_argument("urdf", metavar="ROBOT.urdf", help="the URDF file (expand a xacro first)")
+    p.add_argument("--base", required=True, metavar="LINK", help="link the chain starts from (the machine's reference)")
+    p.add_argument("--tip", required=True, metavar="LINK", help="link the tool is fixed to (below --base in the tree)")
+    p.add_argument("--errors", choices=ERROR_MODES, default="none",
+                   help="error symbols to declare: joint-offsets (one zero offset per moving joint, arcsec or "
+                        "um), origins (a 6-DOF block at each moving joint's origin, um and arcsec), all (both); "
+                        "default none")
+    p.add_argument("--tool-point", default="0,0,0", metavar="X,Y,Z",
+                   help="tool point in the tip link's frame, mm (default 0,0,0)")
+    p.add_argument("--tool-direction", default="0,0,1", metavar="X,Y,Z",
+                   help="tool direction in the tip link's frame (normalised; default 0,0,1)")
+    p.add_argument("--name", help="machine name (default: the URDF robot's name, sanitised)")
+    p.add_argument("-o", "--output", required=True, metavar="M.yaml", help="machine file to write")
+    add_format_argument(p, what="summary format on stdout")
+    p.set_defaults(run=run)
+
+
+def _vector(option: str, text: str) -> list[float]:
+    values = number_list(option, text)
+    if len(values) != 3:
+        raise ChaincompError(f"{option}: expected three numbers X,Y,Z, got {len(values)}")
+    if max(abs(v) for v in values) > 1e15:
+        raise ChaincompError(f"{option}: values beyond 1e15 mm")
+    return values
+
+
+def run(args) -> int:
+    point = _vector("--tool-point", args.tool_point)
+    direction = _vector("--tool-direction", args.tool_direction)
+    if not any(direction):
+        raise ChaincompError("--tool-direction: must not be zero")
+    check_output(args.output, args.urdf)
+    text = machine_text(args.urdf, args.base, args.tip, args.errors, point, direction, args.name, __version__)
+    # Written beside the output and renamed over it only once it loads: a file that does
+    # not load is a bug here, never left behind for the user.
+    folder = os.path.dirname(os.path.abspath(args.output))
+    fd, tmp = tempfile.mkstemp(prefix=".import-urdf-", suffix=".yaml", dir=folder)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        try:
+            machine = load_machine(tmp)
+        except ChaincompError as exc:
+            raise RuntimeError(f"the machine file written does not load: {exc}") from None
+        findings = lint(machine)
+        os.replace(tmp, args.output)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    for f in findings:
+        print(f"chaincomp import-urdf: {f.level}: {args.output}:{f}", file=sys.stderr)
+    summary = {"output": args.output, "name": machine.name, "axes": [a.name for a in machine.axes],
+               "errors": [e.name for e in machine.errors], "warnings": len(findings)}
+    if args.format == "json":
+        print(json.dumps(summary, indent=2))
+    else:
+        print(f"{args.output}: {machine.name}: {len(machine.axes)} axes ({', '.join(summary['axes'])}), "
+              f"{len(machine.errors)} errors, {len(findings)} lint warnings")
+    return 0

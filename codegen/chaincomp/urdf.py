@@ -1,0 +1,401 @@
+"""A machine description from a URDF: the kinematic path from one link to another.
+
+The URDF is read with yourdfpy (links, joints, types, axes, limits, mimic) from an XML tree
+this module parses with a hardened lxml parser first: the file's size and element count
+are bounded, DTDs and entities refused (a URDF needs neither; entities are how XML bombs
+expand), and every element keeps its line for messages. Meshes are never loaded and no
+scene graph is built: only the joints matter.
+
+Each joint on the path base -> tip becomes, in the machine format (internal units mm, rad):
+
+    origin xyz (m)    {translate: [x, y, z]}  in mm, the decimal as written scaled by 1000
+    origin rpy        {rotate: z, angle: yaw}, {rotate: y, angle: pitch}, {rotate: x, angle: roll}
+                      (URDF's R = Rz(yaw)·Ry(pitch)·Rx(roll)); numbers as written, zeros left out
+    --errors origins  {errors: {dx .. ez}, order: txyz}: a 6-DOF block at the joint's origin
+    revolute about an axis along +-x, +-y or +-z: {rotate: x|y|z, angle: +-(q + q_zero)}
+    revolute about any other unit axis u: a constant frame change that takes z onto u, the
+                      rotation about z, and its inverse: Rz(phi)·Ry(theta)·Rz(q)·Ry(-theta)·Rz(-phi),
+                      phi = atan2(uy, ux), theta = atan2(sqrt(ux^2 + uy^2), uz): exact expressions
+    prismatic         {translate: u·(q + q_zero)}
+
+Numbers are folded into the chain as exact decimals (the parser makes them rationals), so
+the file holds exactly the values the URDF states. Axes: revolute in deg (limits rad -> deg),
+continuous in deg with limits [-360, 360] (it has none), revolute limits rounded to
+1e-9 deg, prismatic in mm (limits m -> mm).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from decimal import Decimal
+
+from .errors import ChaincompError
+from .expressions import MAX_LITERAL, NAME, RESERVED
+from .machine import MAX_CHAIN_ELEMENTS, MAX_SYMBOLS
+from .yamlsource import read_text
+
+MAX_ELEMENTS = 50_000       # XML elements of one URDF (a humanoid's has a few thousand)
+ERROR_MODES = ("none", "joint-offsets", "origins", "all")
+MOVING = ("revolute", "continuous", "prismatic")
+CONTINUOUS_LIMIT_DEG = 360.0
+_BLOCK = ("dx", "dy", "dz", "ex", "ey", "ez")
+_START_TAG = re.compile(r"<[A-Za-z_]")
+
+
+@dataclass(frozen=True)
+class PathJoint:
+    """A joint of the path base -> tip, with what the machine file needs of it."""
+    name: str           # as in the URDF
+    axis_name: str      # sanitised to the machine format's NAME rule ('' for a fixed joint)
+    type: str
+    line: int
+    xyz: tuple          # metres, as floats
+    rpy: tuple          # rad, as floats
+    axis: tuple         # unit direction, as written (not normalised)
+    limits: tuple | None  # in the axis' unit (deg, mm)
+
+
+class _Source:
+    def __init__(self, path: str, text: str):
+        self.path, self.text = path, text
+
+    def fail(self, message: str, line: int | None = None, fld: str | None = None) -> ChaincompError:
+        return ChaincompError(message, self.path, line, fld)
+
+
+def _parse_xml(src: _Source):
+    """The <robot> element, parsed without DTDs, entities, network or recovery."""
+    from lxml import etree
+    for marker in ("<!DOCTYPE", "<!ENTITY"):
+        at = src.text.find(marker)
+        if at >= 0:
+            raise src.fail(f"{marker[2:]} declarations are refused (a URDF needs none; entities can expand "
+                           "without bound)", src.text.count("\n", 0, at) + 1)
+    elements = len(_START_TAG.findall(src.text))
+    if elements > MAX_ELEMENTS:
+        raise src.fail(f"{elements} XML elements (at most {MAX_ELEMENTS})")
+    parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False,
+                             remove_comments=True, remove_pis=True)
+    try:
+        root = etree.fromstring(src.text.encode("utf-8"), parser=parser)
+    except etree.XMLSyntaxError as exc:
+        raise src.fail(f"XML syntax error: {exc.msg}", exc.lineno) from None
+    if root.tag != "robot":
+        hint = " (a xacro file: expand it first, 'xacro IN.urdf.xacro > OUT.urdf')" if "xacro" in src.text else ""
+        raise src.fail(f"the root element is <{root.tag}>, expected <robot>{hint}", root.sourceline)
+    macro = next((e for e in root.iter() if isinstance(e.tag, str) and "xacro" in e.tag), None)
+    if macro is not None:
+        raise src.fail("a xacro element: expand the file first ('xacro IN.urdf.xacro > OUT.urdf')",
+                       macro.sourceline)
+    return root
+
+
+def _named(src: _Source, root, tag: str) -> dict:
+    """<tag name=...> children of <robot> by name; a missing or repeated name is refused."""
+    out = {}
+    for el in root.findall(tag):
+        name = el.get("name")
+        if not name:
+            raise src.fail(f"a <{tag}> without a name", el.sourceline, tag)
+        if name in out:
+            raise src.fail(f"{tag} {name!r} is defined twice (first on line {out[name].sourceline})",
+                           el.sourceline, f"{tag} {name}")
+        out[name] = el
+    return out
+
+
+def _read_model(src: _Source, root):
+    """yourdfpy's links and joints of the tree, each element read on its own so that a
+    value it cannot read is reported with the element's line."""
+    import yourdfpy
+    links, joints = _named(src, root, "link"), _named(src, root, "joint")
+    for name, el in joints.items():
+        for part in ("parent", "child"):
+            sub = el.find(part)
+            if sub is None or not sub.get("link"):
+                raise src.fail(f"joint {name!r} has no <{part} link=...>", el.sourceline, f"joint {name}")
+            if sub.get("link") not in links:
+                raise src.fail(f"joint {name!r}: its {part} link {sub.get('link')!r} is not defined",
+                               sub.sourceline, f"joint {name}.{part}")
+    parsed = {}
+    for name, el in joints.items():
+        try:
+            parsed[name] = yourdfpy.URDF._parse_joint(el)
+        except (ValueError, TypeError, AttributeError, KeyError, IndexError) as exc:
+            raise src.fail(f"joint {name!r}: cannot read it: {exc}", el.sourceline, f"joint {name}") from None
+    return links, joints, parsed
+
+
+def _finite(src: _Source, values, what: str, line: int, fld: str, count: int = 3) -> tuple:
+    values = tuple(float(v) for v in values)
+    if len(values) != count:
+        raise src.fail(f"{what}: expected {count} numbers, got {len(values)}", line, fld)
+    for v in values:
+        if not math.isfinite(v):
+            raise src.fail(f"{what}: {v!r} is not a finite number", line, fld)
+        if abs(v) > MAX_LITERAL / 1000:
+            raise src.fail(f"{what}: {v!r} is beyond {MAX_LITERAL / 1000:g} in magnitude", line, fld)
+    return values
+
+
+def _attribute_numbers(src: _Source, el, attr: str, default: str, what: str, fld: str) -> tuple:
+    text = el.get(attr, default) if el is not None else default
+    try:
+        return _finite(src, (float(t) for t in text.split()), what, el.sourceline, fld)
+    except ValueError as exc:
+        raise src.fail(f"{what}: {exc}", el.sourceline, fld) from None
+
+
+def sanitise(name: str) -> str:
+    """A URDF name under the machine format's NAME rule: letters, digits and '_', starting
+    with a letter, not a reserved word."""
+    out = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    if not out or not out[0].isalpha() or not out[0].isascii():
+        out = "j_" + out
+    return out + "_" if out in RESERVED else out
+
+
+def kinematic_path(path: str, base: str, tip: str) -> tuple[str, list[PathJoint], str]:
+    """The robot's name and the joints from link ``base`` down to link ``tip``, checked."""
+    src = _Source(path, read_text(path))
+    root = _parse_xml(src)
+    links, joint_el, joints = _read_model(src, root)
+    robot_line = root.sourceline
+    for which, link in (("--base", base), ("--tip", tip)):
+        if link not in links:
+            shown = ", ".join(sorted(links)[:12]) + (", ..." if len(links) > 12 else "")
+            raise src.fail(f"{which} {link!r}: no link of that name (links: {shown or 'none'})", robot_line)
+    parent_joint: dict = {}
+    for name, j in joints.items():
+        if j.child in parent_joint:   # a tree gives every link one parent: two close a loop
+            first = parent_joint[j.child]
+            raise src.fail(f"link {j.child!r} is the child of joints {first!r} (line "
+                           f"{joint_el[first].sourceline}) and {name!r}: a closed loop, which a URDF tree "
+                           "cannot hold", joint_el[name].sourceline, f"joint {name}.child")
+        parent_joint[j.child] = name
+    names, link, seen = [], tip, {tip}
+    while link != base:
+        if link not in parent_joint:
+            raise src.fail(f"--tip {tip!r} is not below --base {base!r}: going up from {tip!r} the tree ends "
+                           f"at {link!r}", links[tip].sourceline, f"link {tip}")
+        names.append(parent_joint[link])
+        link = joints[parent_joint[link]].parent
+        if link in seen:
+            raise src.fail(f"the joints above link {tip!r} form a cycle through link {link!r}",
+                           joint_el[names[-1]].sourceline, f"joint {names[-1]}")
+        seen.add(link)
+    if not names:
+        raise src.fail(f"--base and --tip are the same link {base!r}: no joint between them", robot_line)
+    out = [_path_joint(src, joints[n], joint_el[n]) for n in reversed(names)]
+    return root.get("name") or "robot", out, src.text
+
+
+def _path_joint(src: _Source, j, el) -> PathJoint:
+    fld = f"joint {j.name}"
+    line = el.sourceline
+    if j.type in ("floating", "planar"):
+        raise src.fail(f"joint {j.name!r} is {j.type}: only revolute, continuous, prismatic and fixed joints "
+                       "form a machine's chain (a floating base is a 6-DOF error block or a fixed origin)",
+                       line, f"{fld}.type")
+    if j.type not in MOVING + ("fixed",):
+        raise src.fail(f"joint {j.name!r} has type {j.type!r} (expected revolute, continuous, prismatic or "
+                       "fixed)", line, f"{fld}.type")
+    if j.mimic is not None:
+        mline = el.find("mimic").sourceline
+        raise src.fail(f"joint {j.name!r} mimics joint {j.mimic.joint!r}: mimic joints are not supported "
+                       "(the machine format has one independent symbol per axis)", mline, f"{fld}.mimic")
+    origin = el.find("origin")
+    xyz = _attribute_numbers(src, origin, "xyz", "0 0 0", f"joint {j.name!r} origin xyz", f"{fld}.origin.xyz") \
+        if origin is not None else (0.0, 0.0, 0.0)
+    rpy = _attribute_numbers(src, origin, "rpy", "0 0 0", f"joint {j.name!r} origin rpy", f"{fld}.origin.rpy") \
+        if origin is not None else (0.0, 0.0, 0.0)
+    axis, limits = (0.0, 0.0, 1.0), None
+    if j.type in MOVING:
+        aline = el.find("axis").sourceline if el.find("axis") is not None else line
+        axis = _finite(src, j.axis, f"joint {j.name!r} axis", aline, f"{fld}.axis")
+        if math.sqrt(sum(a * a for a in axis)) < 1e-9:
+            raise src.fail(f"joint {j.name!r}: its axis {list(axis)} is zero", aline, f"{fld}.axis")
+        limits = _limits(src, j, el)
+    return PathJoint(j.name, sanitise(j.name) if j.type in MOVING else "", j.type, line, xyz, rpy, axis, limits)
+
+
+def _limits(src: _Source, j, el) -> tuple:
+    if j.type == "continuous":
+        return (-CONTINUOUS_LIMIT_DEG, CONTINUOUS_LIMIT_DEG)
+    lim = el.find("limit")
+    fld = f"joint {j.name}.limit"
+    if lim is None:
+        raise src.fail(f"joint {j.name!r} ({j.type}) has no <limit lower=... upper=...>", el.sourceline, fld)
+    try:
+        lo, hi = _finite(src, (j.limit.lower or 0.0, j.limit.upper or 0.0), f"joint {j.name!r} limit",
+                         lim.sourceline, fld, 2)
+    except (TypeError, ValueError) as exc:
+        raise src.fail(f"joint {j.name!r} limit: {exc}", lim.sourceline, fld) from None
+    if not lo < hi:
+        raise src.fail(f"joint {j.name!r}: lower limit {lo!r} is not below upper limit {hi!r}", lim.sourceline, fld)
+    if j.type == "revolute":
+        # rounded to 1e-9 deg: 2*pi written as 6.28318530718 is 360 deg, not 360.0000000000237
+        return (round(math.degrees(lo), 9), round(math.degrees(hi), 9))
+    return tuple(float(Decimal(repr(v)) * 1000) for v in (lo, hi))
+
+
+# ----------------------------------------------------------------------------- writing
+
+def _decimal(value: float, scale: int = 1) -> str:
+    """``value`` (a float, as Python's shortest repr writes it) times ``scale``, exactly, as
+    a decimal the expression parser reads as the same rational."""
+    d = (Decimal(repr(value)) * scale).normalize()
+    if d == 0:
+        return "0"
+    text = format(d, "f")
+    return text if len(text) <= 32 else format(d, "e")
+
+
+def _quote(text: str) -> str:
+    """A YAML double-quoted scalar holding printable ASCII only."""
+    clean = "".join(c if " " <= c <= "~" else "?" for c in text)
+    return '"' + clean.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _aligned(axis: tuple) -> tuple[str, int] | None:
+    """('x'|'y'|'z', +1|-1) where the axis lies along a coordinate axis."""
+    nonzero = [i for i, a in enumerate(axis) if a != 0.0]
+    if len(nonzero) != 1:
+        return None
+    return "xyz"[nonzero[0]], 1 if axis[nonzero[0]] > 0 else -1
+
+
+def _motion(j: PathJoint, motion: str) -> list[str]:
+    """Chain elements moving the joint by ``motion`` (an expression in internal units)."""
+    label = f"label: {_quote('joint ' + j.name)}"
+    along = _aligned(j.axis)
+    if j.type == "prismatic":
+        if along:
+            vec = ["0", "0", "0"]
+            vec["xyz".index(along[0])] = motion if along[1] > 0 else f"-({motion})"
+        else:
+            norm = sum(a * a for a in j.axis)
+            div = "" if norm == 1.0 else "/sqrt(" + " + ".join(f"({_decimal(a)})^2" for a in j.axis) + ")"
+            vec = [f"({motion})*({_decimal(a)}){div}" if a else "0" for a in j.axis]
+        return [f"{{translate: [{', '.join(vec)}], {label}}}"]
+    if along:
+        angle = motion if along[1] > 0 else f"-({motion})"
+        return [f"{{rotate: {along[0]}, angle: {angle}, {label}}}"]
+    ux, uy, uz = (_decimal(a) for a in j.axis)
+    phi = f"atan2({uy}, {ux})"
+    theta = f"atan2(sqrt(({ux})^2 + ({uy})^2), {uz})"
+    frame = f"label: {_quote('joint ' + j.name + ' axis frame')}"
+    return [f"{{rotate: z, angle: {phi}, {frame}}}", f"{{rotate: y, angle: {theta}}}",
+            f"{{rotate: z, angle: {motion}, {label}}}",
+            f"{{rotate: y, angle: -{theta}}}", f"{{rotate: z, angle: -{phi}}}"]
+
+
+def _origin(j: PathJoint) -> list[str]:
+    label = f", label: {_quote(j.name + ' origin')}"
+    out = []
+    if any(j.xyz):
+        out.append(f"{{translate: [{', '.join(_decimal(v, 1000) for v in j.xyz)}]{label}}}")
+        label = ""
+    roll, pitch, yaw = j.rpy
+    for axis, angle in (("z", yaw), ("y", pitch), ("x", roll)):
+        if angle:
+            out.append(f"{{rotate: {axis}, angle: {_decimal(angle)}{label}}}")
+            label = ""
+    return out
+
+
+def machine_text(urdf_path: str, base: str, tip: str, errors: str = "none", tool_point=(0.0, 0.0, 0.0),
+                 tool_direction=(0.0, 0.0, 1.0), name: str | None = None, version: str = "") -> str:
+    """The machine file (YAML text) of the path base -> tip of the URDF."""
+    if errors not in ERROR_MODES:
+        raise ChaincompError(f"--errors {errors!r}: expected one of {', '.join(ERROR_MODES)}")
+    robot, joints, _ = kinematic_path(urdf_path, base, tip)
+    src = _Source(urdf_path, "")
+    machine_name = name or sanitise(robot)
+    if not NAME.match(machine_name) or machine_name in RESERVED:
+        raise ChaincompError(f"--name {machine_name!r}: a machine name is an identifier (letters, digits, '_', "
+                             "starting with a letter) and not a reserved word")
+    moving = [j for j in joints if j.type in MOVING]
+    if not moving:
+        raise src.fail(f"no revolute, continuous or prismatic joint between {base!r} and {tip!r}: nothing moves",
+                       joints[0].line)
+    offsets, blocks = errors in ("joint-offsets", "all"), errors in ("origins", "all")
+
+    symbols: list[str] = []
+    taken: dict[str, PathJoint] = {}
+
+    def declare(symbol: str, j: PathJoint, entry: str) -> None:
+        if symbol in taken:
+            other = taken[symbol]
+            raise src.fail(f"joints {other.name!r} (line {other.line}) and {j.name!r} both give the name "
+                           f"{symbol!r} in the machine file; rename one of them in the URDF", j.line,
+                           f"joint {j.name}")
+        taken[symbol] = j
+        symbols.append(entry)
+
+    for j in moving:
+        unit = "mm" if j.type == "prismatic" else "deg"
+        lo, hi = j.limits
+        meaning = f"URDF joint {j.name} ({j.type})"
+        declare(j.axis_name, j, f"  - {{name: {j.axis_name}, role: axis, unit: {unit}, limits: [{lo!r}, {hi!r}], "
+                                f"meaning: {_quote(meaning)}}}")
+    for j in moving:
+        if offsets:
+            unit = "um" if j.type == "prismatic" else "arcsec"
+            declare(f"{j.axis_name}_zero", j, f"  - {{name: {j.axis_name}_zero, role: error, unit: {unit}, "
+                                              f"meaning: {_quote('zero offset of joint ' + j.name)}}}")
+        if blocks:
+            for k in _BLOCK:
+                unit = "um" if k[0] == "d" else "arcsec"
+                what = {"d": "origin error along ", "e": "origin error about "}[k[0]] + k[1]
+                declare(f"{j.axis_name}_{k}", j, f"  - {{name: {j.axis_name}_{k}, role: error, unit: {unit}, "
+                                                 f"meaning: {_quote(what + ' of joint ' + j.name)}}}")
+
+    chain: list[str] = []
+    for j in joints:
+        chain += _origin(j)
+        if j.type not in MOVING:
+            continue
+        if blocks:
+            chain.append("{errors: {" + ", ".join(f"{k}: {j.axis_name}_{k}" for k in _BLOCK) + "}, order: txyz, "
+                         f"label: {_quote(j.name + ' origin errors')}}}")
+        chain += _motion(j, f"{j.axis_name} + {j.axis_name}_zero" if offsets else j.axis_name)
+    if len(symbols) > MAX_SYMBOLS or len(chain) > MAX_CHAIN_ELEMENTS:
+        raise src.fail(f"the path {base} -> {tip} makes {len(symbols)} symbols and {len(chain)} chain elements "
+                       f"with --errors {errors} (a machine file holds at most {MAX_SYMBOLS} and "
+                       f"{MAX_CHAIN_ELEMENTS})", joints[0].line)
+
+    header = [
+        f"# Imported from the URDF {_comment(urdf_path)} by chaincomp {version} import-urdf",
+        f"# robot {_comment(robot)}, path {_comment(base)} -> {_comment(tip)}: "
+        + ", ".join(f"{_comment(j.name)} ({j.type})" for j in joints),
+        f"# errors: {errors}. Lengths in mm (the URDF's metres x 1000, exactly), angles in rad as written;",
+        "# revolute limits converted from rad to deg, continuous joints limited to [-360, 360] deg.",
+        "# The tool point and direction are in the frame of the tip link.",
+    ]
+    desc = f"{robot} from URDF, {base} -> {tip}"
+    lines = header + [
+        f"name: {machine_name}",
+        f"description: {_quote(desc)}",
+        "length_unit: mm",
+        "rotation_sense: right_hand",
+        "error_block_order: txyz",
+        "",
+        "symbols:",
+        *symbols,
+        "",
+        "chain:",
+        *(f"  - {c}" for c in chain),
+        "",
+        "tool:",
+        f"  point: [{', '.join(repr(float(v)) for v in tool_point)}]",
+        f"  direction: [{', '.join(repr(float(v)) for v in tool_direction)}]",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def _comment(text: str) -> str:
+    """Text for a comment line: printable ASCII, so no line break can end the comment."""
+    return "".join(c if " " <= c <= "~" else "?" for c in text)
