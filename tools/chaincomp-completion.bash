@@ -9,7 +9,7 @@ _chaincomp() {
         case "${COMP_WORDS[i]}" in -*) ;; *) verb="${COMP_WORDS[i]}"; break;; esac
     done
     if [[ -z $verb ]]; then
-        words='derive eval generate testvectors protocol identify simulate-measurements simulate-log replay plot check report budget simulate-calibration build lint iso230-2 laser-to-params status -h --help --version'
+        words='derive eval generate testvectors protocol identify simulate-measurements simulate-log replay plot check report budget simulate-calibration build lint iso230-2 laser-to-params status import-urdf -h --help --version'
     else
         case "$verb" in
         derive)
@@ -20,7 +20,8 @@ _chaincomp() {
         eval)
           case "$prev" in
             --format) words='text json';;
-            *) words='-h --help --params --set --format --json'; [[ $cur == -* ]] || return 0;;
+            --units) words='people internal';;
+            *) words='-h --help --params --set --format --json --units'; [[ $cur == -* ]] || return 0;;
           esac;;
         generate)
           case "$prev" in
@@ -106,6 +107,12 @@ _chaincomp() {
           case "$prev" in
             --format) words='text json';;
             *) words='-h --help --url --once --format --timeout --refresh --machine'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        import-urdf)
+          case "$prev" in
+            --errors) words='none joint-offsets origins all';;
+            --format) words='text json';;
+            *) words='-h --help --base --tip --errors --tool-point --tool-direction --name -o --output --format --json'; [[ $cur == -* ]] || return 0;;
           esac;;
         *) return 0;;
         esac
