@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import sys
 
-from ..build import build, copy_to
+from ..build import RT_MODULE, build, build_linuxcnc, copy_to, install_rt
 from ..errors import ChaincompError
 from .common import _same_file
 
@@ -22,6 +22,15 @@ def add_parser(sub) -> None:
     p.add_argument("-o", "--output", metavar="DIR",
                    help="also copy the library to DIR/NAME.so (for --model LIB.so on a computer without a "
                         "compiler)")
+    p.add_argument("--linuxcnc", action="store_true",
+                   help=f"build the realtime LinuxCNC HAL component {RT_MODULE}.so instead: the machine's "
+                        "compensation in the servo thread, its params baked in (needs linuxcnc-uspace-dev)")
+    p.add_argument("--params", metavar="P.yaml",
+                   help="with --linuxcnc: the error values the component compensates (default: every error "
+                        "zero); constant values only, no tables")
+    p.add_argument("--install", action="store_true",
+                   help=f"with --linuxcnc: also copy {RT_MODULE}.so into LinuxCNC's module folder "
+                        "(/usr/lib/linuxcnc/modules; root), where loadrt finds it")
     p.set_defaults(run=run)
 
 
@@ -32,7 +41,12 @@ def run(args) -> int:
             raise ChaincompError(f"-o {args.output}: is a file, expected a folder")
         if not os.path.isdir(parent):
             raise ChaincompError(f"-o {args.output}: folder {parent} does not exist")
-    path, cached = build(args.machine)
+    if (args.params or args.install) and not args.linuxcnc:
+        raise ChaincompError(f"{'--params' if args.params else '--install'} goes with --linuxcnc")
+    if args.linuxcnc:
+        path, cached = build_linuxcnc(args.machine, args.params)
+    else:
+        path, cached = build(args.machine)
     if cached:
         print(f"chaincomp build: {args.machine}: cached", file=sys.stderr)
     if args.output:   # DIR/NAME.so may be the machine file itself (the name is known only now)
@@ -41,4 +55,6 @@ def run(args) -> int:
             raise ChaincompError(f"-o {args.output}: {target} is also an input ({args.machine}); "
                                  "refusing to overwrite it")
     print(copy_to(path, args.output) if args.output else path)
+    if args.install:
+        print(install_rt(path))
     return 0

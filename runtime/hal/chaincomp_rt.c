@@ -1,0 +1,125 @@
+/* chaincomp_rt: realtime HAL component running one machine's generated compensation in the
+ * servo thread. The HAL glue: pins, the thread function, the cost of each call. The model,
+ * its params and chaincompd's ramp and limits are in the C++ core (chaincomp_rt_core.cpp),
+ * set up at module load; the thread function allocates nothing.
+ *
+ * Pins (N = joint, in the machine file's axis order; LinuxCNC units: mm, deg):
+ *   chaincomp-rt.joint.N.pos-cmd     float in   commanded joint position (joint.N.motor-pos-cmd)
+ *   chaincomp-rt.joint.N.correction  float out  correction to add to it (offset.N.offset)
+ *   chaincomp-rt.enable              bit in     compensate; the correction ramps in and out
+ *   chaincomp-rt.compensating        bit out    a correction is applied (or ramping out)
+ *   chaincomp-rt.ramp                float out  0 (off) .. 1 (fully on)
+ *   chaincomp-rt.clamped             bit out    the correction was limited in size or rate
+ *   chaincomp-rt.fault               bit out    the last command was refused: the correction is held
+ *   chaincomp-rt.reject-reason       s32 out    -1, or why the last command was refused (chaincompd's reasons)
+ *   chaincomp-rt.rejected            s32 out    commands refused so far
+ *   chaincomp-rt.status              s32 out    compensate's status of the last target (0 ok, 1 residual)
+ *   chaincomp-rt.residual-point      float out  mm left at the last target (by the model)
+ *   chaincomp-rt.cost-ns             s32 out    time of the last call (compensation included), ns
+ *   chaincomp-rt.cost-max-ns         s32 out    largest cost-ns so far (write 0 to restart it)
+ * Function: chaincomp-rt.update (floating point), between motion-controller and the offsets.
+ */
+#include "rtapi.h"
+#include "rtapi_app.h"
+#include "rtapi_math.h"
+#include "hal.h"
+
+#include "chaincomp_rt.h"
+
+MODULE_AUTHOR("chaincomp");
+MODULE_DESCRIPTION("chaincomp geometric error compensation in the servo thread");
+MODULE_LICENSE("GPL");
+
+#define CCRT_MAX_AXES 8
+
+struct ccrt_pins {
+  hal_float_t *pos_cmd[CCRT_MAX_AXES];
+  hal_float_t *correction[CCRT_MAX_AXES];
+  hal_bit_t *enable, *compensating, *clamped, *fault;
+  hal_float_t *ramp, *residual_point;
+  hal_s32_t *reject_reason, *rejected, *status, *cost_ns, *cost_max_ns;
+};
+
+static int comp_id;
+static struct ccrt_pins *pins;
+static int num_axes;
+static long long utime_ns;  /* command time: the sum of the servo periods */
+
+static void update(void *arg, long period) {
+  double cmd[CCRT_MAX_AXES], corr[CCRT_MAX_AXES];
+  struct ccrt_result r;
+  long long start = rtapi_get_time(), cost;
+  int i;
+  (void)arg;
+  utime_ns += period;
+  for (i = 0; i < num_axes; ++i) cmd[i] = *pins->pos_cmd[i];
+  if (ccrt_step(cmd, *pins->enable, utime_ns / 1000, corr, &r)) {
+    for (i = 0; i < num_axes; ++i) *pins->correction[i] = corr[i];
+    *pins->compensating = (r.flags & 1) != 0;
+    *pins->clamped = (r.flags & 4) != 0;
+    *pins->status = r.status;
+    *pins->residual_point = r.residual_point;
+    *pins->fault = 0;
+  } else {
+    *pins->fault = 1;  /* the last correction stays on the pins */
+    *pins->rejected += 1;
+  }
+  *pins->reject_reason = r.reject;
+  *pins->ramp = r.ramp;
+  cost = rtapi_get_time() - start;
+  if (cost > 0x7fffffff) cost = 0x7fffffff;
+  *pins->cost_ns = (hal_s32_t)cost;
+  if (*pins->cost_ns > *pins->cost_max_ns) *pins->cost_max_ns = *pins->cost_ns;
+}
+
+#define PIN(kind, dir, ptr, ...)                                              \
+  do {                                                                        \
+    if (hal_pin_##kind##_newf(dir, ptr, comp_id, __VA_ARGS__) != 0) goto fail; \
+  } while (0)
+
+int rtapi_app_main(void) {
+  char error[256];
+  int i;
+  comp_id = hal_init("chaincomp_rt");
+  if (comp_id < 0) return comp_id;
+  if (ccrt_init(error, sizeof error) != 0) {
+    rtapi_print_msg(RTAPI_MSG_ERR, "chaincomp_rt: %s\n", error);
+    hal_exit(comp_id);
+    return -EINVAL;
+  }
+  num_axes = ccrt_num_axes();
+  pins = hal_malloc(sizeof *pins);
+  if (pins == 0 || num_axes > CCRT_MAX_AXES) goto fail;
+  for (i = 0; i < num_axes; ++i) {
+    PIN(float, HAL_IN, &pins->pos_cmd[i], "chaincomp-rt.joint.%d.pos-cmd", i);
+    PIN(float, HAL_OUT, &pins->correction[i], "chaincomp-rt.joint.%d.correction", i);
+    *pins->correction[i] = 0.0;
+  }
+  PIN(bit, HAL_IN, &pins->enable, "chaincomp-rt.enable");
+  PIN(bit, HAL_OUT, &pins->compensating, "chaincomp-rt.compensating");
+  PIN(bit, HAL_OUT, &pins->clamped, "chaincomp-rt.clamped");
+  PIN(bit, HAL_OUT, &pins->fault, "chaincomp-rt.fault");
+  PIN(float, HAL_OUT, &pins->ramp, "chaincomp-rt.ramp");
+  PIN(float, HAL_OUT, &pins->residual_point, "chaincomp-rt.residual-point");
+  PIN(s32, HAL_OUT, &pins->reject_reason, "chaincomp-rt.reject-reason");
+  PIN(s32, HAL_OUT, &pins->rejected, "chaincomp-rt.rejected");
+  PIN(s32, HAL_OUT, &pins->status, "chaincomp-rt.status");
+  PIN(s32, HAL_OUT, &pins->cost_ns, "chaincomp-rt.cost-ns");
+  PIN(s32, HAL_IO, &pins->cost_max_ns, "chaincomp-rt.cost-max-ns");
+  *pins->reject_reason = -1;
+  if (hal_export_funct("chaincomp-rt.update", update, 0, 1, 0, comp_id) != 0) goto fail;
+  rtapi_print_msg(RTAPI_MSG_INFO, "chaincomp_rt: machine %s, %d joints, params %s\n", ccrt_machine(), num_axes,
+                  ccrt_params_file());
+  hal_ready(comp_id);
+  return 0;
+fail:
+  rtapi_print_msg(RTAPI_MSG_ERR, "chaincomp_rt: cannot export its pins or function\n");
+  ccrt_fini();
+  hal_exit(comp_id);
+  return -EINVAL;
+}
+
+void rtapi_app_exit(void) {
+  ccrt_fini();
+  hal_exit(comp_id);
+}
