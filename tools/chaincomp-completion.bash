@@ -9,7 +9,7 @@ _chaincomp() {
         case "${COMP_WORDS[i]}" in -*) ;; *) verb="${COMP_WORDS[i]}"; break;; esac
     done
     if [[ -z $verb ]]; then
-        words='derive eval generate testvectors protocol identify simulate-measurements simulate-log replay plot check report budget simulate-calibration build lint iso230-2 laser-to-params status import-urdf -h --help --version'
+        words='derive eval generate testvectors protocol identify simulate-measurements simulate-log replay plot check report budget simulate-calibration build lint iso230-2 laser-to-params status import-urdf ballbar -h --help --version'
     else
         case "$verb" in
         derive)
@@ -113,6 +113,12 @@ _chaincomp() {
             --errors) words='none joint-offsets origins all';;
             --format) words='text json';;
             *) words='-h --help --base --tip --errors --tool-point --tool-direction --name -o --output --format --json'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        ballbar)
+          case "$prev" in
+            --plane) words='XY YZ ZX';;
+            --format) words='text json';;
+            *) words='-h --help --params --set --plane --radius --centre --center --axes --points --feed --fit --degree --assume-zero --format --json --plot -o --output'; [[ $cur == -* ]] || return 0;;
           esac;;
         *) return 0;;
         esac

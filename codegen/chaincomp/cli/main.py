@@ -30,6 +30,7 @@ from . import iso230_2; VERBS += (iso230_2,)  # noqa: E402,E702
 from . import laser_to_params; VERBS += (laser_to_params,)  # noqa: E402,E702
 from . import status; VERBS += (status,)  # noqa: E402,E702
 from . import import_urdf; VERBS += (import_urdf,)  # noqa: E402,E702
+from . import ballbar; VERBS += (ballbar,)  # noqa: E402,E702
 
 
 class _Parser(argparse.ArgumentParser):
