@@ -1,55 +1,80 @@
-"""``chaincomp plot``: error maps over two axes, the time plot of a replay CSV, and an error
-that varies along an axis (a table and its interpolant, or a polynomial)."""
+"""``chaincomp plot``: error maps over two axes (flat, or as a surface beside the map), the error
+over the working volume, the time plot of a replay CSV, an error that varies along an axis (a
+table and its interpolant, or a polynomial), and an interactive HTML file of the surface and
+the volume. Titles, labels and units come from ``figures`` for every view."""
 
 from __future__ import annotations
 
 import csv
+import math
+import os
 import sys
+from dataclasses import dataclass
 
 import numpy as np
 
+from ..display import add_units_argument, display_unit
 from ..errors import ChaincompError
 from ..jets import JetModel
 from ..numeric import ExactModel
 from ..units import UNITS
+from . import figures as F
 from .common import (MODEL_NAMES, add_machine_argument, add_model_argument, add_values_arguments, check_image,
-                     integer, load, parse_number, values_for)
+                     check_output, integer, load, parse_number, values_for)
 
 COMPONENTS = ("dx", "dy", "dz", "dkx", "dky", "dkz", "norm")
 # 1000 x 1000 points: 4-5 s for one model, 39 s for exact minus second (five_axis_ac, 2026-12)
 MAX_GRID = 1000
+# arrows in the volume view: 12^3 = 1728 still read as a field, more are a blur
+MAX_VOLUME_GRID = 12
+VIEWS = ("map", "surface", "volume")
+DEFAULT_GRID = {"map": 41, "surface": 41, "volume": 5}
 MODELS = ("first", "second", "exact", "second-first", "exact-first", "exact-second")   # internal names
 ORDERS = ("1", "2", "exact", "2-1", "exact-1", "exact-2")   # the same, as --order takes them
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("plot", help="error map over two axes, a replay CSV, or an error table",
+    p = sub.add_parser("plot", help="error map, surface or volume view, a replay CSV, or an error table",
                        description="Plot one tool-error component over a grid of two axes (the paper's "
                                    "Fig. 3 is dy over Ap and Cp), for the first-order, second-order or "
-                                   "exact model or the difference of two; or, with --replay, commanded "
-                                   "axes, correction and residual over time from a 'chaincomp replay' CSV; "
-                                   "or, with --table P.yaml --error NAME, an error that varies along an "
-                                   "axis: its points and its interpolant (or polynomial) with the slope, "
-                                   "past both ends to show what happens outside (MACHINE.yaml optional: "
-                                   "given, the entry is checked against it).")
+                                   "exact model or the difference of two: as a map, or as a 3-D surface "
+                                   "beside the map (--view surface); or the tool point error as arrows at "
+                                   "a grid of up to three axes over the working volume (--view volume); or, "
+                                   "with --replay, commanded axes, correction and the tool error with and "
+                                   "without compensation over time from a 'chaincomp replay' CSV (the "
+                                   "error without it needs MACHINE.yaml and --params); or, with --table "
+                                   "P.yaml --error NAME, an error that varies along an axis: its points "
+                                   "and its interpolant (or polynomial) with the slope, past both ends to "
+                                   "show what happens outside (MACHINE.yaml optional: given, the entry is "
+                                   "checked against it). --html writes the surface and the volume view "
+                                   "as one interactive file. Errors in µm and arcsec (--units internal: "
+                                   "mm and rad).")
     add_machine_argument(p, optional=True)
     add_values_arguments(p)
-    p.add_argument("--component", default="dy", choices=COMPONENTS, help="error component (default dy)")
-    p.add_argument("--over", metavar="A1,A2", help="the two axes of the map (default: the first two axes)")
+    p.add_argument("--view", choices=VIEWS, help="map (default), surface (a 3-D surface beside the map) or "
+                   "volume (arrows of the tool point error over the working volume)")
+    p.add_argument("--style", choices=("heatmap", "surface"), help="older spelling of --view: heatmap is map")
+    p.add_argument("--component", default="dy", choices=COMPONENTS,
+                   help="error component of the map and surface (default dy; dk*: tilt of the tool axis)")
+    p.add_argument("--over", metavar="A1,A2", help="the two axes of the map (default: the first two axes); for "
+                   "--view volume one to three axes (default: the linear axes, else the first three)")
     p.add_argument("--range", dest="range1", metavar="LO:HI", help="range of the first axis (declared unit; "
                    "default its limits)")
     p.add_argument("--range2", metavar="LO:HI", help="range of the second axis (default: --range, else limits)")
-    p.add_argument("--grid", type=integer(2, MAX_GRID), default=41,
-                   help=f"points per axis (2 to {MAX_GRID}, default 41)")
+    p.add_argument("--grid", type=integer(2, MAX_GRID), metavar="N",
+                   help=f"points per axis: map and surface 2 to {MAX_GRID} (default 41); volume 2 to "
+                        f"{MAX_VOLUME_GRID} (default 5; 3 gives the corners, mid-edges, face centres and centre)")
     add_model_argument(p, ORDERS, ("--order", "--model"), "model, or a difference of two (e.g. exact-1); "
                        "--model first|second|exact|second-first.. is the older spelling")
-    p.add_argument("--style", default="heatmap", choices=("heatmap", "surface"),
-                   help="heatmap (default) or a 3-D surface")
+    add_units_argument(p)
     p.add_argument("--replay", metavar="REPLAY.csv", help="plot a replay CSV instead of a map")
     p.add_argument("--table", metavar="P.yaml", help="plot an error of this params file that varies along an "
                    "axis (with --error)")
     p.add_argument("--error", metavar="NAME", help="the error to plot with --table")
-    p.add_argument("-o", "--output", default="plot.png", metavar="OUT.png", help="image file (default plot.png)")
+    p.add_argument("-o", "--output", metavar="OUT.png",
+                   help="image file (default plot.png; none when only --html is given)")
+    p.add_argument("--html", metavar="OUT.html", help="write the surface and the volume view as one "
+                   "self-contained interactive HTML file (works offline; rotate and zoom in a browser)")
     p.set_defaults(run=run)
 
 
@@ -66,6 +91,22 @@ def _range(text: str, what: str) -> tuple[float, float]:
     return lo, hi
 
 
+def model_error(machine, values: dict, model: str):
+    """(dp, dd or None) of a model or a difference of two, internal units, broadcast over values."""
+    names = model.split("-")
+    truncated = JetModel(machine, 2) if set(names) & {"first", "second"} else None
+    parts = {}
+    for name in set(names):
+        parts[name] = ExactModel(machine).error(values) if name == "exact" else \
+            truncated.error(values, 1 if name == "first" else 2)
+    dp, dd = parts[names[0]]
+    if len(names) == 2:
+        dp2, dd2 = parts[names[1]]
+        dp = [a - b for a, b in zip(dp, dp2)]
+        dd = [a - b for a, b in zip(dd, dd2)] if dd is not None else None
+    return dp, dd
+
+
 def error_grid(machine, values: dict, over: tuple[str, str], ranges, grid: int, component: str, model: str):
     """(g1, g2, Z): axis values (declared units) and the component on the grid, Z in the
     machine's length unit (direction components unitless)."""
@@ -76,18 +117,8 @@ def error_grid(machine, values: dict, over: tuple[str, str], ranges, grid: int, 
     v = dict(values)
     v[a1.name] = a1.to_internal(G1)
     v[a2.name] = a2.to_internal(G2)
-    scale = 1.0 / UNITS[machine.length_unit].to_internal
-    needs = set(model.split("-"))
-    truncated = JetModel(machine, 2) if needs & {"first", "second"} else None
-    parts = {}
-    for name in needs:
-        if name == "exact":
-            dp, dd = ExactModel(machine).error(v)
-        else:
-            dp, dd = truncated.error(v, 1 if name == "first" else 2)
-        parts[name] = _component(dp, dd, component, scale, G1.shape)
-    z = parts[model.split("-")[0]] - (parts[model.split("-")[1]] if "-" in model else 0)
-    return g1, g2, z
+    dp, dd = model_error(machine, v, model)
+    return g1, g2, _component(dp, dd, component, 1.0 / UNITS[machine.length_unit].to_internal, G1.shape)
 
 
 def _component(dp, dd, component, scale, shape):
@@ -100,27 +131,83 @@ def _component(dp, dd, component, scale, shape):
     return np.broadcast_to(np.asarray(dp["xyz".index(component[-1])], float), shape) * scale
 
 
+def _normalise(args) -> None:
+    """One spelling for the options that have two, and the defaults that depend on the view."""
+    if args.style and args.view and {"heatmap": "map"}.get(args.style, args.style) != args.view:
+        raise ChaincompError(f"--style {args.style} and --view {args.view} disagree: give --view alone")
+    args.view = args.view or {"heatmap": "map", "surface": "surface", None: "map"}[args.style]
+    internal = {v: k for k, v in MODEL_NAMES.items()}
+    args.model = "-".join(internal.get(m, m) for m in args.model.split("-"))
+    if args.output is None and not args.html:
+        args.output = "plot.png"
+    if args.grid is None:
+        args.grid = DEFAULT_GRID[args.view]
+    elif args.view == "volume" and args.grid > MAX_VOLUME_GRID:
+        raise ChaincompError(f"--grid {args.grid}: the volume view takes 2 to {MAX_VOLUME_GRID} points per axis")
+
+
 def run(args) -> int:
     import matplotlib
     matplotlib.use("Agg")
-    check_image(args.output, args.machine, args.params, args.replay, args.table)
-    internal = {v: k for k, v in MODEL_NAMES.items()}
-    args.model = "-".join(internal[m] for m in args.model.split("-"))
-    if args.replay:
-        _plot_replay(args.replay, args.output)
-    elif args.table or args.error:
-        _plot_table(args)
-    else:
-        if not args.machine:
-            raise ChaincompError("give a MACHINE.yaml (or --replay REPLAY.csv)")
-        _plot_map(args)
-    print(f"plot: wrote {args.output}", file=sys.stderr)
+    _normalise(args)
+    inputs = (args.machine, args.params, args.replay, args.table)
+    check_image(args.output, *inputs)
+    if args.html:
+        check_output(args.html, *inputs, option="--html")
+        if os.path.splitext(args.html)[1].lower() not in (".html", ".htm"):
+            raise ChaincompError(f"--html {args.html}: the file name must end in .html")
+        if args.replay or args.table or args.error:
+            raise ChaincompError("--html draws the surface and the volume view of a machine: not with --replay "
+                                 "or --table")
+        if args.output and os.path.abspath(args.output) == os.path.abspath(args.html):
+            raise ChaincompError(f"--html {args.html}: is also the -o output")
+    if args.output:
+        import matplotlib.pyplot as plt
+        fig = build_figure(args)
+        fig.savefig(args.output)
+        plt.close(fig)
+        print(f"plot: wrote {args.output}", file=sys.stderr)
+    if args.html:
+        write_html(args)
+        print(f"plot: wrote {args.html}", file=sys.stderr)
     return 0
 
 
-def _plot_map(args) -> None:
-    import matplotlib.pyplot as plt
+def build_figure(args):
+    """The matplotlib figure of the options (after _normalise), not yet saved."""
+    if args.replay:
+        return _replay_figure(args)
+    if args.table or args.error:
+        return _table_figure(args)
+    if not args.machine:
+        raise ChaincompError("give a MACHINE.yaml (or --replay REPLAY.csv)")
+    if args.view == "volume":
+        return _volume_figure(volume_data(args))
+    return _map_figure(map_data(args), surface=args.view == "surface")
+
+
+@dataclass
+class MapData:
+    title: str
+    a1: object          # the two axes drawn (symbols)
+    a2: object
+    g1: np.ndarray      # their values, declared units
+    g2: np.ndarray
+    z: np.ndarray       # the component on the grid [g1, g2], in `unit`
+    label: str          # the component with its unit
+
+
+def _machine_values(args):
     machine = load(args.machine)
+    values, has_errors = values_for(machine, args.params, args.sets)
+    if not has_errors:
+        F.warn("no error values (give --params P.yaml, or --set an error): every error is zero, so the "
+               "figure shows nothing")
+    return machine, values, has_errors
+
+
+def map_data(args) -> MapData:
+    machine, values, has_errors = _machine_values(args)
     names = [a.name for a in machine.axes]
     over = tuple(args.over.split(",")) if args.over else tuple(names[:2])
     if len(over) != 2 or over[0] == over[1] or any(n not in names for n in over):
@@ -129,67 +216,260 @@ def _plot_map(args) -> None:
     r1 = _range(args.range1, "--range") if args.range1 else machine.symbol(over[0]).limits
     r2 = _range(args.range2, "--range2") if args.range2 else (
         _range(args.range1, "--range") if args.range1 else machine.symbol(over[1]).limits)
-    values, _ = values_for(machine, args.params, args.sets)
     g1, g2, z = error_grid(machine, values, over, (r1, r2), args.grid, args.component, args.model)
     bad = np.argwhere(~np.isfinite(z))
     if len(bad):
         i, j = bad[0]
         raise ChaincompError(f"{args.component} is not finite at {over[0]} = {g1[i]:g}, {over[1]} = {g2[j]:g}: the "
                              "machine's expressions or the values given leave their domain there")
-    unit = "" if args.component.startswith("dk") else machine.length_unit
-    if unit == "mm":
-        z, unit = z * 1000.0, "µm"
-    a1, a2 = machine.symbol(over[0]), machine.symbol(over[1])
-    fig = plt.figure(figsize=(8, 6), dpi=100)
-    label = f"{args.component} [{unit}]" if unit else args.component
-    if args.style == "surface":
-        ax = fig.add_subplot(projection="3d")
-        G1, G2 = np.meshgrid(g1, g2, indexing="ij")
-        ax.plot_surface(G1, G2, z, cmap="viridis")
-        ax.set_zlabel(label)
-    else:
-        ax = fig.add_subplot()
-        mesh = ax.pcolormesh(g1, g2, z.T, shading="auto", cmap="viridis")
-        fig.colorbar(mesh, ax=ax, label=label)
-    ax.set_xlabel(f"{a1.name} [{a1.unit.name}]")
-    ax.set_ylabel(f"{a2.name} [{a2.unit.name}]")
-    names = {"first": "first-order", "second": "second-order", "exact": "exact"}
-    model = " minus ".join(names[m] for m in args.model.split("-"))
-    ax.set_title(f"{machine.name}: {args.component}, {model} model")
-    fig.savefig(args.output)
-    plt.close(fig)
+    if has_errors and not np.any(z):
+        F.warn(f"{args.component} is zero everywhere on this grid: no error given moves it, nothing to draw")
+    factor, unit = F.component_unit(args.component, machine.length_unit, args.units)
+    what = F.COMPONENT_TEXT[args.component]
+    title = F.title(machine, f"{what} over {over[0]} and {over[1]}", args.params, args.sets, args.model,
+                    F.held_text(machine, values, over))
+    return MapData(title, machine.symbol(over[0]), machine.symbol(over[1]), g1, g2, z * factor,
+                   F.label(what, unit))
 
 
-def _plot_replay(path: str, output: str) -> None:
+def _map_figure(d: MapData, surface: bool):
     import matplotlib.pyplot as plt
-    rows, cols = _read_replay_csv(path)
+    fig = plt.figure(figsize=(14, 6) if surface else (8, 6), dpi=100)
+    ax = fig.add_subplot(1, 2 if surface else 1, 1)
+    mesh = ax.pcolormesh(d.g1, d.g2, d.z.T, shading="auto", cmap="viridis")
+    fig.colorbar(mesh, ax=ax, label=d.label)
+    ax.set_xlabel(F.axis_label(d.a1))
+    ax.set_ylabel(F.axis_label(d.a2))
+    if surface:
+        ax3 = fig.add_subplot(1, 2, 2, projection="3d")
+        G1, G2 = np.meshgrid(d.g1, d.g2, indexing="ij")
+        ax3.plot_surface(G1, G2, d.z, cmap="viridis", norm=mesh.norm, linewidth=0)
+        ax3.set_xlabel(F.axis_label(d.a1))
+        ax3.set_ylabel(F.axis_label(d.a2))
+        ax3.set_zlabel(d.label)
+    fig.suptitle(d.title, fontsize="medium")
+    return fig
+
+
+@dataclass
+class VolumeData:
+    title: str
+    axes: list            # the grid axes (symbols)
+    point: np.ndarray     # (n, 3) nominal tool points, the machine's length unit
+    error: np.ndarray     # (n, 3) tool point errors, in `unit`
+    unit: str
+    length_unit: str
+    scale: float          # drawn arrow length (length unit) per `unit` of error
+    key: float            # the key arrow's length, in `unit`
+
+
+def _volume_axes(machine, text: str | None) -> list[str]:
+    names = [a.name for a in machine.axes]
+    if not text:
+        linear = [a.name for a in machine.axes if a.unit.kind == "length"]
+        return (linear or names)[:3]
+    pick = [n.strip() for n in text.split(",")]
+    if not 1 <= len(pick) <= 3 or len(set(pick)) != len(pick) or any(n not in names for n in pick):
+        raise ChaincompError(f"--over expects one to three different axes of {machine.name} ({', '.join(names)}) "
+                             f"for the volume view, got {text!r}")
+    return pick
+
+
+def _nice(x: float) -> float:
+    """1, 2 or 5 times a power of ten, at most x (x > 0)."""
+    p = 10.0 ** math.floor(math.log10(x))
+    return next(m * p for m in (5, 2, 1) if m * p <= x)
+
+
+def volume_data(args) -> VolumeData:
+    machine, values, has_errors = _machine_values(args)
+    over = _volume_axes(machine, args.over)
+    ranges = [machine.symbol(n).limits for n in over]
+    if args.range1:
+        ranges[0] = _range(args.range1, "--range")
+    if args.range2 and len(over) > 1:
+        ranges[1] = _range(args.range2, "--range2")
+    grids = np.meshgrid(*(np.linspace(*r, args.grid) for r in ranges), indexing="ij")
+    v = dict(values)
+    for n, g in zip(over, grids):
+        v[n] = machine.symbol(n).to_internal(g.ravel())
+    nominal = {k: (0.0 * x if machine.symbol(k).role == "error" else x) for k, x in v.items()}
+    shape = grids[0].ravel().shape
+    point, _ = ExactModel(machine).pose(nominal)
+    dp, _ = model_error(machine, v, args.model)
+    length = UNITS[machine.length_unit].to_internal
+    point = np.stack([np.broadcast_to(np.asarray(c, float), shape) for c in point], axis=1) / length
+    shown = display_unit("length", args.units)
+    err = np.stack([np.broadcast_to(np.asarray(c, float), shape) for c in dp], axis=1) / shown.to_internal
+    if not (np.isfinite(point).all() and np.isfinite(err).all()):
+        raise ChaincompError("the tool point or its error is not finite on this grid: the machine's expressions "
+                             "or the values given leave their domain there")
+    biggest = float(np.linalg.norm(err, axis=1).max())
+    if has_errors and biggest == 0.0:
+        F.warn("the tool point error is zero everywhere on this grid: nothing to draw")
+    span = float((point.max(axis=0) - point.min(axis=0)).max()) or 1.0
+    key = _nice(biggest) if biggest > 0 else 1.0
+    scale = 0.15 * span / (biggest or 1.0)   # the longest arrow: 15 % of the travel
+    held = F.held_text(machine, values, over)
+    magnification = _round(scale * length / shown.to_internal)   # drawn length / error length
+    title = F.title(machine, f"tool point error over {', '.join(over)} (arrows x {magnification})",
+                    args.params, args.sets, args.model, held)
+    return VolumeData(title, [machine.symbol(n) for n in over], point, err, shown.name, machine.length_unit,
+                      scale, key)
+
+
+def _round(x: float) -> str:
+    return f"{float(f'{x:.2g}'):g}"
+
+
+def _volume_figure(d: VolumeData):
+    import matplotlib.pyplot as plt
+    from matplotlib import cm, colors
+    fig = plt.figure(figsize=(9, 8), dpi=100)
+    ax = fig.add_subplot(projection="3d")
+    size = np.linalg.norm(d.error, axis=1)
+    lo_size, hi_size = float(size.min()), float(size.max())
+    norm = colors.Normalize(lo_size, hi_size if hi_size > lo_size else lo_size + 1.0)
+    rgba = cm.viridis(norm(size))
+    u = d.error * d.scale
+    ax.quiver(*d.point.T, *u.T, colors=np.concatenate([rgba, rgba, rgba]), arrow_length_ratio=0.25)
+    ax.scatter(*d.point.T, s=4, color="0.4")
+    x0, y0, z0 = _key_origin(d)
+    ax.quiver(x0, y0, z0, d.key * d.scale, 0, 0, color="red", arrow_length_ratio=0.25)
+    ax.text(x0, y0, z0, f"key: {d.key:g} {d.unit}  ", color="red", ha="right")
+    for set_label, c in zip((ax.set_xlabel, ax.set_ylabel, ax.set_zlabel), "xyz"):
+        set_label(F.label(f"tool point {c}", d.length_unit))
+    fig.colorbar(cm.ScalarMappable(norm=norm, cmap="viridis"), ax=ax, shrink=0.6,
+                 label=F.label("|tool point error|", d.unit))
+    ax.set_title(d.title, fontsize="medium")
+    return fig
+
+
+def _key_origin(d: VolumeData) -> tuple[float, float, float]:
+    """Where the key arrow starts: above the grid's top left corner, clear of the field."""
+    lo, hi = d.point.min(axis=0), d.point.max(axis=0)
+    return float(lo[0]), float(lo[1]), float(hi[2] + 0.1 * (float((hi - lo).max()) or 1.0))
+
+
+def write_html(args) -> None:
+    """The surface (over the map's axes) and the volume view in one self-contained plotly file."""
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+    if not args.machine:
+        raise ChaincompError("--html needs a MACHINE.yaml")
+    m = map_data(args)
+    grid, args.grid = args.grid, DEFAULT_GRID["volume"] if args.view != "volume" else args.grid
+    try:
+        v = volume_data(args)
+    finally:
+        args.grid = grid
+    fig = make_subplots(rows=1, cols=2, specs=[[{"type": "scene"}, {"type": "scene"}]],
+                        subplot_titles=(m.title.replace("\n", "<br>"), v.title.replace("\n", "<br>")),
+                        horizontal_spacing=0.08)
+    fig.add_trace(go.Surface(x=m.g1, y=m.g2, z=m.z.T, colorscale="Viridis", name=m.label,
+                             colorbar={"title": {"text": m.label}, "x": 0.42, "len": 0.8}), 1, 1)
+    tips = v.point + v.error * v.scale
+    xs, ys, zs = (np.column_stack([v.point[:, k], tips[:, k], np.full(len(tips), np.nan)]).ravel()
+                  for k in range(3))
+    size = np.linalg.norm(v.error, axis=1)
+    fig.add_trace(go.Scatter3d(x=xs, y=ys, z=zs, mode="lines", line={"color": "grey", "width": 3},
+                               name="error (scaled)", hoverinfo="skip"), 1, 2)
+    fig.add_trace(go.Scatter3d(x=tips[:, 0], y=tips[:, 1], z=tips[:, 2], mode="markers",
+                               marker={"size": 3, "color": size, "colorscale": "Viridis",
+                                       "colorbar": {"title": {"text": F.label("|tool point error|", v.unit)},
+                                                    "x": 1.0, "len": 0.8}},
+                               text=[f"{s:.3f} {v.unit}" for s in size], name="arrow tips"), 1, 2)
+    x0, y0, z0 = _key_origin(v)
+    fig.add_trace(go.Scatter3d(x=[x0, x0 + v.key * v.scale], y=[y0, y0], z=[z0, z0],
+                               mode="lines+text", line={"color": "red", "width": 6}, text=["", f"{v.key:g} {v.unit}"],
+                               name=f"key: {v.key:g} {v.unit}"), 1, 2)
+    fig.update_scenes(xaxis_title=F.axis_label(m.a1), yaxis_title=F.axis_label(m.a2), zaxis_title=m.label,
+                      row=1, col=1)
+    fig.update_scenes(**{f"{c}axis_title": F.label(f"tool point {c}", v.length_unit) for c in "xyz"}, row=1, col=2)
+    fig.update_layout(width=1500, height=750, showlegend=True, legend={"x": 0.55, "y": 0.0},
+                      margin={"t": 110})
+    fig.write_html(args.html, include_plotlyjs=True, full_html=True)
+
+
+def _replay_figure(args):
+    import matplotlib.pyplot as plt
+    rows, cols = _read_replay_csv(args.replay)
     ok = cols.pop("ok")
-    t = cols.pop("utime")
-    t = (t - t[0]) * 1e-6
-    residual = cols.pop("residual_point_mm")
-    axes = [c[len("commanded_"):] for c in cols if c.startswith("commanded_")]
-    fig, (top, mid, bottom) = plt.subplots(3, 1, figsize=(9, 8), dpi=100, sharex=True)
-    for a in axes:
-        top.plot(t, cols["commanded_" + a], label=a)
-        unit = a.rsplit("_", 1)[-1]
-        mid.plot(t, cols["correction_" + a] * (1000.0 if unit == "mm" else 3600.0),
-                 label=f"{a.rsplit('_', 1)[0]} [{'µm' if unit == 'mm' else 'arcsec'}]")
-    bottom.plot(t, residual * 1e6)
-    top.set_ylabel("commanded")
-    mid.set_ylabel("correction")
-    bottom.set_ylabel("residual [nm]")
-    bottom.set_xlabel("time [s]")
-    top.legend(loc="upper right", fontsize="small")
-    mid.legend(loc="upper right", fontsize="small")
-    top.set_title(f"replay of {path}: {ok} corrected, {rows - ok} rejected")
+    t = (cols["utime"] - cols["utime"][0]) * 1e-6
+    axes = [c[len("commanded_"):] for c in cols if c.startswith("commanded_")]   # e.g. X_mm, Ap_deg
+    linear = [a for a in axes if a.endswith("_mm")]
+    rotary = [a for a in axes if not a.endswith("_mm")]
+    machine = load(args.machine) if args.machine else None
+    without = _uncompensated(args, machine, axes, cols)
+    um, arcsec = display_unit("length", args.units), display_unit("angle", args.units)
+    panels = [("commanded", linear, "mm", 1.0), ("commanded", rotary, "deg", 1.0),
+              ("correction", linear, um.name, 1.0 / um.to_internal),
+              ("correction", rotary, arcsec.name, UNITS["deg"].to_internal / arcsec.to_internal)]
+    panels = [p for p in panels if p[1]]
+    has_direction = "residual_direction_rad" in cols
+    n = len(panels) + 1 + has_direction
+    fig, grid = plt.subplots(n, 1, figsize=(10, 2.1 * n + 1.2), dpi=100, sharex=True, squeeze=False)
+    grid = grid[:, 0]
+    for ax, (what, names, unit, k) in zip(grid, panels):
+        for a in names:
+            ax.plot(t, cols[f"{what}_{a}"] * k, label=a.rsplit("_", 1)[0])
+        ax.set_ylabel(F.label(what, unit))
+        ax.legend(loc="upper right", fontsize="small", ncol=len(names))
+    ax = grid[len(panels)]
+    if without is not None:
+        ax.plot(t, without[0] / um.to_internal, label="without compensation", color="C3")
+    with_ = cols["residual_point_mm"] / um.to_internal
+    ax.plot(t, with_, label=f"with compensation (median {np.median(with_):.2g} {um.name})", color="C2")
+    ax.set_ylabel(F.label("|tool point error|", um.name))
+    ax.legend(loc="upper right", fontsize="small")
+    if has_direction:
+        ax = grid[-1]
+        if without is not None and without[1] is not None:
+            ax.plot(t, without[1] / arcsec.to_internal, label="without compensation", color="C3")
+        with_ = cols["residual_direction_rad"] / arcsec.to_internal
+        ax.plot(t, with_, label=f"with compensation (median {np.median(with_):.2g} {arcsec.name})", color="C2")
+        ax.set_ylabel(F.label("tool axis error", arcsec.name))
+        ax.legend(loc="upper right", fontsize="small")
+    grid[-1].set_xlabel(F.label("time", "s"))
+    fig.suptitle(F.title(machine or "(no machine file)", f"replay of {os.path.basename(args.replay)}, {ok} corrected, {rows - ok} rejected",
+                         args.params, args.sets, "exact", extra="with compensation: as the compiled compensator "
+                         "left it (ramp included)"), fontsize="medium")
     fig.tight_layout()
-    fig.savefig(output)
-    plt.close(fig)
+    return fig
+
+
+def _uncompensated(args, machine, axes: list[str], cols: dict):
+    """(|tool point error|, tool axis angle error or None) at the commanded axes, internal units:
+    the error the machine would make without compensation; None without a machine and params."""
+    if not (machine and (args.params or args.sets)):
+        F.warn("the tool error without compensation needs MACHINE.yaml and --params: only the error with "
+               "compensation is drawn")
+        return None
+    values, _ = values_for(machine, args.params, args.sets)
+    have = [a.rsplit("_", 1)[0] for a in axes]
+    if have != [a.name for a in machine.axes]:
+        raise ChaincompError(f"the CSV's axes ({', '.join(have)}) are not those of {machine.name} "
+                             f"({', '.join(a.name for a in machine.axes)})", args.replay, 1)
+    v = dict(values)
+    for a in axes:
+        name, unit = a.rsplit("_", 1)
+        v[name] = cols["commanded_" + a] * UNITS[unit].to_internal
+    dp, dd = ExactModel(machine).error(v)
+    point = np.sqrt(sum(np.asarray(c, float) ** 2 for c in dp))
+    if dd is None:
+        return point, None
+    nominal = {k: (0.0 * x if machine.symbol(k).role == "error" else x) for k, x in v.items()}
+    _, n = ExactModel(machine).pose(nominal)
+    n = np.stack([np.broadcast_to(np.asarray(c, float), point.shape) for c in n], axis=1)
+    a = n + np.stack([np.broadcast_to(np.asarray(c, float), point.shape) for c in dd], axis=1)
+    angle = np.arctan2(np.linalg.norm(np.cross(n, a), axis=1), np.einsum("ij,ij->i", n, a))
+    return point, angle
 
 
 def _read_replay_csv(path: str) -> tuple[int, dict[str, np.ndarray]]:
     """(rows, {"ok": count, column: values of the corrected records}) of a replay CSV: utime,
-    residual_point_mm and every commanded_/correction_ column, each cell a finite number."""
+    residual_point_mm, residual_direction_rad (where there) and every commanded_/correction_ column
+    (named AXIS_mm or AXIS_deg, the wire's units), each cell a finite number."""
     def fail(message: str, line: int | None = None, field: str | None = None):
         raise ChaincompError(message, path, line, field)
 
@@ -197,10 +477,14 @@ def _read_replay_csv(path: str) -> tuple[int, dict[str, np.ndarray]]:
         with open(path, newline="", encoding="utf-8") as f:
             reader = csv.DictReader(f)
             names = reader.fieldnames or []
-            wanted = ["utime", "residual_point_mm"] + [c for c in names if c.startswith(("commanded_", "correction_"))]
+            wanted = ["utime", "residual_point_mm"] + [c for c in names if c == "residual_direction_rad"
+                                                        or c.startswith(("commanded_", "correction_"))]
             missing = [c for c in ("result", "utime", "residual_point_mm") if c not in names]
             if missing or not any(c.startswith("commanded_") for c in names):
                 fail(f"not a 'chaincomp replay' CSV: no {(missing or ['commanded_*'])[0]} column", 1)
+            for c in wanted:
+                if c.startswith(("commanded_", "correction_")) and not c.endswith(("_mm", "_deg")):
+                    fail(f"column {c}: an axis column ends in _mm or _deg (the units on the wire)", 1)
             out: dict[str, list[float]] = {c: [] for c in wanted}
             rows = 0
             for row in reader:
@@ -225,7 +509,7 @@ def _read_replay_csv(path: str) -> tuple[int, dict[str, np.ndarray]]:
     return rows, cols
 
 
-def _plot_table(args) -> None:
+def _table_figure(args):
     """Points, interpolant and slope of one varying error, 5 % past both ends."""
     import matplotlib.pyplot as plt
     from ..varying import Table, parse_varying
@@ -280,8 +564,8 @@ def _plot_table(args) -> None:
     bottom.set_ylabel(f"slope [{vu.name}/{pu.name}]")
     bottom.set_xlabel(f"{v.axis} [{pu.name}]")
     top.legend(loc="best", fontsize="small")
-    top.set_title(f"{args.error}: {v.describe()}\n(shaded: outside the {'table' if isinstance(v, Table) else 'range'})",
-                  fontsize="medium")
+    outside = f"shaded: outside the {'table' if isinstance(v, Table) else 'range'}"
+    fig.suptitle(F.title(machine or "(no machine file)", f"{args.error}: {v.describe()}",
+                         args.table, extra=outside), fontsize="medium")
     fig.tight_layout()
-    fig.savefig(args.output)
-    plt.close(fig)
+    return fig
