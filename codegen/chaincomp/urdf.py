@@ -121,6 +121,7 @@ def _read_model(src: _Source, root):
                                sub.sourceline, f"joint {name}.{part}")
     parsed = {}
     for name, el in joints.items():
+        _origin_numbers(src, el, name)   # before yourdfpy, which names no line
         try:
             parsed[name] = yourdfpy.URDF._parse_joint(el)
         except (ValueError, TypeError, AttributeError, KeyError, IndexError) as exc:
@@ -146,6 +147,15 @@ def _attribute_numbers(src: _Source, el, attr: str, default: str, what: str, fld
         return _finite(src, (float(t) for t in text.split()), what, el.sourceline, fld)
     except ValueError as exc:
         raise src.fail(f"{what}: {exc}", el.sourceline, fld) from None
+
+
+def _origin_numbers(src: _Source, el, name: str) -> tuple[tuple, tuple]:
+    """xyz (m) and rpy (rad) of a joint's <origin>, as written (yourdfpy keeps only their matrix)."""
+    origin = el.find("origin")
+    if origin is None:
+        return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    return tuple(_attribute_numbers(src, origin, k, "0 0 0", f"joint {name!r} origin {k}", f"joint {name}.origin.{k}")
+                 for k in ("xyz", "rpy"))
 
 
 def sanitise(name: str) -> str:
@@ -206,11 +216,7 @@ def _path_joint(src: _Source, j, el) -> PathJoint:
         mline = el.find("mimic").sourceline
         raise src.fail(f"joint {j.name!r} mimics joint {j.mimic.joint!r}: mimic joints are not supported "
                        "(the machine format has one independent symbol per axis)", mline, f"{fld}.mimic")
-    origin = el.find("origin")
-    xyz = _attribute_numbers(src, origin, "xyz", "0 0 0", f"joint {j.name!r} origin xyz", f"{fld}.origin.xyz") \
-        if origin is not None else (0.0, 0.0, 0.0)
-    rpy = _attribute_numbers(src, origin, "rpy", "0 0 0", f"joint {j.name!r} origin rpy", f"{fld}.origin.rpy") \
-        if origin is not None else (0.0, 0.0, 0.0)
+    xyz, rpy = _origin_numbers(src, el, j.name)
     axis, limits = (0.0, 0.0, 1.0), None
     if j.type in MOVING:
         aline = el.find("axis").sourceline if el.find("axis") is not None else line
@@ -259,6 +265,11 @@ def _quote(text: str) -> str:
     return '"' + clean.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
+def _flow(expr: str) -> str:
+    """An expression as a YAML flow scalar: quoted where a comma or bracket would end it."""
+    return _quote(expr) if re.search(r"[,()\[\]{}:#]", expr) else expr
+
+
 def _aligned(axis: tuple) -> tuple[str, int] | None:
     """('x'|'y'|'z', +1|-1) where the axis lies along a coordinate axis."""
     nonzero = [i for i, a in enumerate(axis) if a != 0.0]
@@ -279,17 +290,17 @@ def _motion(j: PathJoint, motion: str) -> list[str]:
             norm = sum(a * a for a in j.axis)
             div = "" if norm == 1.0 else "/sqrt(" + " + ".join(f"({_decimal(a)})^2" for a in j.axis) + ")"
             vec = [f"({motion})*({_decimal(a)}){div}" if a else "0" for a in j.axis]
-        return [f"{{translate: [{', '.join(vec)}], {label}}}"]
+        return [f"{{translate: [{', '.join(_flow(v) for v in vec)}], {label}}}"]
     if along:
         angle = motion if along[1] > 0 else f"-({motion})"
-        return [f"{{rotate: {along[0]}, angle: {angle}, {label}}}"]
+        return [f"{{rotate: {along[0]}, angle: {_flow(angle)}, {label}}}"]
     ux, uy, uz = (_decimal(a) for a in j.axis)
     phi = f"atan2({uy}, {ux})"
     theta = f"atan2(sqrt(({ux})^2 + ({uy})^2), {uz})"
     frame = f"label: {_quote('joint ' + j.name + ' axis frame')}"
-    return [f"{{rotate: z, angle: {phi}, {frame}}}", f"{{rotate: y, angle: {theta}}}",
-            f"{{rotate: z, angle: {motion}, {label}}}",
-            f"{{rotate: y, angle: -{theta}}}", f"{{rotate: z, angle: -{phi}}}"]
+    return [f"{{rotate: z, angle: {_flow(phi)}, {frame}}}", f"{{rotate: y, angle: {_flow(theta)}}}",
+            f"{{rotate: z, angle: {_flow(motion)}, {label}}}",
+            f"{{rotate: y, angle: {_flow('-' + theta)}}}", f"{{rotate: z, angle: {_flow('-' + phi)}}}"]
 
 
 def _origin(j: PathJoint) -> list[str]:
