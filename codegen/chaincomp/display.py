@@ -92,8 +92,8 @@ def plus_minus(value: float, u: float) -> str:
     if -4 <= top < 6:
         return f"{_no_negative_zero(_plain(vr))} ± {_plain(ur)}"
     # a shared power of ten: both mantissas keep the same decimal place
-    shift = Decimal(1).scaleb(-top)
-    vm, um = (vr * shift).quantize(Decimal(1).scaleb(place - top)), (ur * shift).quantize(Decimal(1).scaleb(place - top))
+    shift, step = Decimal(1).scaleb(-top), Decimal(1).scaleb(place - top)
+    vm, um = (vr * shift).quantize(step), (ur * shift).quantize(step)
     return f"({_no_negative_zero(_plain(vm))} ± {_plain(um)})e{top:+03d}"
 
 

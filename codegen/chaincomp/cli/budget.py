@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 
 import numpy as np
@@ -9,6 +10,7 @@ import numpy as np
 from .. import budget as B
 from ..errors import ChaincompError
 from ..tolerances import from_params, load_tolerances
+from . import figures as F
 from .common import (add_format_argument, add_machine_argument, add_model_argument, add_seed_argument,
                      add_values_arguments, check_finite, check_image, integer, load, to_json, values_for)
 
@@ -83,7 +85,7 @@ def run(args) -> int:
     check_finite(doc)
     print(to_json(doc) if args.format == "json" else B.to_text(b, args.top))
     if args.plot:
-        plot(b, args.plot, pick, args.component)
+        plot(b, args.plot, pick, args.component, args.params, args.sets, args.tolerances)
         print(f"budget: wrote {args.plot}", file=sys.stderr)
     return 0
 
@@ -99,11 +101,21 @@ def _map_axes(grid: B.Grid, text: str | None) -> list[str]:
     return pick
 
 
-def plot(b: B.Budget, output: str, pick: list[str], component: str | None) -> None:
-    """Worst-case and RSS maps over two grid axes (the largest value over the other grid axes,
-    one colour scale for both) and a bar chart of the contributions at the worst point."""
+def plot(b: B.Budget, output: str, pick: list[str], component: str | None, params: str | None = None,
+         sets=(), tolerances: str | None = None) -> None:
     import matplotlib
     matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig = build_plot(b, pick, component, params, sets, tolerances)
+    fig.savefig(output)
+    plt.close(fig)
+
+
+def build_plot(b: B.Budget, pick: list[str], component: str | None, params: str | None = None, sets=(),
+               tolerances: str | None = None):
+    """Worst-case and RSS maps over two grid axes (the largest value over the other grid axes,
+    each map its own colour scale: the RSS is a fraction of the worst case) and a bar chart of
+    the contributions at the worst point; the figure, not saved."""
     import matplotlib.pyplot as plt
 
     names = [a.name for a in b.grid.axes]
@@ -121,16 +133,15 @@ def plot(b: B.Budget, output: str, pick: list[str], component: str | None) -> No
         for arr in (cb.worst, cb.rss):
             env = np.max(arr, axis=rest) if rest else np.asarray(arr)
             maps.append(env if i1 < i2 else env.T)   # -> [axis 1, axis 2]
-        vmax = max(float(m.max()) for m in maps) * scale
         a1, a2 = b.grid.axes[i1], b.grid.axes[i2]
         others = ", ".join(names[k] for k in rest)
         for p, (title, mp) in enumerate(zip(("worst case", "RSS"), maps), 1):
             ax = fig.add_subplot(1, panels, p)
             mesh = ax.pcolormesh(b.grid.points[i1], b.grid.points[i2], mp.T * scale, shading="auto",
-                                 cmap="viridis", vmin=0.0, vmax=vmax or 1.0)
-            fig.colorbar(mesh, ax=ax, label=f"{component} [{unit}]")
-            ax.set_xlabel(f"{a1.name} [{a1.unit.name}]")
-            ax.set_ylabel(f"{a2.name} [{a2.unit.name}]")
+                                 cmap="viridis")
+            fig.colorbar(mesh, ax=ax, label=F.label(f"{title} {component}", unit))
+            ax.set_xlabel(F.axis_label(a1))
+            ax.set_ylabel(F.axis_label(a2))
             ax.set_title(f"{title}" + (f" (largest over {others})" if others else ""), fontsize="medium")
     else:
         i1 = names.index(pick[0])
@@ -139,9 +150,8 @@ def plot(b: B.Budget, output: str, pick: list[str], component: str | None) -> No
         x = b.grid.points[i1]
         for label, arr in (("worst case", cb.worst), ("RSS", cb.rss), ("sigma", cb.sigma)):
             ax.plot(x, (np.max(arr, axis=rest) if rest else arr) * scale, label=label)
-        a1 = b.grid.axes[i1]
-        ax.set_xlabel(f"{a1.name} [{a1.unit.name}]")
-        ax.set_ylabel(f"{component} [{unit}]")
+        ax.set_xlabel(F.axis_label(b.grid.axes[i1]))
+        ax.set_ylabel(F.label(component, unit))
         ax.legend()
     ax = fig.add_subplot(1, panels, panels)
     rows = B.contributors(b, component)[:15]
@@ -153,12 +163,15 @@ def plot(b: B.Budget, output: str, pick: list[str], component: str | None) -> No
             ax.text(bar.get_width(), bar.get_y() + bar.get_height() / 2, f" {100 * r['share_worst']:.1f} %",
                     va="center", fontsize="small")
         ax.set_xlim(0, max(vals) * 1.25 or 1.0)
-    ax.set_xlabel(f"|gain| x bound [{unit}]")
-    at = ", ".join(f"{n}={v:g}" for n, v in B._axes_at(b, cb.worst_index).items())
+    ax.set_xlabel(F.label("|gain| x bound", unit))
+    ax.set_ylabel("error source")
+    at = ", ".join(f"{n} = {v:g} {b.machine.symbol(n).unit.name}"
+                   for n, v in B._axes_at(b, cb.worst_index).items())
     ax.set_title(f"contributions at the worst point\n({at})", fontsize="medium")
-    order = {"1": "first order", "2": "second order", "exact": "exact model"}[b.order]
-    fig.suptitle(f"{b.machine.name}: budget of {component}, {order}; worst {float(cb.worst.max()) * scale:.3g} "
-                 f"{unit}, RSS there {float(cb.rss[cb.worst_index]) * scale:.3g} {unit}")
+    held = ", ".join(f"{n} = {v:g} {b.machine.symbol(n).unit.name}" for n, v in b.grid.fixed.items())
+    tol = f"tolerances {os.path.basename(tolerances)}" if tolerances else "--params values as bounds"
+    fig.suptitle(F.title(b.machine, f"budget of {component}; worst {float(cb.worst.max()) * scale:.3g} {unit}, "
+                         f"RSS there {float(cb.rss[cb.worst_index]) * scale:.3g} {unit}", params, sets, b.order,
+                         held, tol), fontsize="medium")
     fig.tight_layout()
-    fig.savefig(output)
-    plt.close(fig)
+    return fig

@@ -9,7 +9,8 @@ from ..jets import JetModel
 from ..numeric import ExactModel
 from ..units import UNITS
 from ..varying import check_inside, resolve, varying_errors
-from .common import add_format_argument, add_machine_argument, add_values_arguments, check_finite, load, to_json, values_for
+from .common import (add_format_argument, add_machine_argument, add_values_arguments, check_finite, load, to_json,
+                     values_for)
 
 
 def add_parser(sub) -> None:

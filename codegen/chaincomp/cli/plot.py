@@ -431,8 +431,8 @@ def _replay_figure(args):
         ax.set_ylabel(F.label("tool axis error", arcsec.name))
         ax.legend(loc="upper right", fontsize="small")
     grid[-1].set_xlabel(F.label("time", "s"))
-    fig.suptitle(F.title(machine or "(no machine file)", f"replay of {os.path.basename(args.replay)}, {ok} corrected, {rows - ok} rejected",
-                         args.params, args.sets, "exact", extra="with compensation: as the compiled compensator "
+    what = f"replay of {os.path.basename(args.replay)}, {ok} corrected, {rows - ok} rejected"
+    fig.suptitle(F.title(machine or "(no machine file)", what, args.params, args.sets, "exact", extra="with compensation: as the compiled compensator "
                          "left it (ramp included)"), fontsize="medium")
     fig.tight_layout()
     return fig
