@@ -12,6 +12,7 @@ from ..errors import ChaincompError
 from ..expressions import MAX_LITERAL
 from ..identify import MAX_ROWS, coordinate_named_axes, read_table, simulate, write_table
 from ..params import load_params, parse_sets
+from ..protocol_linear import auto_levels
 from .common import add_machine_argument, add_seed_argument, check_output, load, number_list
 from .identify import length
 from .protocol import names
@@ -46,15 +47,6 @@ def add_parser(sub) -> None:
     p.set_defaults(run=run)
 
 
-def _levels(s) -> list[float]:
-    """auto's values of one axis (internal units): both limits and the middle, or for a rotary
-    axis that can make a turn the four quarter turns (each moved by a turn into the limits)."""
-    lo, hi = s.to_internal(s.limits[0]), s.to_internal(s.limits[1])
-    if s.unit.kind == "angle" and hi - lo >= 2 * math.pi * (1 - 1e-12):
-        return [v if v <= hi else v - 2 * math.pi for v in (0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi)]
-    return [lo, 0.5 * (lo + hi), hi] if hi > lo else [lo]
-
-
 def setups(machine, spec: str, sets: list[str], rng) -> dict[str, np.ndarray]:
     """Axis values (internal units) per set-up."""
     fixed = parse_sets(sets, machine)
@@ -68,9 +60,15 @@ def setups(machine, spec: str, sets: list[str], rng) -> dict[str, np.ndarray]:
                                  f"axis' limits [{lo:g}, {hi:g}]")
     free = [s for s in machine.axes if s.name not in fixed]
     kind, colon, arg = spec.partition(":")
+    if kind in ("auto", "grid", "random") and not any(s.limits[1] > s.limits[0] for s in free):
+        # one pose repeated identifies nothing: refuse rather than write it without a word
+        raise ChaincompError(f"--setups {spec}: no axis of {machine.name} is left to move "
+                             + (f"(--set holds {', '.join(fixed)}" if fixed else "(")
+                             + (f"; {', '.join(s.name for s in free)} cannot move within its limits" if free else "")
+                             + "): every set-up would be the same pose; free an axis or give a set-ups file")
     levels = None
     if kind == "auto" and not colon:
-        levels = {s.name: _levels(s) for s in free}
+        levels = {s.name: auto_levels(s) for s in free}
     elif kind == "grid" and arg:
         values = number_list("--setups", arg)
         rotary = [s for s in free if s.unit.kind == "angle"]
@@ -135,6 +133,9 @@ def run(args) -> int:
     # identify, reading them back, evaluates the model at the same angles
     axes = {k: machine.symbol(k).to_internal(np.array([float(f"{machine.symbol(k).from_internal(x):.15g}")
                                                         for x in v])) for k, v in axes.items()}
+    count = len(next(iter(axes.values())))
+    print(f"chaincomp simulate-measurements: {count} set-up{'s' if count != 1 else ''} ({args.setups}) "
+          f"of {', '.join(s.name for s in machine.axes)}", file=sys.stderr)
     coords = simulate(machine, values, axes, noise, rng, measure)
     if not (np.abs(coords[~np.isnan(coords)]) <= MAX_LITERAL).all():
         raise ChaincompError(f"the simulated coordinates reach beyond {MAX_LITERAL:g} {machine.length_unit} "
