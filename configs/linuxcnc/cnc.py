@@ -1,0 +1,150 @@
+"""Runs chaincomp's LinuxCNC configurations headless and reads what the simulated machine did
+(used by tests/python/test_linuxcnc.py and tools/linuxcnc-demo).
+
+run() copies a configuration (configs/linuxcnc/NAME/) to a fresh work folder, writes the NML
+file without its TCP socket, picks the route (off | rt | bridge), and runs LinuxCNC once as an
+unprivileged user (it refuses root), one instance at a time (a lock: LinuxCNC's shared memory
+keys are fixed). Its driver (drive.py) records every servo period with halsampler: the joint
+commands and the correction the drives actually got (drive - command).
+
+The simulated *true machine* is the machine file's exact model with a params file: the
+actual tool pose at the drive positions, against the nominal pose at the commands (what the
+program asked for). tool_errors() evaluates it on every recorded period.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import glob
+import json
+import os
+import pwd
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.abspath(os.path.join(HERE, "..", ".."))
+USER = os.environ.get("CHAINCOMP_LINUXCNC_USER", "chaincomp-cnc")
+LOCK = os.path.join(tempfile.gettempdir(), "chaincomp-linuxcnc.lock")
+NML = "/usr/share/linuxcnc/linuxcnc.nml"
+ROUTES = ("off", "rt", "bridge")
+# sampler.0 columns after halsampler's tag: 5 commands (mm, deg), 5 observed corrections
+# (drive - command, nm and udeg), the bridge's age-ms, stale and fault
+N_JOINTS = 5
+COL_CMD, COL_OBS, COL_AGE, COL_STALE, COL_FAULT = 1, 6, 11, 12, 13
+
+
+def unavailable() -> str | None:
+    """Why LinuxCNC cannot run here, or None."""
+    if shutil.which("linuxcnc") is None or not os.path.exists(NML):
+        return "LinuxCNC is not installed (tools/setup-linuxcnc installs linuxcnc-uspace)"
+    if os.geteuid() == 0:
+        try:
+            pwd.getpwnam(USER)
+        except KeyError:
+            return f"no user {USER!r} to run LinuxCNC as (it refuses root): run tools/setup-linuxcnc"
+    if shutil.which("halsampler") is None:
+        return "halsampler is missing (linuxcnc-uspace)"
+    return None
+
+
+@dataclass
+class Run:
+    work: str            # the work folder (kept: logs, samples, events)
+    samples: np.ndarray  # one row per servo period (see COL_*)
+    events: list         # the driver's timeline
+    log: str             # LinuxCNC's output
+    returncode: int
+
+    @property
+    def commands(self) -> np.ndarray:
+        return self.samples[:, COL_CMD:COL_CMD + N_JOINTS]
+
+    @property
+    def corrections(self) -> np.ndarray:
+        """drive - command per joint, LinuxCNC units (mm, deg)."""
+        return self.samples[:, COL_OBS:COL_OBS + N_JOINTS] * 1e-6
+
+    @property
+    def drives(self) -> np.ndarray:
+        return self.commands + self.corrections
+
+
+def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeout: float = 120.0,
+        work: str | None = None) -> Run:
+    if route not in ROUTES:
+        raise ValueError(f"route {route!r}: expected one of {', '.join(ROUTES)}")
+    src = os.path.join(HERE, config)
+    work = work or tempfile.mkdtemp(prefix=f"chaincomp-cnc-{config}-{route}-")
+    for f in glob.glob(os.path.join(src, "*")) + [os.path.join(HERE, "drive.py")]:
+        shutil.copy(f, work)
+    shutil.copy(os.path.join(src, f"route-{route}.hal"), os.path.join(work, "route.hal"))
+    with open(NML) as f:
+        nml = f.read().replace(" TCP=5005", "")  # no socket at all
+    with open(os.path.join(work, "linuxcnc.nml"), "w") as f:
+        f.write(nml)
+    cmd_env = {"CHAINCOMP_ROOT": ROOT, **(env or {})}
+    cmd = ["env", "-u", "DISPLAY", *(f"{k}={v}" for k, v in cmd_env.items()), "linuxcnc",
+           os.path.join(work, f"{config}.ini")]
+    if os.geteuid() == 0:
+        pw = pwd.getpwnam(USER)
+        for dirpath, _, files in os.walk(work):
+            os.chown(dirpath, pw.pw_uid, pw.pw_gid)
+            for name in files:
+                os.chown(os.path.join(dirpath, name), pw.pw_uid, pw.pw_gid)
+        cmd = ["runuser", "-u", USER, "--", *cmd]
+    with open(LOCK, "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # one LinuxCNC at a time
+        proc = subprocess.run(cmd, cwd=work, stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                              timeout=timeout)
+    samples_path = os.path.join(work, "samples.txt")
+    rows = np.loadtxt(samples_path, ndmin=2) if os.path.exists(samples_path) and os.path.getsize(samples_path) \
+        else np.zeros((0, COL_FAULT + 1))
+    events = []
+    if os.path.exists(os.path.join(work, "events.txt")):
+        with open(os.path.join(work, "events.txt")) as f:
+            events = [json.loads(line) for line in f if line.strip()]
+    return Run(work, rows, events, proc.stdout + proc.stderr, proc.returncode)
+
+
+def to_internal(machine, joints: np.ndarray) -> dict:
+    """LinuxCNC joint values (mm, deg; columns in the machine's axis order) as the exact
+    model's inputs (mm, rad)."""
+    out = {}
+    for i, a in enumerate(machine.axes):
+        out[a.name] = joints[:, i] * (np.pi / 180.0 if a.unit.kind == "angle" else 1.0)
+    return out
+
+
+def tool_errors(machine, params: dict, commands: np.ndarray, drives: np.ndarray):
+    """The true machine on every row: actual tool point (the exact model with `params` at the
+    drive positions) minus the programmed one (the nominal model at the commands), mm, and
+    the same for the tool direction (rad), as arrays (rows, 3)."""
+    from chaincomp import ExactModel
+
+    exact = ExactModel(machine)
+    p_act, d_act = exact.pose({**params, **to_internal(machine, drives)})
+    p_nom, d_nom = exact.pose(to_internal(machine, commands))
+    point = np.stack([np.asarray(a) - np.asarray(b) for a, b in zip(p_act, p_nom)], axis=1)
+    direction = np.stack([np.asarray(a) - np.asarray(b) for a, b in zip(d_act, d_nom)], axis=1) if d_act else None
+    return point, direction
+
+
+def dwells(commands: np.ndarray, min_rows: int = 300, skip: int = 30) -> list[slice]:
+    """Stretches where every joint command stands still for at least `min_rows` periods (the
+    program's G4 dwells and the end), without their first `skip` rows (the bridge's
+    correction catches up there)."""
+    still = np.r_[False, np.all(np.abs(np.diff(commands, axis=0)) < 1e-9, axis=1)]
+    out, start = [], None
+    for i, s in enumerate(np.r_[still, False]):
+        if s and start is None:
+            start = i
+        elif not s and start is not None:
+            if i - start >= min_rows:
+                out.append(slice(start + skip, i))
+            start = None
+    return out
