@@ -182,8 +182,8 @@ def build_figure(args):
     if not args.machine:
         raise ChaincompError("give a MACHINE.yaml (or --replay REPLAY.csv)")
     if args.view == "volume":
-        return _volume_figure(volume_data(args))
-    return _map_figure(map_data(args), surface=args.view == "surface")
+        return _volume_figure(volume_data(args, args.over, args.grid))
+    return _map_figure(map_data(args, args.over, args.grid), surface=args.view == "surface")
 
 
 @dataclass
@@ -198,25 +198,30 @@ class MapData:
 
 
 def _machine_values(args):
-    machine = load(args.machine)
-    values, has_errors = values_for(machine, args.params, args.sets)
-    if not has_errors:
-        F.warn("no error values (give --params P.yaml, or --set an error): every error is zero, so the "
-               "figure shows nothing")
-    return machine, values, has_errors
+    """(machine, values, whether any error is given), loaded once per run: the HTML file's two
+    views share them, and their warnings are printed once."""
+    if getattr(args, "loaded", None) is None:
+        machine = load(args.machine)
+        values, has_errors = values_for(machine, args.params, args.sets)
+        if not has_errors:
+            F.warn("no error values (give --params P.yaml, or --set an error): every error is zero, so the "
+                   "figure shows nothing")
+        args.loaded = machine, values, has_errors
+    return args.loaded
 
 
-def map_data(args) -> MapData:
+def map_data(args, over_text: str | None, grid: int) -> MapData:
+    """The map of args.component over two axes (over_text 'A1,A2', default the first two)."""
     machine, values, has_errors = _machine_values(args)
     names = [a.name for a in machine.axes]
-    over = tuple(args.over.split(",")) if args.over else tuple(names[:2])
+    over = tuple(over_text.split(",")) if over_text else tuple(names[:2])
     if len(over) != 2 or over[0] == over[1] or any(n not in names for n in over):
         raise ChaincompError(f"--over expects two different axes of {machine.name} ({', '.join(names)}), "
-                             f"got {args.over!r}")
+                             f"got {over_text!r}")
     r1 = _range(args.range1, "--range") if args.range1 else machine.symbol(over[0]).limits
     r2 = _range(args.range2, "--range2") if args.range2 else (
         _range(args.range1, "--range") if args.range1 else machine.symbol(over[1]).limits)
-    g1, g2, z = error_grid(machine, values, over, (r1, r2), args.grid, args.component, args.model)
+    g1, g2, z = error_grid(machine, values, over, (r1, r2), grid, args.component, args.model)
     bad = np.argwhere(~np.isfinite(z))
     if len(bad):
         i, j = bad[0]
@@ -275,21 +280,31 @@ def _volume_axes(machine, text: str | None) -> list[str]:
     return pick
 
 
+def _points(axis, limits, grid: int) -> np.ndarray:
+    """grid values of an axis across its limits; a rotary axis of a turn or more takes one turn
+    without its end (-360 and 360 deg would draw the same arrows twice)."""
+    lo, hi = limits
+    if axis.unit.kind == "angle" and axis.to_internal(hi - lo) >= 2 * math.pi - 1e-12:
+        return np.linspace(lo, lo + axis.from_internal(2 * math.pi), grid, endpoint=False)
+    return np.linspace(lo, hi, grid)
+
+
 def _nice(x: float) -> float:
     """1, 2 or 5 times a power of ten, at most x (x > 0)."""
     p = 10.0 ** math.floor(math.log10(x))
     return next(m * p for m in (5, 2, 1) if m * p <= x)
 
 
-def volume_data(args) -> VolumeData:
+def volume_data(args, over_text: str | None, grid: int) -> VolumeData:
+    """Tool points and errors on a grid of one to three axes (default: the linear axes)."""
     machine, values, has_errors = _machine_values(args)
-    over = _volume_axes(machine, args.over)
+    over = _volume_axes(machine, over_text)
     ranges = [machine.symbol(n).limits for n in over]
-    if args.range1:
+    if args.view == "volume" and args.range1:   # otherwise the ranges are the map's
         ranges[0] = _range(args.range1, "--range")
-    if args.range2 and len(over) > 1:
+    if args.view == "volume" and args.range2 and len(over) > 1:
         ranges[1] = _range(args.range2, "--range2")
-    grids = np.meshgrid(*(np.linspace(*r, args.grid) for r in ranges), indexing="ij")
+    grids = np.meshgrid(*(_points(machine.symbol(n), r, grid) for n, r in zip(over, ranges)), indexing="ij")
     v = dict(values)
     for n, g in zip(over, grids):
         v[n] = machine.symbol(n).to_internal(g.ravel())
@@ -357,12 +372,10 @@ def write_html(args) -> None:
     from plotly.subplots import make_subplots
     if not args.machine:
         raise ChaincompError("--html needs a MACHINE.yaml")
-    m = map_data(args)
-    grid, args.grid = args.grid, DEFAULT_GRID["volume"] if args.view != "volume" else args.grid
-    try:
-        v = volume_data(args)
-    finally:
-        args.grid = grid
+    # --over and --grid belong to the view asked for; the other view takes its defaults
+    volume = args.view == "volume"
+    m = map_data(args, None if volume else args.over, DEFAULT_GRID["map"] if volume else args.grid)
+    v = volume_data(args, args.over if volume else None, args.grid if volume else DEFAULT_GRID["volume"])
     fig = make_subplots(rows=1, cols=2, specs=[[{"type": "scene"}, {"type": "scene"}]],
                         subplot_titles=(m.title.replace("\n", "<br>"), v.title.replace("\n", "<br>")),
                         horizontal_spacing=0.08)
