@@ -44,7 +44,8 @@ def add_parser(sub) -> None:
                         "(required without --fit)")
     p.add_argument("--centre", "--center", metavar="x=..,y=..,z=..",
                    help="the centre pivot in the workpiece frame (machine's length unit), any of x, y, z "
-                        "(default: the tool point with the axes at 0 or mid-range, or as --set)")
+                        "(default: the tool point with the axes at 0 or mid-range, or as --set: '--set Z=-200' "
+                        "also places the centre of a circle that Z drives)")
     p.add_argument("--axes", metavar="A,B", help="the two axes that drive the circle, when more than one axis "
                    "moves the tool along a direction of the plane (default: found from the model)")
     p.add_argument("--points", type=integer(bb.MIN_POINTS, bb.MAX_POINTS), default=360, metavar="N",
@@ -105,10 +106,6 @@ def _setup(args, machine, model, values) -> bb.Setup:
         if len(axes_given) != 2:
             raise ChaincompError(f"--axes: expected two axes A,B, got {args.axes!r}")
     axes = bb.plane_axes(machine, args.plane, values, axes_given, model)
-    for item in args.sets:
-        name = item.partition("=")[0].strip()
-        if name in axes:
-            raise ChaincompError(f"--set {name}: {name} drives the circle; place the circle with --centre")
     centre = _centre(args.centre, machine, bb.tool_point(model, bb.nominal(machine, values)))
     held = {s.name: values[s.name] for s in machine.axes if s.name not in axes}
     return bb.Setup(args.plane, axes, args.radius * bb.U.UNITS[machine.length_unit].to_internal, centre, held,
