@@ -1,13 +1,23 @@
 """Error values from measured tool-tip coordinates: nonlinear least squares on the exact model.
 
 Measurements are a CSV file (see ``read_table``): one row per set-up, one column per axis
-and per measured coordinate. The fit is Gauss-Newton on the exact chain. Its Jacobian is
-taken by the complex step (the derivative is the imaginary part of the chain evaluated at
-an imaginary error, free of the cancellation that makes a difference quotient of 500 mm
-coordinates lose eight digits and blur the rank), for all rows and all errors in one
-broadcast call. Errors that these set-ups cannot separate (the first-order Jacobian, its
-columns scaled to unit norm, has a null space touching them) stay out of the fit's
-parameter space and are reported, not given a value; a fit in which no error is left, or
+and per measured coordinate (tool point x, y, z; tool direction kx, ky, kz). The fit is
+Gauss-Newton on the exact chain, each coordinate weighted by its standard uncertainty. Its
+Jacobian is taken by the complex step (the derivative is the imaginary part of the chain
+evaluated at an imaginary error, free of the cancellation that makes a difference quotient
+of 500 mm coordinates lose eight digits and blur the rank), for all rows and all parameters
+in one broadcast call.
+
+The parameters are the errors' values, or, for an error fitted as varying along an axis
+(``Vary``), its values at given knots (piecewise linear between them) or its polynomial
+coefficients: either way the error at a set-up is linear in its parameters (a basis matrix
+per error), so complex steps pass through.
+
+Parameters that these set-ups cannot separate (the first-order Jacobian, its columns scaled
+to unit norm, has a null space touching them) stay out of the fit's parameter space and are
+reported, not given a value; or, with ``minimal``, a minimal identifiable set is chosen by QR
+with column pivoting and fitted alone, every other parameter held at zero and reported with
+the combination of the chosen ones that carries it. A fit in which nothing is left, or
 without the redundancy to estimate its own uncertainty, is refused.
 """
 
@@ -20,17 +30,23 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .derive import COMPONENTS
+from .display import DEFAULT_UNITS, display_unit, plus_minus, quantity
 from .errors import ChaincompError
 from .expressions import MAX_LITERAL
 from .machine import Machine
 from .numeric import ExactModel
-from .units import UNITS
+from .units import INTERNAL, UNITS
+from .varying import MAX_POLYNOMIAL_COEFFICIENTS, MAX_TABLE_KNOTS, MAX_VARYING_ERRORS
 from .yamlsource import read_text
 
 _CSTEP = 1e-20    # complex step, internal units (mm, rad): any tiny value gives the same digits
 _STEP = 1e-6      # central-difference step, where the chain cannot take complex values
 _RANK_TOL = 1e-9  # singular values below this, relative to the largest, are zero
 MAX_ROWS = 20_000  # set-ups in a file or a --setups spec: bounds the fit's memory (rows x errors)
+_TIE = 1e-9       # pivoted QR: columns this close (relative) to the largest remaining norm tie
+DIRECTIONS = ("kx", "ky", "kz")       # measured tool direction (unit vector components)
+COLUMNS = COMPONENTS + DIRECTIONS     # every measured column, in the order of Table.observations
+_NORM_TOL = 0.01  # a measured direction whose three components are given is a unit vector to 1 %
 
 
 @dataclass
@@ -41,10 +57,17 @@ class Table:
     coords: np.ndarray                    # (rows, 3) tool tip x, y, z; NaN where not measured
     lines: list[int]                      # line of each row in the file
     columns: list[str] = field(default_factory=list)
+    directions: np.ndarray | None = None  # (rows, 3) tool direction kx, ky, kz; NaN where not measured
+
+    @property
+    def observations(self) -> np.ndarray:
+        """(rows, 6): x, y, z, kx, ky, kz; NaN where not measured."""
+        d = self.directions if self.directions is not None else np.full_like(self.coords, math.nan)
+        return np.concatenate([self.coords, d], axis=1)
 
     @property
     def measured(self) -> list[str]:
-        return [c for i, c in enumerate(COMPONENTS) if not np.isnan(self.coords[:, i]).all()]
+        return [c for i, c in enumerate(COLUMNS) if not np.isnan(self.observations[:, i]).all()]
 
 
 def coordinate_named_axes(machine: Machine) -> list:
@@ -52,11 +75,19 @@ def coordinate_named_axes(machine: Machine) -> list:
     return [s for s in machine.axes if s.name in COMPONENTS]
 
 
+def measured_columns(machine: Machine) -> tuple[str, ...]:
+    """The measured columns a file for ``machine`` may have: the tool direction only where the
+    machine defines one."""
+    return COLUMNS if machine.tool_direction is not None else COMPONENTS
+
+
 def read_table(path: str, machine: Machine, coords_required: bool = True) -> Table:
     """Read a CSV: '#' comments and blank lines skipped; a header naming every axis of the
     machine (values in each axis' declared unit) and any of x, y, z (tool-tip coordinates in
-    the machine's length unit; an empty cell is a coordinate not measured in that row).
-    Names are matched exactly as spelt: axis X and coordinate x are different columns."""
+    the machine's length unit) and kx, ky, kz (the measured tool direction, components of a unit
+    vector, where the machine has a tool direction); an empty cell is a coordinate not measured
+    in that row. Names are matched exactly as spelt: axis X and coordinate x are different
+    columns."""
     axes = [s.name for s in machine.axes]
     length = UNITS[machine.length_unit].to_internal
     text = read_text(path).removeprefix("\ufeff")     # the byte-order mark spreadsheets write
@@ -79,7 +110,7 @@ def read_table(path: str, machine: Machine, coords_required: bool = True) -> Tab
             raise ChaincompError(f"more than {MAX_ROWS} rows", path, lineno)
         row = {}
         for name, cell in zip(header, cells):
-            if cell == "" and name in COMPONENTS:
+            if cell == "" and name in COLUMNS:
                 row[name] = math.nan
                 continue
             try:
@@ -91,30 +122,40 @@ def read_table(path: str, machine: Machine, coords_required: bool = True) -> Tab
                                      if math.isfinite(value) else f"expected a number, got {cell!r}",
                                      path, lineno, name)
             row[name] = value
+        k = [row.get(c, math.nan) for c in DIRECTIONS]
+        if not np.isnan(k).any() and not abs(math.sqrt(sum(v * v for v in k)) - 1) <= _NORM_TOL:
+            raise ChaincompError(f"the measured tool direction (kx, ky, kz) = ({', '.join(f'{v:g}' for v in k)}) "
+                                 f"is not a unit vector (length {math.sqrt(sum(v * v for v in k)):.4g})",
+                                 path, lineno, "kx")
         rows.append(row)
         lines.append(lineno)
     if header is None or not rows:
         raise ChaincompError("no measurements: expected a header row and at least one data row", path)
     table = Table(path, {a: np.array([machine.symbol(a).to_internal(r[a]) for r in rows]) for a in axes},
                   np.array([[r.get(c, math.nan) * length for c in COMPONENTS] for r in rows]),
-                  lines, header)
-    if coords_required and np.isnan(table.coords).all():
-        raise ChaincompError("no measured coordinate: every x, y, z cell is empty", path)
+                  lines, header, np.array([[r.get(c, math.nan) for c in DIRECTIONS] for r in rows]))
+    if coords_required and np.isnan(table.observations).all():
+        raise ChaincompError(f"no measured coordinate: every {', '.join(c for c in header if c in COLUMNS)} "
+                             f"cell is empty", path)
     return table
 
 
 def _header(cells, machine, coords_required, path, lineno) -> list[str]:
     axes = [s.name for s in machine.axes]
+    columns = measured_columns(machine)
     header = []
     for cell in cells:
-        if cell in axes and cell in COMPONENTS:
+        if cell in DIRECTIONS and cell not in columns and cell not in axes:
+            raise ChaincompError(f"column {cell!r} is a measured tool direction, but {machine.name} has no tool "
+                                 f"direction (tool: direction in {machine.file})", path, lineno, "header")
+        if cell in axes and cell in columns:
             raise ChaincompError(f"column {cell!r} is ambiguous: it is both the axis {cell} "
                                  f"({machine.file}:{machine.symbol(cell).line}) and the measured tool-tip "
                                  f"coordinate {cell}; rename the axis in the machine file", path, lineno, "header")
-        if cell not in axes and cell not in COMPONENTS:
-            near = [n for n in axes + list(COMPONENTS) if n.lower() == cell.lower()]
+        if cell not in axes and cell not in columns:
+            near = [n for n in axes + list(columns) if n.lower() == cell.lower()]
             raise ChaincompError(f"unknown column {cell!r} (expected the axes {', '.join(axes)} and "
-                                 f"measured coordinates x, y, z)"
+                                 f"measured coordinates {', '.join(columns)})"
                                  + (f"; names are case-sensitive: did you mean {near[0]!r}?" if near else ""),
                                  path, lineno, "header")
         if cell in header:
@@ -124,8 +165,8 @@ def _header(cells, machine, coords_required, path, lineno) -> list[str]:
         if a not in header:
             raise ChaincompError(f"missing column for axis {a} (every axis of the machine needs one)",
                                  path, lineno, "header")
-    if coords_required and not any(c in header for c in COMPONENTS):
-        raise ChaincompError("no measured coordinate column (x, y or z)", path, lineno, "header")
+    if coords_required and not any(c in header for c in columns):
+        raise ChaincompError(f"no measured coordinate column ({', '.join(columns)})", path, lineno, "header")
     return header
 
 
@@ -155,6 +196,18 @@ def pose_points(machine: Machine, model: ExactModel, axes: dict[str, np.ndarray]
     return np.stack([np.broadcast_to(v, shape) for v in point], axis=-1)
 
 
+def pose_observations(machine: Machine, model: ExactModel, axes: dict[str, np.ndarray], errors: dict) -> np.ndarray:
+    """Tool points and directions (..., rows, 6): x, y, z, kx, ky, kz (directions zero where the
+    machine has none)."""
+    values = machine.nominal_values()
+    values.update(axes)
+    values.update(errors)
+    point, direction = model.pose(values)
+    parts = point + (direction if direction is not None else [0.0] * 3)
+    shape = np.broadcast_shapes(*[np.shape(v) for v in parts])
+    return np.stack([np.broadcast_to(v, shape) for v in parts], axis=-1)
+
+
 def simulate(machine: Machine, values: dict, axes: dict[str, np.ndarray], noise: float,
              rng: np.random.Generator, measure=COMPONENTS, model: ExactModel | None = None) -> np.ndarray:
     """Tool points (rows, 3) with the errors (and constants) in ``values`` plus Gaussian noise
@@ -168,58 +221,247 @@ def simulate(machine: Machine, values: dict, axes: dict[str, np.ndarray], noise:
     return pts
 
 
+# ----------------------------------------------------------------------------- parameters
+
+@dataclass(frozen=True)
+class Vary:
+    """An error fitted as varying along ``axis``: a table on ``knots`` (internal units,
+    increasing; piecewise linear in the knot values, held at the end values beyond them), or a
+    polynomial of ``degree`` in the axis' declared unit (held beyond the measured span)."""
+    error: str
+    axis: str
+    kind: str                       # "table" | "poly"
+    knots: tuple[float, ...] = ()
+    degree: int = 0
+
+
+@dataclass(frozen=True)
+class Param:
+    """One fitted number: an error's constant value, a table's value at a knot, or a
+    polynomial coefficient."""
+    name: str            # the error's name, EXX@X=100 (knot at X = 100 in X's unit) or EXX.c2
+    error: str
+    kind: str            # unit kind of the error's value
+    unit: str            # declared unit: the error's, per the axis' unit^power for a coefficient
+    to_internal: float   # a value in ``unit`` times this is internal (mm, rad, 1 per mm^k or rad^k)
+    power: int = 0       # a polynomial coefficient's power of the axis
+    axis: str | None = None
+
+
+def _hat(x: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(rows, knots): the piecewise linear interpolant's weights of each knot value at t, the
+    end values held beyond the ends (the params format's linear table with outside: hold)."""
+    k = np.clip(np.searchsorted(x, t, side="right") - 1, 0, len(x) - 2)
+    u = np.clip((t - x[k]) / (x[k + 1] - x[k]), 0.0, 1.0)
+    b = np.zeros((len(t), len(x)))
+    b[np.arange(len(t)), k] = 1 - u
+    b[np.arange(len(t)), k + 1] += u
+    return b
+
+
+def _parameters(machine: Machine, free: list[str], varies: dict[str, Vary], table: Table):
+    """The parameters (machine order; an error's together), each error's (parameter indices,
+    basis matrix (rows, its parameters)) so that its value per row is basis @ parameters, a
+    polynomial's range (the measured span, internal) and notes for the report."""
+    params, bases, ranges, notes = [], {}, {}, []
+    rows = len(table.lines)
+    for name in free:
+        s = machine.symbol(name)
+        v = varies.get(name)
+        first = len(params)
+        if v is None:
+            params.append(Param(name, name, s.unit.kind, s.unit.name, s.unit.to_internal))
+            bases[name] = (list(range(first, first + 1)), np.ones((rows, 1)))
+            continue
+        a = machine.symbol(v.axis)
+        t = np.asarray(table.axes[v.axis], float)
+        if v.kind == "table":
+            x = np.array(v.knots, float)
+            params += [Param(f"{name}@{v.axis}={a.from_internal(k):.10g}", name, s.unit.kind, s.unit.name,
+                             s.unit.to_internal, axis=v.axis) for k in x]
+            basis = _hat(x, t)
+            out = int(((t < x[0]) | (t > x[-1])).sum())
+            if out:
+                notes.append(f"{_count(out, 'set-up')} lie{'s' if out == 1 else ''} outside {name}'s knots "
+                             f"[{a.from_internal(x[0]):g}, {a.from_internal(x[-1]):g}] {a.unit.name} of "
+                             f"{v.axis}: the table holds its end values there")
+        else:
+            lo, hi = float(t.min()), float(t.max())
+            if not lo < hi:
+                raise ChaincompError(f"--vary {name}: every set-up has {v.axis} = {a.from_internal(lo):g} "
+                                     f"{a.unit.name}; a polynomial along {v.axis} needs measurements at "
+                                     f"different positions", table.file)
+            ranges[name] = (lo, hi)
+            tc = np.clip(t, lo, hi)
+            for k in range(v.degree + 1):
+                unit = s.unit.name if k == 0 else f"{s.unit.name}/{a.unit.name}" + (f"^{k}" if k > 1 else "")
+                params.append(Param(f"{name}.c{k}", name, s.unit.kind, unit,
+                                    s.unit.to_internal / a.unit.to_internal ** k, k, v.axis))
+            basis = np.stack([tc ** k for k in range(v.degree + 1)], axis=1)
+        bases[name] = (list(range(first, len(params))), basis)
+    return params, bases, ranges, notes
+
+
+def _check_vary(machine: Machine, vary, assume_zero) -> dict[str, Vary]:
+    out = {}
+    for v in vary:
+        s = machine.symbol(v.error)
+        if s.role != "error" or machine.symbol(v.axis).role != "axis":
+            raise ChaincompError(f"--vary {v.error}@{v.axis}: expected an error and an axis of {machine.name}")
+        if v.error in assume_zero:
+            raise ChaincompError(f"--vary {v.error}: it is also assumed zero (--assume-zero)")
+        if v.error in out:
+            raise ChaincompError(f"--vary {v.error}: given twice")
+        if v.kind == "table" and not (2 <= len(v.knots) <= MAX_TABLE_KNOTS and np.all(np.diff(v.knots) > 0)):
+            raise ChaincompError(f"--vary {v.error}: a table needs 2 to {MAX_TABLE_KNOTS} increasing knots")
+        if v.kind == "poly" and not 0 <= v.degree < MAX_POLYNOMIAL_COEFFICIENTS:
+            raise ChaincompError(f"--vary {v.error}: the degree must be 0 to {MAX_POLYNOMIAL_COEFFICIENTS - 1}")
+        if v.kind not in ("table", "poly"):
+            raise ChaincompError(f"--vary {v.error}: expected table or poly, got {v.kind!r}")
+        out[v.error] = v
+    if len(out) > MAX_VARYING_ERRORS:
+        raise ChaincompError(f"--vary: at most {MAX_VARYING_ERRORS} varying errors (the params format's limit), "
+                             f"got {len(out)}")
+    return out
+
+
+def _weights(sigma, measured: list[str], mask: np.ndarray, smooth: float):
+    """Per observation 1/sigma (or 1 where no sigma is given) and the sigmas by column."""
+    if sigma is None:
+        sig = {}
+    elif isinstance(sigma, dict):
+        sig = dict(sigma)
+    else:
+        sig = {c: float(sigma) for c in COMPONENTS}
+    pos = [c for c in measured if c in COMPONENTS]
+    ang = [c for c in measured if c in DIRECTIONS]
+    for c, value in sig.items():
+        if c not in COLUMNS or not value > 0:
+            raise ChaincompError(f"--sigma: expected positive values for columns of {', '.join(COLUMNS)}, "
+                                 f"got {c}={value!r}")
+    if any(c in DIRECTIONS for c in sig) and not ang:
+        raise ChaincompError("--sigma gives an angle, the standard uncertainty of the measured tool direction, "
+                             "but the measurements have no kx, ky, kz column")
+    if any(c in COMPONENTS for c in sig) and not pos and not all(c in DIRECTIONS for c in sig):
+        raise ChaincompError("--sigma gives a length, the standard uncertainty of the measured tool point, but "
+                             "the measurements have no x, y, z column")
+    sig = {c: v for c, v in sig.items() if c in measured}
+    if sig:
+        missing = [c for c in measured if c not in sig]
+        if missing:
+            raise ChaincompError(f"--sigma gives no standard uncertainty for the measured "
+                                 f"{'columns' if len(missing) > 1 else 'column'} {', '.join(missing)} "
+                                 f"(give a length for x, y, z and an angle for kx, ky, kz, e.g. --sigma 20um,10arcsec)")
+    elif pos and ang:
+        raise ChaincompError("tool points (x, y, z) and directions (kx, ky, kz) are both measured: weighing one "
+                             "against the other needs their standard uncertainties; give --sigma LENGTH,ANGLE "
+                             "(e.g. --sigma 20um,10arcsec)")
+    if smooth and not sig:
+        raise ChaincompError("--smooth weighs the tables' second differences against the measurements' standard "
+                             "uncertainty: give --sigma as well")
+    col = np.array([1.0 / sig[c] if c in sig else 1.0 for c in COLUMNS])
+    return np.broadcast_to(col, mask.shape)[mask], sig
+
+
+def _penalty(params: list[Param], varies: dict[str, Vary], smooth: float) -> np.ndarray:
+    """Rows whose squares sum to smooth * sum of (second difference of a table's knot values,
+    in the error's declared unit)^2."""
+    n = len(params)
+    rows = []
+    for e, v in varies.items():
+        if not smooth or v.kind != "table":
+            continue
+        idx = [i for i, p in enumerate(params) if p.error == e]
+        f = params[idx[0]].to_internal
+        for k in range(len(idx) - 2):
+            r = np.zeros(n)
+            r[idx[k:k + 3]] = np.array([1.0, -2.0, 1.0]) * math.sqrt(smooth) / f
+            rows.append(r)
+    return np.array(rows).reshape(-1, n)
+
+
 @dataclass
 class Fit:
     machine: Machine
     fitted: list[str]                      # errors in the fit (not assumed zero), machine order
     assumed_zero: list[str]
-    estimates: dict[str, float]            # identifiable errors, internal units
+    estimates: dict[str, float]            # identified parameters by name, internal units
     uncertainties: dict[str, float]        # standard uncertainties, internal units
-    unidentifiable: dict[str, str]         # error -> reason
+    unidentifiable: dict[str, str]         # parameter -> reason
     suggested_zero: list[str]              # assumed zero as well, these leave every other one identifiable
-    rank: int                              # independent combinations of the errors the data see
+    rank: int                              # independent combinations of the parameters the data see
     condition: float
     correlations: list[tuple[str, str, float]]
-    rms: float                             # rms residual, internal length
+    rms: float                             # rms residual of the tool point, internal length (nan: not measured)
     observations: int
     setups: int
-    dof: int
+    dof: float
     iterations: int
     converged: bool
     measured: list[str]
+    params: list[Param] = field(default_factory=list)
+    varying: dict[str, Vary] = field(default_factory=dict)
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)   # polynomials' span, internal
+    minimal: bool = False
+    redundant: dict[str, str] = field(default_factory=dict)        # minimal: held at zero -> the combination
+    carried: dict[str, dict[str, float]] = field(default_factory=dict)   # ... as coefficients (declared units)
+    sigma: dict[str, float] = field(default_factory=dict)           # given standard uncertainty by column
+    chi2: float | None = None              # weighted residual sum of squares / dof, with sigma given
+    rms_direction: float = math.nan        # rms residual of the tool direction (rad; nan: not measured)
+    smooth: float = 0.0
+    notes: list[str] = field(default_factory=list)
 
 
-def identify(machine: Machine, table: Table, assume_zero=(), sigma: float | None = None,
-             max_iterations: int = 50, model: ExactModel | None = None) -> Fit:
-    """Fit the errors of ``machine`` (all but ``assume_zero``) to the measured tool tips.
-    ``model``: the machine's ExactModel, to reuse its compiled functions across fits.
-    Raises ChaincompError when the data identify no error, leave no redundancy to estimate
-    the uncertainty (without ``sigma``), or give non-finite values."""
+def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_iterations: int = 50,
+             model: ExactModel | None = None, vary=(), smooth: float = 0.0, minimal: bool = False) -> Fit:
+    """Fit the errors of ``machine`` (all but ``assume_zero``) to the measured tool points and
+    directions.
+
+    ``sigma``: None (one standard uncertainty for all, estimated from the residuals), a length
+    for x, y, z (internal units), or {column: sigma} (lengths for x, y, z, angles in rad for
+    kx, ky, kz). ``vary``: ``Vary`` specs of errors fitted as tables or polynomials along an
+    axis; ``smooth``: the weight of their tables' second differences (declared unit). ``minimal``:
+    fit a minimal identifiable set, every other parameter held at zero. ``model``: the machine's
+    ExactModel, to reuse its compiled functions across fits. Raises ChaincompError when the data
+    identify nothing, leave no redundancy to estimate the uncertainty (without ``sigma``), or
+    give non-finite values."""
     model = model or ExactModel(machine)
+    varies = _check_vary(machine, vary, assume_zero)
+    if smooth and not any(v.kind == "table" for v in varies.values()):
+        raise ChaincompError("--smooth: no error is fitted as a table (--vary NAME=table:...) to smooth")
     free = [s.name for s in machine.errors if s.name not in assume_zero]
     if not free:
         raise ChaincompError("--assume-zero: every error is assumed zero, nothing is left to fit")
-    mask = ~np.isnan(table.coords)
-    y = table.coords[mask]
-    n, m = len(free), int(mask.sum())
-    measured = [c for i, c in enumerate(COMPONENTS) if mask[:, i].any()]
+    obs = table.observations
+    mask = ~np.isnan(obs)
+    y = obs[mask]
+    measured = [c for i, c in enumerate(COLUMNS) if mask[:, i].any()]
+    w, sig = _weights(sigma, measured, mask, smooth)
+    params, bases, ranges, notes = _parameters(machine, free, varies, table)
+    penalty = _penalty(params, varies, smooth)
+    names = [p.name for p in params]
+    n, m = len(params), int(mask.sum())
     data = f"{_count(m, 'coordinate')} ({', '.join(measured)}) at {_count(len(table.lines), 'set-up')}"
     nonfinite = ChaincompError(f"the fit went to non-finite values on these {data} (coordinates in "
                                f"{machine.length_unit}? axes in their declared units?)", table.file)
 
     def predict(P: np.ndarray) -> np.ndarray:            # (k, n) parameter sets -> (k, m)
-        errs = {name: P[:, j:j + 1] for j, name in enumerate(free)}
-        f = pose_points(machine, model, table.axes, errs)[:, mask]
+        errs = {e: P[:, idx] @ basis.T for e, (idx, basis) in bases.items()}
+        f = pose_observations(machine, model, table.axes, errs)[:, mask]
         if not np.isfinite(f).all():
             raise nonfinite
         return f
 
-    def jacobian(p: np.ndarray) -> np.ndarray:           # (m, n)
+    def jacobian(p: np.ndarray) -> np.ndarray:           # (m + penalty rows, n), weighted
         try:
-            return predict(p + 1j * _CSTEP * np.eye(n)).imag.T / _CSTEP
+            j = predict(p + 1j * _CSTEP * np.eye(n)).imag.T / _CSTEP
         except TypeError:      # numpy has no complex arctan2: an error inside atan2
             f = predict(np.vstack([p + _STEP * np.eye(n), p - _STEP * np.eye(n)]))
-            return ((f[:n] - f[n:]) / (2 * _STEP)).T
+            j = ((f[:n] - f[n:]) / (2 * _STEP)).T
+        return np.vstack([w[:, None] * j, penalty])
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        return np.concatenate([w * (y - predict(p[None])[0]), -penalty @ p])
 
     p = np.zeros(n)
     j0 = jacobian(p)                                      # first-order gains at these set-ups
@@ -227,73 +469,98 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma: float | None
     visible = scale > 1e-12 * max(scale.max(initial=0.0), 1e-300)
     unidentifiable = {}
     for j in np.flatnonzero(~visible):
-        unidentifiable[free[j]] = (f"does not move the measured coordinates ({', '.join(measured)}) "
-                                   f"at any of these set-ups")
+        unidentifiable[names[j]] = (f"does not move the measured coordinates ({', '.join(measured)}) "
+                                    f"at any of these set-ups")
     cols = np.flatnonzero(visible)
     d = np.zeros(n)
     d[cols] = 1.0 / scale[cols]
     scaled = j0[:, cols] * d[cols]
     s, vt = np.zeros(0), np.zeros((0, 0))
     if len(cols):
-        # with fewer data than errors the reduced vt lacks part of the null space; only then is
-        # the full one needed (and small: U is data x data)
+        # with fewer data than parameters the reduced vt lacks part of the null space; only then
+        # is the full one needed (and small: U is data x data)
         _, s, vt = np.linalg.svd(scaled, full_matrices=len(scaled) < len(cols))
     rank = int((s > _RANK_TOL * s[0]).sum()) if len(s) else 0
     if rank == 0:
-        raise ChaincompError(f"none of the {n} errors fitted moves the {data}: nothing to identify", table.file)
-    null = vt[rank:]
-    proj = null.T @ null        # projector on the null space: its blocks do not depend on the basis
-    for k, j in enumerate(cols):
-        if proj[k, k] > 1e-12:
-            unidentifiable[free[j]] = _inseparable_reason(machine, free, cols, proj, k, d)
-    ident = [j for j in range(n) if free[j] not in unidentifiable]
+        raise ChaincompError(f"none of the {n} parameters fitted moves the {data}: nothing to identify",
+                             table.file)
+    kept = [int(cols[k]) for k in _spanning(scaled, rank)]
+    redundant, carried = {}, {}
+    if minimal:
+        for j in cols:
+            if j not in kept:
+                redundant[names[j]], carried[names[j]] = _carried(params, j0, kept, j)
+        basis = np.zeros((n, rank))                       # p = basis @ z: the minimal set, scaled
+        basis[sorted(kept), np.arange(rank)] = d[sorted(kept)]
+        suggested = []
+    else:
+        null = vt[rank:]
+        proj = null.T @ null    # projector on the null space: its blocks do not depend on the basis
+        for k, j in enumerate(cols):
+            if proj[k, k] > 1e-12:
+                unidentifiable[names[j]] = _inseparable_reason(params, cols, proj, k, d)
+        basis = np.zeros((n, rank))                       # the combinations the data see
+        basis[cols] = d[cols, None] * vt[:rank].T
+        suggested = [names[j] for j in cols if j not in kept]
+    ident = [j for j in range(n) if names[j] not in unidentifiable and names[j] not in redundant]
     if not ident:
-        raise ChaincompError(f"no error can be identified from these {data}: the {n} errors fitted "
+        raise ChaincompError(f"no error can be identified from these {data}: the {n} parameters fitted "
                              f"move them only in {_count(rank, 'combination')} that isolate{'s' if rank == 1 else ''} "
                              f"none of them; "
-                             f"measure more coordinates or set-ups, or assume errors zero (--assume-zero)",
-                             table.file)
-    if sigma is None and m <= rank:
+                             f"measure more coordinates or set-ups, assume errors zero (--assume-zero), "
+                             f"or fit a minimal set (--minimal)", table.file)
+    if not sig and m <= rank:
         raise ChaincompError(f"no redundancy: {data} for {_count(rank, 'independent unknown')}, nothing "
                              f"left to estimate the uncertainty from; measure more, or give --sigma", table.file)
-    kept = set(cols[_spanning(scaled, rank)])
-    suggested = [free[j] for j in cols if j not in kept]
-    basis = np.zeros((n, rank))                           # p = basis @ z: the combinations the data see
-    basis[cols] = d[cols, None] * vt[:rank].T
 
     iterations, converged = 0, False
+    yw = np.linalg.norm(w * y)
     for iterations in range(1, max_iterations + 1):
-        r = y - predict(p[None])[0]
+        r = residual(p)
         jz = jacobian(p) @ basis
         dz = np.linalg.lstsq(jz, r, rcond=None)[0]
         p = p + basis @ dz
         z = np.linalg.lstsq(basis, p, rcond=None)[0]
         # done when the step is negligible against the estimates or below the coordinates' precision
-        if (np.linalg.norm(dz) <= 1e-10 * np.linalg.norm(z)
-                or np.linalg.norm(jz @ dz) <= 1e-14 * np.linalg.norm(y)):
+        if np.linalg.norm(dz) <= 1e-10 * np.linalg.norm(z) or np.linalg.norm(jz @ dz) <= 1e-14 * yw:
             converged = True
             break
-    r = y - predict(p[None])[0]
+    r = residual(p)[:m]
     jz = jacobian(p) @ basis
     rss = float(r @ r)
-    dof = m - rank
-    var = sigma ** 2 if sigma is not None else rss / dof
+    inv = np.linalg.pinv(jz.T @ jz)
+    if len(penalty):          # effective number of parameters: the trace of the data's hat matrix
+        jd = jz[:m]
+        dof = float(m - np.trace(jd @ inv @ jd.T))
+    else:
+        dof = m - rank
+    var = 1.0 if sig else rss / dof
     sv = np.linalg.svd(jz, compute_uv=False)
-    cov = var * basis @ np.linalg.pinv(jz.T @ jz) @ basis.T
+    cov = var * basis @ inv @ basis.T
     std = np.sqrt(np.abs(np.diag(cov)))
     corr = []
     for a_, b_ in ((a, b) for i, a in enumerate(ident) for b in ident[i + 1:]):
         if std[a_] > 0 and std[b_] > 0:
             c = cov[a_, b_] / (std[a_] * std[b_])
             if abs(c) > 0.9:
-                corr.append((free[a_], free[b_], float(c)))
+                corr.append((names[a_], names[b_], float(c)))
+    raw = (y - predict(p[None])[0])
+    kinds = np.broadcast_to(np.arange(6) < 3, mask.shape)[mask]
+
+    def rms(sel):
+        return math.sqrt(float(np.mean(raw[sel] ** 2))) if sel.any() else math.nan
+
     fit = Fit(machine, free, [s.name for s in machine.errors if s.name in assume_zero],
-              {free[j]: float(p[j]) for j in ident}, {free[j]: float(std[j]) for j in ident},
+              {names[j]: float(p[j]) for j in ident}, {names[j]: float(std[j]) for j in ident},
               unidentifiable, suggested, rank, float(sv[0] / sv[-1]), corr,
-              math.sqrt(rss / m), m, len(table.lines), dof, iterations, converged, measured)
+              rms(kinds), m, len(table.lines), dof, iterations, converged, measured,
+              params, varies, ranges, minimal, redundant, carried, sig,
+              rss / dof if sig else None, rms(~kinds), smooth, notes)
     if not all(math.isfinite(v) for v in [*fit.estimates.values(), *fit.uncertainties.values(),
-                                          fit.condition, fit.rms]):
+                                          fit.condition, dof]):
         raise nonfinite
+    if not dof > 0:
+        raise ChaincompError(f"no redundancy: {data} leave no degrees of freedom", table.file)
     return fit
 
 
@@ -303,97 +570,238 @@ def _count(k: int, what: str) -> str:
 
 def _spanning(a: np.ndarray, rank: int) -> list[int]:
     """``rank`` columns of ``a`` that span its column space, picked greedily, each time the one
-    least explained by those already picked (QR with column pivoting)."""
+    least explained by those already picked (QR with column pivoting). Ties (remaining norms
+    within 1e-9 of the largest, relative) go to the first column: machine order."""
     a = a.copy()
     picked = []
     for _ in range(rank):
-        j = int(np.argmax(np.linalg.norm(a, axis=0)))
-        q = a[:, j] / np.linalg.norm(a[:, j])
+        norms = np.linalg.norm(a, axis=0)
+        j = int(np.flatnonzero(norms >= norms.max() * (1 - _TIE))[0])
+        q = a[:, j] / norms[j]
         a -= np.outer(q, q @ a)
         picked.append(j)
     return picked
 
 
-def _inseparable_reason(machine, free, cols, proj, k, d) -> str:
+def _terms(params: list[Param], pairs) -> str:
+    return ", ".join(f"{x:+.4g} {params[i].unit} in {params[i].name}" for i, x in pairs)
+
+
+def _carried(params: list[Param], j0: np.ndarray, kept: list[int], j: int):
+    """Parameter j, outside the minimal set: the change of the kept ones that moves the
+    measurements as a unit change of j does (first order), in declared units."""
+    c = np.linalg.lstsq(j0[:, kept], j0[:, j], rcond=None)[0]
+    size = np.abs(c * np.linalg.norm(j0[:, kept], axis=0))
+    pairs = [(i, c[k] * params[j].to_internal / params[i].to_internal)
+             for k, i in enumerate(kept) if size[k] > 1e-6 * size.max()]
+    me = params[j]
+    text = (f"to first order a change of 1 {me.unit} in {me.name} moves "
+            f"the measured coordinates as {_terms(params, pairs)} {'does' if len(pairs) == 1 else 'do'}; "
+            f"the estimate{'' if len(pairs) == 1 else 's'} of {', '.join(params[i].name for i, _ in pairs)} "
+            f"carr{'ies' if len(pairs) == 1 else 'y'} it")
+    return text, {params[i].name: float(x) for i, x in pairs}
+
+
+def _inseparable_reason(params: list[Param], cols, proj, k, d) -> str:
     """'a change of 1 arcsec in A with -0.64 arcsec in B moves no measured coordinate'."""
-    v = proj[:, k] * d[cols]          # a null vector through error k, unscaled internal units
-    me = machine.symbol(free[cols[k]])
-    pairs = [(machine.symbol(free[j]), v[i]) for i, j in enumerate(cols)
+    v = proj[:, k] * d[cols]          # a null vector through parameter k, unscaled internal units
+    me = params[cols[k]]
+    pairs = [(int(j), v[i] / v[k] * me.to_internal / params[j].to_internal) for i, j in enumerate(cols)
              if i != k and abs(proj[i, k]) > 1e-6 * proj[k, k]]
-    others = [o for o, _ in pairs]
-    parts = [f"{x / v[k] * me.unit.to_internal / o.unit.to_internal:+.4g} {o.unit.name} in {o.name}"
-             for o, x in pairs]
-    return (f"cannot be told apart from {', '.join(o.name for o in others)} at these set-ups: "
-            f"a change of 1 {me.unit.name} in {me.name} with {', '.join(parts)} moves no measured "
+    return (f"cannot be told apart from {', '.join(params[j].name for j, _ in pairs)} at these set-ups: "
+            f"a change of 1 {me.unit} in {me.name} with {_terms(params, pairs)} moves no measured "
             f"coordinate (to first order)")
 
 
 # ----------------------------------------------------------------------------- reports
 
-def _declared(machine, name, value):
-    return machine.symbol(name).from_internal(value)
+def _shown(fit: Fit, p: Param, units: str) -> tuple[float, str]:
+    """A parameter's display unit: its kind's (µm, arcsec, µm/m; or internal), per the axis'
+    declared unit (internal: mm, rad) to the power for a polynomial coefficient."""
+    vu = display_unit(p.kind, units)
+    if not p.power:
+        return vu.to_internal, vu.name
+    au = fit.machine.symbol(p.axis).unit
+    if units != "people":
+        au = UNITS[INTERNAL[au.kind]]
+    return vu.to_internal / au.to_internal ** p.power, f"{vu.name}/{au.name}" + (f"^{p.power}" if p.power > 1 else "")
+
+
+def _declared(fit: Fit, p: Param, value: float) -> float:
+    return value / p.to_internal
+
+
+def _varying_json(fit: Fit, e: str, v: Vary) -> dict:
+    m = fit.machine
+    a, s = m.symbol(v.axis), m.symbol(e)
+    ps = [p for p in fit.params if p.error == e]
+    vals = [fit.estimates[p.name] / p.to_internal if p.name in fit.estimates else None for p in ps]
+    unc = [fit.uncertainties[p.name] / p.to_internal if p.name in fit.uncertainties else None for p in ps]
+    if v.kind == "table":
+        return {"kind": "table", "axis": v.axis, "units": [a.unit.name, s.unit.name], "interpolation": "linear",
+                "outside": "hold", "positions": [a.from_internal(k) for k in v.knots], "values": vals,
+                "uncertainties": unc, "parameters": [p.name for p in ps]}
+    lo, hi = fit.ranges[e]
+    return {"kind": "polynomial", "axis": v.axis, "units": [a.unit.name, s.unit.name], "degree": v.degree,
+            "coefficients": vals, "uncertainties": unc, "range": [a.from_internal(lo), a.from_internal(hi)],
+            "outside": "hold", "parameters": [p.name for p in ps]}
 
 
 def to_json(fit: Fit, source: str) -> dict:
+    """Values in each error's declared unit (named beside it); residuals in the machine's length
+    unit and rad."""
     m = fit.machine
     lu = UNITS[m.length_unit].to_internal
+    byname = {p.name: p for p in fit.params}
     return {
         "machine": m.name, "measurements": source, "setups": fit.setups, "observations": fit.observations,
         "measured": fit.measured, "fitted": fit.fitted, "assumed_zero": fit.assumed_zero,
-        "estimates": {n: {"value": _declared(m, n, v), "uncertainty": _declared(m, n, fit.uncertainties[n]),
-                          "unit": m.symbol(n).unit.name} for n, v in fit.estimates.items()},
+        "estimates": {n: {"value": _declared(fit, byname[n], v), "uncertainty": _declared(fit, byname[n],
+                                                                                          fit.uncertainties[n]),
+                          "unit": byname[n].unit}
+                      for n, v in fit.estimates.items() if byname[n].error not in fit.varying},
+        "varying": {e: _varying_json(fit, e, v) for e, v in fit.varying.items()},
+        "parameters": len(fit.params), "minimal": fit.minimal,
+        "redundant": {n: {"reason": why, "carried_by": fit.carried[n]} for n, why in fit.redundant.items()},
         "unidentifiable": fit.unidentifiable,
         "suggested_assume_zero": fit.suggested_zero, "rank": fit.rank,
         "condition_number": fit.condition,
         "correlations": [{"errors": [a, b], "value": c} for a, b, c in fit.correlations],
-        "rms_residual": fit.rms / lu, "length_unit": m.length_unit,
+        "rms_residual": None if math.isnan(fit.rms) else fit.rms / lu, "length_unit": m.length_unit,
+        "rms_direction_residual": None if math.isnan(fit.rms_direction) else fit.rms_direction,
+        "direction_unit": "rad",
+        "sigma": {c: {"value": v / lu if c in COMPONENTS else v, "unit": m.length_unit if c in COMPONENTS else "rad"}
+                  for c, v in fit.sigma.items()},
+        "chi2_per_dof": fit.chi2, "smooth": fit.smooth, "notes": fit.notes,
         "degrees_of_freedom": fit.dof, "iterations": fit.iterations, "converged": fit.converged,
     }
 
 
-def to_text(fit: Fit, source: str) -> str:
+def _residuals(fit: Fit, units: str) -> str:
+    parts = []
+    if not math.isnan(fit.rms):
+        parts.append(f"tool point {quantity(fit.rms, 'length', units)}")
+    if not math.isnan(fit.rms_direction):
+        parts.append(f"tool direction {quantity(fit.rms_direction, 'angle', units)}")
+    return "rms residual " + ", ".join(parts)
+
+
+def to_text(fit: Fit, source: str, units: str = DEFAULT_UNITS) -> str:
     m = fit.machine
-    lu = UNITS[m.length_unit].to_internal
+    what = _count(len(fit.fitted), "error") + (f" as {len(fit.params)} parameters"
+                                              if len(fit.params) != len(fit.fitted) else "")
     lines = [f"identify {m.name} from {source}: {fit.observations} coordinates "
-             f"({', '.join(fit.measured)}) at {fit.setups} set-ups; {len(fit.fitted)} errors fitted"
+             f"({', '.join(fit.measured)}) at {fit.setups} set-ups; {what} fitted"
              + (f" (the data see {fit.rank} independent combinations of them)"
-                if fit.rank < len(fit.fitted) else "")
-             + (f", assumed zero: {', '.join(fit.assumed_zero)}" if fit.assumed_zero else ""),
-             f"{'converged' if fit.converged else 'NOT converged'} after {fit.iterations} Gauss-Newton "
-             f"iterations on the exact model; rms residual {fit.rms / lu:.4g} {m.length_unit}; "
-             f"{fit.dof} degrees of freedom",
-             f"  {'error':<12} {'estimate':>16}   {'std. uncertainty':>16}"]
+                if fit.rank < len(fit.params) else "")
+             + (f", assumed zero: {', '.join(fit.assumed_zero)}" if fit.assumed_zero else "")]
+    for e, v in fit.varying.items():
+        a = m.symbol(v.axis)
+        if v.kind == "table":
+            lines.append(f"{e} varies along {v.axis}: a table on {len(v.knots)} knots, linear between them, "
+                         f"held beyond [{a.from_internal(v.knots[0]):g}, {a.from_internal(v.knots[-1]):g}] "
+                         f"{a.unit.name}")
+        else:
+            lo, hi = fit.ranges[e]
+            lines.append(f"{e} varies along {v.axis}: a polynomial of degree {v.degree} in {v.axis} "
+                         f"({a.unit.name}) over the measured [{a.from_internal(lo):g}, {a.from_internal(hi):g}] "
+                         f"{a.unit.name}, held beyond")
+    if fit.smooth:
+        lines.append(f"smoothing: {fit.smooth:g} x the squared second differences of the tables' knot values "
+                     f"(declared unit) added to the weighted sum of squares")
+    if fit.minimal:
+        lines.append(f"minimal set: {len(fit.estimates)} of {len(fit.params)} parameters fitted (chosen by QR "
+                     f"with column pivoting), {len(fit.redundant) + len(fit.unidentifiable)} held at zero")
+    if fit.sigma:
+        groups: dict[str, list[str]] = {}
+        for c, v in fit.sigma.items():
+            u = display_unit("length" if c in COMPONENTS else "angle", units)
+            groups.setdefault(f"{v / u.to_internal:.4g} {u.name}", []).append(c)
+        given = ", ".join(f"{', '.join(cs)} {v}" for v, cs in groups.items())
+        weights = f"; sigma {given}; chi2/dof {fit.chi2:.3g}"
+    else:
+        weights = ""
+    lines.append(f"{'converged' if fit.converged else 'NOT converged'} after {fit.iterations} Gauss-Newton "
+                 f"iterations on the exact model; {_residuals(fit, units)}; {fit.dof:.4g} degrees of freedom"
+                 + weights)
+    width = max([12] + [len(n) for n in fit.estimates])
+    lines.append(f"  {'parameter':<{width}}  estimate ± standard uncertainty")
+    byname = {p.name: p for p in fit.params}
     for n, v in fit.estimates.items():
-        unit = m.symbol(n).unit.name
-        lines.append(f"  {n:<12} {_declared(m, n, v):>16.8g}   {_declared(m, n, fit.uncertainties[n]):>16.3g}"
-                     f" {unit}")
+        f, unit = _shown(fit, byname[n], units)
+        lines.append(f"  {n:<{width}}  {plus_minus(v / f, fit.uncertainties[n] / f)} {unit}")
     lines.append(f"condition number {fit.condition:.4g} (Jacobian columns scaled to unit norm)")
     lines.append("correlations above 0.9: " + (", ".join(f"{a}/{b} {c:+.3f}" for a, b, c in fit.correlations)
                                                  or "none"))
+    if fit.redundant:
+        lines.append("held at zero, not in the minimal set (each carried by the fitted ones):")
+        lines += [f"  {n}: {why}" for n, why in fit.redundant.items()]
     if fit.unidentifiable:
-        lines.append("not identifiable from these set-ups (no value given):")
+        lines.append("not identifiable from these set-ups ("
+                     + ("held at zero):" if fit.minimal else "no value given):"))
         lines += [f"  {n}: {why}" for n, why in fit.unidentifiable.items()]
     if fit.suggested_zero:
-        lines.append("to give every other error a value, assume these zero as well (one choice of many): "
-                     "--assume-zero " + ",".join(fit.assumed_zero + fit.suggested_zero))
+        constants = [n for n in fit.suggested_zero if n in fit.fitted and n not in fit.varying]
+        lines.append("to give every other parameter a value, fit a minimal set (--minimal)"
+                     + (f", or assume these zero as well (one choice of many): --assume-zero "
+                        + ",".join(fit.assumed_zero + constants) if len(constants) == len(fit.suggested_zero) else ""))
+    lines += [f"note: {note}" for note in fit.notes]
     return "\n".join(lines)
 
 
+def _num(v: float) -> str:
+    text = f"{v:.12g}"
+    return "0" if text == "-0" else text
+
+
 def params_yaml(fit: Fit, source: str) -> str:
-    """A params file (machine + values as 'VALUE UNIT') that load_params and chaincompd read."""
+    """A params file (machine + values as 'VALUE UNIT', tables and polynomials in the params
+    format) that load_params and chaincompd read."""
     m = fit.machine
     out = [f"# Error values identified by chaincomp identify from {source}:",
-           f"# {fit.observations} coordinates at {fit.setups} set-ups, rms residual "
-           f"{fit.rms / UNITS[m.length_unit].to_internal:.4g} {m.length_unit}, "
+           f"# {fit.observations} coordinates at {fit.setups} set-ups, {_residuals(fit, 'internal')}, "
            f"condition number {fit.condition:.4g}."]
-    if fit.unidentifiable:
+    if fit.minimal:
+        out.append(f"# Minimal identifiable set: {len(fit.estimates)} of {len(fit.params)} parameters fitted; "
+                   f"every other one is written as zero (held at zero in the fit).")
+    elif fit.unidentifiable:
         out.append(f"# Not identifiable, no value given: {', '.join(fit.unidentifiable)}.")
     out += [f"machine: {m.name}", "values:"]
+    params = {p.name: p for p in fit.params}
+
+    def note(name):
+        if name in fit.estimates:
+            return f"standard uncertainty {fit.uncertainties[name] / params[name].to_internal:.3g} " \
+                   f"{params[name].unit}"
+        if name in fit.redundant:
+            return "held at zero: redundant, carried by " + ", ".join(fit.carried[name])
+        return "held at zero: moves no measured coordinate"
+
     for s in m.errors:
-        if s.name in fit.estimates:
-            u = s.from_internal(fit.uncertainties[s.name])
-            out.append(f'  {s.name}: "{s.from_internal(fit.estimates[s.name]):.12g} {s.unit.name}"'
-                       f"   # standard uncertainty {u:.3g} {s.unit.name}")
+        if s.name in fit.varying:
+            v = fit.varying[s.name]
+            ps = [p for p in fit.params if p.error == s.name]
+            if not fit.minimal and any(p.name in fit.unidentifiable for p in ps):
+                out.append(f"  # {s.name}: not written, not identifiable: "
+                           + ", ".join(p.name for p in ps if p.name in fit.unidentifiable))
+                continue
+            a = m.symbol(v.axis)
+            val = [fit.estimates.get(p.name, 0.0) / p.to_internal for p in ps]
+            out += [f"  {s.name}:   # identified as a {'table' if v.kind == 'table' else 'polynomial'} along {v.axis}",
+                    f"    axis: {v.axis}", f"    units: [{a.unit.name}, {s.unit.name}]"]
+            if v.kind == "table":
+                out += ["    interpolation: linear", "    outside: hold", "    table:"]
+                out += [f"      - [{_num(a.from_internal(k))}, {_num(x)}]   # {note(p.name)}"
+                        for k, x, p in zip(v.knots, val, ps)]
+            else:
+                lo, hi = fit.ranges[s.name]
+                out.append(f"    polynomial: [{', '.join(_num(x) for x in val)}]")
+                out += [f"    # {p.name}: {note(p.name)}" for p in ps]
+                out += [f"    range: [{_num(a.from_internal(lo))}, {_num(a.from_internal(hi))}]", "    outside: hold"]
+        elif s.name in fit.estimates:
+            out.append(f'  {s.name}: "{_num(s.from_internal(fit.estimates[s.name]))} {s.unit.name}"   # {note(s.name)}')
         elif s.name in fit.assumed_zero:
             out.append(f'  {s.name}: "0 {s.unit.name}"   # assumed zero')
+        elif fit.minimal:
+            out.append(f'  {s.name}: "0 {s.unit.name}"   # {note(s.name)}')
     return "\n".join(out) + "\n"

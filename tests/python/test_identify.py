@@ -161,7 +161,7 @@ def test_malformed_row_names_its_line(tmp_path):
 def test_unknown_axis_column(tmp_path):
     err = bad(tmp_path, "Ap,Bp,x\n0,0,1\n")
     assert err.endswith("m.csv:1: header: unknown column 'Bp' (expected the axes Ap, Cp and measured "
-                        "coordinates x, y, z)")
+                        "coordinates x, y, z, kx, ky, kz)")
     err = bad(tmp_path, "Ap,x\n0,1\n")
     assert "m.csv:1: header: missing column for axis Cp" in err
 

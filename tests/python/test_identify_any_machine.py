@@ -349,7 +349,7 @@ def test_columns_are_matched_exactly(tmp_path, capsys):
     path.write_text("X,Y,Z,ap,Cp,x\n0,0,0,0,0,1\n")
     assert refused(capsys, "identify", FIVE, path).endswith(
         "m.csv:1: header: unknown column 'ap' (expected the axes X, Y, Z, Ap, Cp and measured coordinates "
-        "x, y, z); names are case-sensitive: did you mean 'Ap'?")
+        "x, y, z, kx, ky, kz); names are case-sensitive: did you mean 'Ap'?")
     path.write_text("X,Y,Z,Ap,Cp,X\n0,0,0,0,0,1\n")
     assert "m.csv:1: header: column 'X' appears twice" in refused(capsys, "identify", FIVE, path)
     # a spreadsheet's byte-order mark is not part of the first column's name
@@ -387,7 +387,9 @@ def test_a_single_measured_coordinate_identifies_nothing_and_writes_nothing(tmp_
     (("--sigma", "0um"), "--sigma: must be positive, got '0um'"),
     (("--sigma=-1um",), "--sigma: must be positive, got '-1um'"),
     (("--sigma", "nan"), "--sigma: "),
-    (("--sigma", "1 deg"), "--sigma: unit 'deg'"),
+    (("--sigma", "1 deg"), "--sigma gives an angle, the standard uncertainty of the measured tool direction, "
+                           "but the measurements have no kx, ky, kz column"),
+    (("--sigma", "1 ppm"), "--sigma: unit 'ppm' is a ratio unit"),
     (("--assume-zero", "X"), "--assume-zero: 'X' is an axis, not an error"),
 ])
 def test_identify_options_are_validated(tmp_path, capsys, args, message):

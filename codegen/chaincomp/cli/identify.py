@@ -2,13 +2,19 @@
 
 from __future__ import annotations
 
+import re
+
+from ..calibration import _write_loadable, find_slides
+from ..display import add_units_argument
 from ..errors import ChaincompError
-from ..identify import identify, params_yaml, read_table, to_json, to_text
+from ..identify import COMPONENTS, DIRECTIONS, Vary, identify, params_yaml, read_table, to_json, to_text
 from ..machine import Symbol
 from ..params import parse_value
 from ..protocol import check_errors
 from ..units import UNITS
-from .common import add_assume_zero_argument, add_format_argument, add_machine_argument, check_output, load, to_json as json_text
+from ..varying import MAX_POLYNOMIAL_COEFFICIENTS, MAX_TABLE_KNOTS
+from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, check_output, load,
+                     number, number_list, to_json as json_text)
 from .protocol import names
 
 
@@ -24,27 +30,137 @@ def length(machine, option: str, raw: str, positive: bool = False) -> float:
     return value
 
 
+def sigma_spec(machine, raw: str) -> dict[str, float]:
+    """'--sigma 20um,10arcsec' -> {x, y, z: 0.02, kx, ky, kz: 4.8e-5} (internal units). Items
+    separated by commas: a length is every tool-point column's standard uncertainty, an angle
+    every tool-direction column's, COLUMN=VALUE one column's (later items win); a bare number is
+    a length in the machine's unit."""
+    out: dict[str, float] = {}
+    for item in (t.strip() for t in raw.split(",")):
+        column, sep, text = item.rpartition("=")
+        column = column.strip()
+        if sep and column not in COMPONENTS + DIRECTIONS:
+            raise ChaincompError(f"--sigma: unknown column {column!r} (expected x, y, z, kx, ky, kz)")
+        value, error = None, None
+        for kind, unit in (("length", machine.length_unit), ("angle", "rad")):
+            try:
+                value = parse_value(Symbol("--sigma", "constant", UNITS[unit], ""), text)
+                break
+            except ValueError as exc:
+                error = str(exc)
+                wrong_kind = re.match(r"(unit '.*' is an? \w+ unit) but", error)
+                if not wrong_kind:
+                    break
+                error = f"{wrong_kind.group(1)}: expected a length (tool point) or an angle (tool direction)"
+        if value is None:
+            raise ChaincompError(f"--sigma: {error}")
+        if not value > 0:
+            raise ChaincompError(f"--sigma: must be positive, got {text.strip()!r}")
+        targets = [column] if sep else list(COMPONENTS if kind == "length" else DIRECTIONS)
+        want = "length" if targets[0] in COMPONENTS else "angle"
+        if kind != want:
+            raise ChaincompError(f"--sigma {item}: {column} is a measured "
+                                 f"{'tool-point coordinate' if want == 'length' else 'tool-direction component'}: "
+                                 f"give {'a length, e.g. 20um' if want == 'length' else 'an angle, e.g. 10arcsec'}")
+        out.update({c: value for c in targets})
+    return out
+
+
+VARY_FORMS = "NAME=table:K1,K2,... or NAME=poly:DEGREE (NAME@AXIS=... to name the axis)"
+
+
+def vary_spec(machine, raw: str) -> Vary:
+    """'EXX=table:0,100,200' (knots in the axis' declared unit) or 'EXX=poly:3'; the axis is the
+    slide whose error block holds the error (chaincomp.calibration.find_slides) unless given as
+    'EXX@X=...'."""
+    def fail(msg):
+        raise ChaincompError(f"--vary {raw}: {msg}")
+
+    left, sep, form = raw.partition("=")
+    if not sep:
+        fail(f"expected {VARY_FORMS}")
+    name, at, axis = (t.strip() for t in left.partition("@"))
+    errors = [s.name for s in machine.errors]
+    if name not in errors:
+        fail(f"unknown error {name!r} for machine {machine.name!r} (errors: {', '.join(errors)})")
+    axes = [s.name for s in machine.axes]
+    if at:
+        if axis not in axes:
+            fail(f"{axis!r} is not an axis of {machine.name} (axes: {', '.join(axes)})")
+    else:
+        found = [sl.axis for sl in find_slides(machine) if any(c.error == name for c in sl.components)]
+        if not found:
+            fail(f"{name} is not a component error of a slide (an error block after a translation along one "
+                 f"linear axis), so the axis it varies along is not known: name it, e.g. "
+                 f"--vary {name}@{axes[0]}={form.strip()}")
+        axis = found[0]
+    a = machine.symbol(axis)
+    kind, colon, rest = (t.strip() for t in form.partition(":"))
+    if kind == "table":
+        if not colon or not rest:
+            fail(f"expected table:K1,K2,... (knots along {axis} in {a.unit.name})")
+        knots = number_list(f"--vary {raw}", rest)
+        if not 2 <= len(knots) <= MAX_TABLE_KNOTS:
+            fail(f"a table needs 2 to {MAX_TABLE_KNOTS} knots, got {len(knots)}")
+        for k0, k1 in zip(knots, knots[1:]):
+            if not k1 > k0 or f"{k1:.10g}" == f"{k0:.10g}":
+                fail(f"knots must increase (and differ in 10 significant digits): {k1:g} follows {k0:g}")
+        lo, hi = a.limits
+        outside = [k for k in knots if not lo <= k <= hi]
+        if outside:
+            fail(f"knot {outside[0]:g} lies outside {axis}'s limits [{lo:g}, {hi:g}] {a.unit.name}")
+        return Vary(name, axis, "table", tuple(a.to_internal(k) for k in knots))
+    if kind == "poly":
+        if not re.fullmatch(r"[0-9]{1,3}", rest):
+            fail(f"expected poly:DEGREE, an integer 0 to {MAX_POLYNOMIAL_COEFFICIENTS - 1}, got {rest!r}")
+        degree = int(rest)
+        if degree >= MAX_POLYNOMIAL_COEFFICIENTS:
+            fail(f"the degree must be 0 to {MAX_POLYNOMIAL_COEFFICIENTS - 1} (the params format holds "
+                 f"{MAX_POLYNOMIAL_COEFFICIENTS} coefficients), got {degree}")
+        return Vary(name, axis, "poly", degree=degree)
+    fail(f"unknown form {kind!r}: expected {VARY_FORMS}")
+
+
 def add_parser(sub) -> None:
     p = sub.add_parser("identify", help="fit error values to measured tool-tip coordinates",
                        description="Least-squares fit of the machine's error values to tool-tip "
                                    "coordinates measured at known axis positions (Gauss-Newton on the "
                                    "exact model). MEAS.csv: '#' comments, a header row naming every axis "
                                    "exactly as the machine file spells it (values in its declared unit) "
-                                   "and any of x, y, z (tool tip in the machine's length unit; an empty "
-                                   "cell is not measured), one row per set-up. Reports each estimate with "
-                                   "its standard uncertainty, the condition number, correlations above "
+                                   "and any of x, y, z (tool tip in the machine's length unit) and kx, ky, kz "
+                                   "(measured tool direction, a unit vector, where the machine has one; an "
+                                   "empty cell is not measured), one row per set-up. Reports each estimate "
+                                   "with its standard uncertainty, the condition number, correlations above "
                                    "0.9, the errors these set-ups cannot identify, which get no value, and "
-                                   "errors to assume zero so that the others can be. Refuses data that "
-                                   "identify no error, or that leave no redundancy without --sigma.")
+                                   "errors to assume zero so that the others can be (or --minimal fits a "
+                                   "minimal identifiable set). Errors may be fitted as tables or polynomials "
+                                   "along an axis (--vary). Refuses data that identify no error, or that "
+                                   "leave no redundancy without --sigma.")
     add_machine_argument(p)
     p.add_argument("measurements", metavar="MEAS.csv", help="measured tool-tip coordinates")
     add_assume_zero_argument(p, "errors held at zero (not fitted)")
-    p.add_argument("--sigma", metavar="LENGTH",
-                   help="standard uncertainty of each measured coordinate, positive, e.g. 1um "
-                        "(default: estimated from the residuals)")
+    p.add_argument("--sigma", metavar="SIGMA",
+                   help="standard uncertainty of the measured coordinates, positive: a length for x, y, z "
+                        "(e.g. 20um; a bare number is in the machine's length unit), an angle for the "
+                        "direction kx, ky, kz (e.g. 10arcsec), or COLUMN=VALUE for one column, separated by "
+                        "commas: 20um,10arcsec (default: one for all, estimated from the residuals; needed "
+                        "when both points and directions are measured)")
+    p.add_argument("--minimal", action="store_true",
+                   help="fit a minimal identifiable set (QR with column pivoting of the scaled Jacobian); "
+                        "every other parameter is held at zero and reported with the combination that "
+                        "carries it")
+    p.add_argument("--vary", action="append", default=[], metavar="NAME=table:K1,K2,...|NAME=poly:DEG",
+                   help="fit error NAME as a table on these knots (the axis' declared unit; linear between "
+                        "them, held beyond) or a polynomial of this degree along its slide's axis "
+                        "(NAME@AXIS=... names the axis); repeatable")
+    p.add_argument("--smooth", type=number(0.0), default=0.0, metavar="LAMBDA",
+                   help="add LAMBDA x the sum of squared second differences of each table's knot values (in "
+                        "the error's declared unit, e.g. um) to the weighted sum of squares; needs --sigma "
+                        "(default 0: none)")
     p.add_argument("-o", "--output", metavar="params.yaml",
                    help="write the identified values as a params file (for eval and chaincompd); "
                         "never one of the inputs")
+    add_units_argument(p)
     add_format_argument(p, what="report format")
     p.set_defaults(run=run)
 
@@ -53,21 +169,18 @@ def run(args) -> int:
     machine = load(args.machine)
     check_output(args.output, args.measurements, args.machine)
     assume = check_errors(machine, names(",".join(args.assume_zero)), "--assume-zero")
-    sigma = length(machine, "--sigma", args.sigma, positive=True) if args.sigma is not None else None
+    sigma = sigma_spec(machine, args.sigma) if args.sigma is not None else None
+    vary = [vary_spec(machine, v) for v in args.vary]
     table = read_table(args.measurements, machine)
-    fit = identify(machine, table, assume, sigma)
+    fit = identify(machine, table, assume, sigma, vary=vary, smooth=args.smooth, minimal=args.minimal)
     if not fit.converged:
         raise ChaincompError(f"the fit did not converge in {fit.iterations} Gauss-Newton iterations "
                              f"(rms residual {fit.rms / UNITS[machine.length_unit].to_internal:.4g} "
                              f"{machine.length_unit}); no values given", args.measurements)
     print(json_text(to_json(fit, args.measurements)) if args.format == "json"
-          else to_text(fit, args.measurements))
+          else to_text(fit, args.measurements, args.units))
     if args.output:
-        try:
-            with open(args.output, "w", encoding="utf-8") as f:
-                f.write(params_yaml(fit, args.measurements))
-        except OSError as exc:
-            raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
+        _write_loadable(args.output, params_yaml(fit, args.measurements), machine)
         if args.format == "text":
             print(f"wrote {args.output}")
     return 0
