@@ -265,8 +265,10 @@ def evaluate(trace: Trace) -> dict:
 # ----------------------------------------------------------------------------- the trace CSV
 
 def _num(v: float) -> str:
+    """A number as short as reads back to the same float (the set-up must reproduce the circle)."""
     text = f"{v:.10g}"
-    return "0" if text == "-0" else text
+    text = text if float(text) == v else repr(float(v))
+    return "0" if text in ("-0", "-0.0") else text
 
 
 def header_lines(machine: Machine, setup: Setup) -> list[str]:
