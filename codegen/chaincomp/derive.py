@@ -89,8 +89,15 @@ class Derivation:
         return sum(len(c.terms()) for m, c in s.items() if len(m) == degree)
 
 
-def derive(machine: Machine, order: int = 1, htm: bool = False, progress: bool = False) -> Derivation:
-    """Derive the tool pose of ``machine`` to ``order`` in its error symbols."""
+def _terms(vectors) -> int:
+    return sum(len(c) for vec, _ in vectors for s in vec for m, c in s.items() if m)
+
+
+def derive(machine: Machine, order: int = 1, htm: bool = False, progress: bool = False,
+           max_terms: int | None = None) -> Derivation | None:
+    """Derive the tool pose of ``machine`` to ``order`` in its error symbols. With ``max_terms``:
+    None as soon as the point and direction hold more terms of degree 1..order than that
+    (the expansion of a long chain grows with every rotation; this stops it early)."""
     if order < 0:
         raise ValueError("order must be >= 0")
     k = order
@@ -152,6 +159,8 @@ def derive(machine: Machine, order: int = 1, htm: bool = False, progress: bool =
                 if w:
                     for c in range(3):
                         vec[c] = S.add(vec[c], t[c])
+        if max_terms is not None and _terms(vectors[:2 if dir0 else 1]) > max_terms:
+            return None
         prog.step(f"element {n - idx}/{n}")
     prog.done()
 

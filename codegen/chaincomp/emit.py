@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import sympy as sp
 from sympy.printing.cxx import CXX17CodePrinter
 
+from . import straightline
 from .derive import derive
-from .jets import JetModel
 from .machine import ROT_PLANE, Machine, Rotation
 from .units import UNITS
 
@@ -102,9 +102,8 @@ class _Function:
     # Takes the axes' sin and cos (a Trig after `q`) instead of computing them: compensate
     # computes them once per command. A wrapper without it is declared inline.
     trig: bool = False
-    # Temporaries (symbol, expression) the outputs refer to, in order: the jets' straight-line
-    # code (chaincomp.jets), emitted only where an output needs them.
-    defs: tuple = ()
+    # The body written already (straight-line code of a long chain); else from ``outputs``.
+    lines: list[str] | None = None
 
     def declaration(self) -> str:
         if not self.trig:
@@ -142,21 +141,17 @@ class _Hoister:
         self._done[e] = out
         return out
 
-    def defs(self, defs) -> tuple:
-        return tuple((t, self(e)) for t, e in defs)
-
 
 def _c_name(sym: sp.Symbol, machine: Machine) -> str:
     s = machine.symbol(sym.name)
     return ("q_" if s.role == "axis" else "p_") + s.name
 
 
-def _body(machine: Machine, outputs: list[tuple[str, sp.Expr]], hoisted: bool, trig: bool = False,
-          defs: tuple = ()) -> list[str]:
+def _body(machine: Machine, outputs: list[tuple[str, sp.Expr]], hoisted: bool, trig: bool = False) -> list[str]:
     """Statements computing ``outputs`` with one joint CSE; inputs bound to locals first. With
     ``trig``, sin and cos of each angular axis come from ``t`` (any other function of an axis
-    is still computed from ``q``). ``defs``: temporaries the outputs use, in order."""
-    exprs = [e for _, e in defs] + [e for _, e in outputs]
+    is still computed from ``q``)."""
+    exprs = [e for _, e in outputs]
     bound = []
     if trig:
         sub = {}
@@ -168,11 +163,7 @@ def _body(machine: Machine, outputs: list[tuple[str, sp.Expr]], hoisted: bool, t
                 bound += [(sub[sp.sin(a.sym)], f"t.s[{i}]"), (sub[sp.cos(a.sym)], f"t.c[{i}]")]
         memo: dict = {}
         exprs = [_replace(e, sub, memo) for e in exprs]
-    # The jets' temporaries are straight-line code already: CSE sees the outputs only (over
-    # thousands of small definitions it would cost seconds for little).
-    nd = len(defs)
-    repl, reduced = sp.cse(exprs[nd:], symbols=sp.numbered_symbols("t"), order="canonical")
-    reduced = exprs[:nd] + list(reduced)
+    repl, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("t"), order="canonical")
     # from the reduced forms: free_symbols of the nested pose would walk its shared subtrees
     used = set().union(*(e.free_symbols for e in [r for _, r in repl] + list(reduced))) if exprs else set()
     axes = {a.sym: i for i, a in enumerate(machine.axes)}
@@ -196,16 +187,9 @@ def _body(machine: Machine, outputs: list[tuple[str, sp.Expr]], hoisted: bool, t
         lines.append("static_cast<void>(t);  // no sin or cos of an axis here")
     if trig and not any(sym in used for sym in axes):
         lines.append("static_cast<void>(q);  // the axes enter through t alone")
-    for t, _ in defs:
-        rename[t] = sp.Symbol(str(t).lstrip("_"))
-    statements = list(repl)
-    if defs:  # temporaries interleaved as they are read; unused ones left out (and not counted)
-        statements = _in_dependency_order(statements + [(t, e) for (t, _), e in zip(defs, reduced)],
-                                          list(reduced[len(defs):]))
-        lines[0] = f"// {sp.count_ops(sp.Tuple(*[r for _, r in statements], *reduced[len(defs):]))} operations after CSE"
-    for lhs, rhs in statements:
+    for lhs, rhs in repl:
         lines.append(f"const double {rename.get(lhs, lhs)} = {ccode(rhs.xreplace(rename))};")
-    for (target, _), e in zip(outputs, reduced[len(defs):]):
+    for (target, _), e in zip(outputs, reduced):
         lines.append(f"{target} = {ccode(e.xreplace(rename))};")
     return lines
 
@@ -223,28 +207,6 @@ def _replace(e: sp.Expr, rule: dict, memo: dict) -> sp.Expr:
     return memo[e]
 
 
-def _in_dependency_order(assignments: list[tuple[sp.Symbol, sp.Expr]], outputs: list[sp.Expr]):
-    """The assignments the outputs need, each after those it reads: a depth-first walk from
-    the outputs in order (deterministic; iterative, as chains of temporaries run long)."""
-    by_name = dict(assignments)
-    done: set = set()
-    out = []
-    for root in outputs:
-        stack = [(sym, False) for sym in sorted(root.free_symbols & by_name.keys(), key=str, reverse=True)]
-        while stack:
-            sym, expanded = stack.pop()
-            if sym in done:
-                continue
-            if expanded:
-                done.add(sym)
-                out.append((sym, by_name[sym]))
-                continue
-            stack.append((sym, True))
-            stack.extend((d, False) for d in sorted(by_name[sym].free_symbols & by_name.keys(), key=str, reverse=True)
-                         if d not in done)
-    return out
-
-
 def generate(machine: Machine, order: int = 2) -> dict[str, str]:
     """C++ sources for ``machine``: {'NAME.hpp': text, 'NAME.cpp': text}."""
     name = machine.name
@@ -256,33 +218,8 @@ def generate(machine: Machine, order: int = 2) -> dict[str, str]:
     corr_dir = corrects_direction(machine)
 
     exact = exact_pose(machine, True)
-    nominal = exact_pose(machine, False)
-    jac = _jacobian(exact, axes)
-    n_err = len(machine.errors)
-    gain, errors, defs = _truncated(machine, order, hoist)
-    functions = [
-        _Function("pose_exact", "const Model& m, const Axes& q, Pose& out",
-                  [(f"out[{i}]", hoist(e)) for i, e in enumerate(exact)],
-                  "Actual tool point (and direction) with every error: the exact chain.", trig=True),
-        _Function("pose_nominal", "const Model& m, const Axes& q, Pose& out",
-                  [(f"out[{i}]", hoist(e)) for i, e in enumerate(nominal)],
-                  "Nominal tool point (and direction): every error at zero.", trig=True),
-        _Function("pose_jacobian", "const Model& m, const Axes& q, Pose& out, Jacobian& J",
-                  [(f"out[{i}]", hoist(e)) for i, e in enumerate(exact)]
-                  + [(f"J({i}, {j})", hoist(jac[i][j])) for i in range(pose_size) for j in range(n)],
-                  "Actual pose and its exact Jacobian with respect to the axes (one shared CSE).", trig=True),
-        _Function("pose_jacobian_gain", "const Model& m, const Axes& q, Pose& out, Jacobian& J, Gain& G",
-                  [(f"out[{i}]", hoist(e)) for i, e in enumerate(exact)]
-                  + [(f"J({i}, {j})", hoist(jac[i][j])) for i in range(pose_size) for j in range(n)]
-                  + [(f"G({i}, {c})", hoist(gain[i][c])) for i in range(pose_size) for c in range(n_err)],
-                  "pose_jacobian, and the error gain matrix G = d pose / d error at zero errors (columns: "
-                  "the errors in kParams order).", trig=True, defs=defs),
-    ]
-    for k in range(1, order + 1):
-        functions.append(_Function(
-            f"error_order{k}", "const Model& m, const Axes& q, Pose& out",
-            [(f"out[{i}]", hoist(e)) for i, e in enumerate(errors[k])],
-            f"Tool error (actual - nominal) of the order-{k} truncated series in the errors.", defs=defs))
+    d = None if _paths(exact) > DIFF_PATHS_LIMIT else derive(machine, order, max_terms=EXPANDED_TERMS_LIMIT)
+    functions = _expanded_functions(machine, order, hoist, exact, d) if d else _straight_functions(machine, order, hoist)
 
     src_hash = fnv1a64(machine.source_text.encode("utf-8"))
     src_file = os.path.basename(machine.file)
@@ -294,14 +231,95 @@ def generate(machine: Machine, order: int = 2) -> dict[str, str]:
     return {f"{name}.hpp": hpp, f"{name}.cpp": cpp}
 
 
-# Up to this many root-to-leaf paths in the nested exact pose, sympy's diff differentiates it
-# (what the bundled machines have always used); beyond, a differentiation that visits each
-# shared subexpression once (sympy's walks every path: 65 s for one component of a 41-error
-# five-axis machine with 4.3 M paths).
+def _expanded_functions(machine: Machine, order: int, hoist: "_Hoister", exact: list[sp.Expr], d) -> list[_Function]:
+    """The functions by the expanded series and sympy's cse: what short chains (every bundled
+    machine) use, and compile to the fewest operations."""
+    axes = [a.sym for a in machine.axes]
+    n = len(axes)
+    pose_size = 6 if machine.tool_direction else 3
+    nominal = exact_pose(machine, False)
+    jac = [[sp.diff(e, a) for a in axes] for e in exact]
+    n_err = len(machine.errors)
+    vecs = d.point + (d.direction or [])
+    gain = [d.gain(v) for v in vecs]
+    errors = {k: [d.error(v, k) for v in vecs] for k in range(1, order + 1)}
+    functions = [
+        _Function("pose_exact", "const Model& m, const Axes& q, Pose& out",
+                  [(f"out[{i}]", hoist(e)) for i, e in enumerate(exact)],
+                  POSE_EXACT, trig=True),
+        _Function("pose_nominal", "const Model& m, const Axes& q, Pose& out",
+                  [(f"out[{i}]", hoist(e)) for i, e in enumerate(nominal)],
+                  POSE_NOMINAL, trig=True),
+        _Function("pose_jacobian", "const Model& m, const Axes& q, Pose& out, Jacobian& J",
+                  [(f"out[{i}]", hoist(e)) for i, e in enumerate(exact)]
+                  + [(f"J({i}, {j})", hoist(jac[i][j])) for i in range(pose_size) for j in range(n)],
+                  POSE_JACOBIAN, trig=True),
+        _Function("pose_jacobian_gain", "const Model& m, const Axes& q, Pose& out, Jacobian& J, Gain& G",
+                  [(f"out[{i}]", hoist(e)) for i, e in enumerate(exact)]
+                  + [(f"J({i}, {j})", hoist(jac[i][j])) for i in range(pose_size) for j in range(n)]
+                  + [(f"G({i}, {c})", hoist(gain[i][c])) for i in range(pose_size) for c in range(n_err)],
+                  POSE_JACOBIAN_GAIN, trig=True),
+    ]
+    for k in range(1, order + 1):
+        functions.append(_Function(f"error_order{k}", "const Model& m, const Axes& q, Pose& out",
+                                   [(f"out[{i}]", hoist(e)) for i, e in enumerate(errors[k])], ERROR_ORDER.format(k=k)))
+    return functions
+
+
+def _straight_functions(machine: Machine, order: int, hoist: "_Hoister") -> list[_Function]:
+    """The functions of a long chain as straight-line code propagated through the chain
+    (chaincomp.straightline): their size grows linearly with the chain."""
+    out = []
+    for name, trig, builder, targets in straightline.functions(machine, order, hoist):
+        ops, inputs, statements = builder.g.emit(targets)
+        out.append(_Function(name, SIGNATURES[name] if name in SIGNATURES else SIGNATURES["error_order"], [],
+                             ERROR_ORDER.format(k=name[len("error_order"):]) if name.startswith("error_order")
+                             else COMMENTS[name], trig=trig, lines=_declare(machine, ops, inputs, trig) + statements))
+    return out
+
+
+def _declare(machine: Machine, ops: int, inputs: list[str], trig: bool) -> list[str]:
+    """The first lines of a straight-line body: its operation count and the inputs it reads."""
+    used = set(inputs)
+    lines = [f"// {ops} operations after CSE"]
+    axes = machine.axes
+    lines += [f"const double q_{a.name} = q[{i}];" for i, a in enumerate(axes) if f"q_{a.name}" in used]
+    lines += [f"const double p_{s.name} = m.params.{s.name};" for s in machine.symbols
+              if s.role != "axis" and f"p_{s.name}" in used]
+    ks = sorted((int(n[1:]) for n in used if n.startswith("k")))
+    lines += [f"const double k{i} = m.k[{i}];" for i in ks]
+    sines = [(n, f"t.{n[0]}[{i}]") for i, a in enumerate(axes) for n in (f"s_{a.name}", f"c_{a.name}") if n in used]
+    lines += [f"const double {n} = {src};" for n, src in sines]
+    if trig and not sines:
+        lines.append("static_cast<void>(t);  // no sin or cos of an axis here")
+    if trig and not any(f"q_{a.name}" in used for a in axes):
+        lines.append("static_cast<void>(q);  // the axes enter through t alone")
+    return lines
+
+
+POSE_EXACT = "Actual tool point (and direction) with every error: the exact chain."
+POSE_NOMINAL = "Nominal tool point (and direction): every error at zero."
+POSE_JACOBIAN = "Actual pose and its exact Jacobian with respect to the axes (one shared CSE)."
+POSE_JACOBIAN_GAIN = ("pose_jacobian, and the error gain matrix G = d pose / d error at zero errors (columns: "
+                      "the errors in kParams order).")
+ERROR_ORDER = "Tool error (actual - nominal) of the order-{k} truncated series in the errors."
+COMMENTS = {"pose_exact": POSE_EXACT, "pose_nominal": POSE_NOMINAL, "pose_jacobian": POSE_JACOBIAN,
+            "pose_jacobian_gain": POSE_JACOBIAN_GAIN}
+SIGNATURES = {"pose_exact": "const Model& m, const Axes& q, Pose& out",
+              "pose_nominal": "const Model& m, const Axes& q, Pose& out",
+              "pose_jacobian": "const Model& m, const Axes& q, Pose& out, Jacobian& J",
+              "pose_jacobian_gain": "const Model& m, const Axes& q, Pose& out, Jacobian& J, Gain& G",
+              "error_order": "const Model& m, const Axes& q, Pose& out"}
+
+
+# Up to this many root-to-leaf paths in the nested exact pose (and expanded terms below), a
+# machine is a short chain: sympy's diff and cse over the expressions; beyond, the straight-line
+# code (sympy's diff walks every path: 65 s for one component of a 41-error five-axis machine
+# with 4.3 M paths).
 DIFF_PATHS_LIMIT = 200_000
 
 
-def _jacobian(exact: list[sp.Expr], axes: list[sp.Symbol]) -> list[list[sp.Expr]]:
+def _paths(exact: list[sp.Expr]) -> int:
     memo: dict = {}
 
     def paths(e):
@@ -311,76 +329,14 @@ def _jacobian(exact: list[sp.Expr], axes: list[sp.Symbol]) -> list[list[sp.Expr]
             memo[e] = 1 + sum(paths(a) for a in e.args)
         return memo[e]
 
-    if sum(paths(e) for e in exact) <= DIFF_PATHS_LIMIT:
-        return [[sp.diff(e, a) for a in axes] for e in exact]
-    deps: dict = {}
-    return [[_diff(e, a, {}, deps) for a in axes] for e in exact]
-
-
-def _depends(e: sp.Expr, deps: dict) -> frozenset:
-    if e.is_Symbol:
-        return frozenset((e,))
-    if e.is_Atom:
-        return frozenset()
-    if e not in deps:
-        deps[e] = frozenset().union(*(_depends(a, deps) for a in e.args))
-    return deps[e]
-
-
-def _diff(e: sp.Expr, x: sp.Symbol, memo: dict, deps: dict) -> sp.Expr:
-    """d e / d x with the chain rule, each shared subexpression differentiated once."""
-    if x not in _depends(e, deps):
-        return sp.Integer(0)
-    if e == x:
-        return sp.Integer(1)
-    if e in memo:
-        return memo[e]
-    d = lambda u: _diff(u, x, memo, deps)  # noqa: E731
-    if e.is_Add:
-        out = sp.Add(*[d(a) for a in e.args])
-    elif e.is_Mul:
-        terms = []
-        for i, a in enumerate(e.args):
-            da = d(a)
-            if da != 0:
-                terms.append(sp.Mul(da, *(e.args[:i] + e.args[i + 1:])))
-        out = sp.Add(*terms)
-    elif e.is_Pow and x not in _depends(e.exp, deps):
-        out = e.exp * e.base ** (e.exp - 1) * d(e.base)
-    elif isinstance(e, sp.sin):
-        out = sp.cos(e.args[0]) * d(e.args[0])
-    elif isinstance(e, sp.cos):
-        out = -sp.sin(e.args[0]) * d(e.args[0])
-    else:  # tan, asin, atan2, ...: rare in a pose; sympy's rule on the (small) node
-        u = [sp.Dummy() for _ in e.args]
-        out = sp.Add(*[sp.diff(e.func(*u), ui).xreplace(dict(zip(u, e.args))) * d(a) for ui, a in zip(u, e.args)])
-    memo[e] = out
-    return out
+    return sum(paths(e) for e in exact)
 
 
 # Up to this many terms in the expanded series (orders 1..k, every pose component) the
-# generated error functions and gain matrix evaluate the expanded forms, which CSE shrinks
-# best on short chains; beyond it, the jets' straight-line code (chaincomp.jets), whose size
-# grows linearly with the chain where the expansion grows with every rotation (a UR5 with
-# constant twists: 32 883 terms, 7105 operations as jets).
+# generated functions evaluate the expanded forms, which CSE shrinks best on short chains;
+# beyond it, the straight-line code, whose size grows linearly with the chain where the
+# expansion grows with every rotation (a UR5 with constant twists: 32 883 terms).
 EXPANDED_TERMS_LIMIT = 5000
-
-
-def _truncated(machine: Machine, order: int, hoist: "_Hoister"):
-    """(gain rows per pose component, {k: order-k error per component}, temporaries)."""
-    d = derive(machine, order)
-    vecs = d.point + (d.direction or [])
-    if sum(d.term_count(v, k) for v in vecs for k in range(1, order + 1)) <= EXPANDED_TERMS_LIMIT:
-        return [d.gain(v) for v in vecs], {k: [d.error(v, k) for v in vecs] for k in range(1, order + 1)}, ()
-    defs, jp, jd = JetModel(machine, order).symbolic()
-    jets = jp + (jd or [])
-    small = [s.sym for s in machine.errors]
-    gain = [[v.get((c,), sp.Integer(0)) for c in range(len(small))] for v in jets]
-
-    def error(v: dict, k: int) -> sp.Expr:
-        return sp.Add(*[c * sp.Mul(*[small[i] for i in m]) for m, c in sorted(v.items()) if 1 <= len(m) <= k])
-
-    return gain, {k: [error(v, k) for v in jets] for k in range(1, order + 1)}, hoist.defs(defs)
 
 
 def _kind(unit) -> str:
@@ -491,7 +447,8 @@ def _source(machine, banner, n, pre, functions, order) -> str:
     L += _set_errors(machine, params, pre)
     for f in functions:
         L += [f"{f.declaration()} {{"]
-        L += ["  " + line for line in _body(machine, f.outputs, hoisted=True, trig=f.trig, defs=f.defs)]
+        body = f.lines if f.lines is not None else _body(machine, f.outputs, hoisted=True, trig=f.trig)
+        L += ["  " + line for line in body]
         L += ["}", ""]
     # Type-erased entry points: with varying errors attached, each evaluates them at `axes`
     # first (a model outside a rejecting range gives NaN).

@@ -34,7 +34,7 @@ def _sin_cos(delta: dict, k: int) -> tuple[dict, dict]:
     """sin and cos of a jet without constant term, to order k."""
     s: dict = {}
     c: dict = {(): 1}
-    power: dict = {(): 1}   # exact integers: the same code runs on sympy expressions
+    power: dict = {(): 1}
     for j in range(1, k + 1):
         power = S.mul_all(power, delta, k)
         if not power:
@@ -92,35 +92,9 @@ class JetModel:
         """The jets of the tool point and direction (3 each) at the large values given."""
         values = resolve(complete(self.machine, values))
         coeff = self._fn(backend)(*[values[n] for n in self._large])
-        return self._propagate(coeff, _lib(backend), lambda jet: jet)
+        return self._propagate(coeff, _lib(backend))
 
-    def symbolic(self) -> tuple[list[tuple[sp.Symbol, sp.Expr]], list[dict], list[dict] | None]:
-        """The same propagation on sympy expressions, as straight-line code: (definitions of
-        temporaries in order, point jets, direction jets), every coefficient an expression in
-        the large symbols and earlier temporaries. Binding each element's results to
-        temporaries keeps every expression small and the code linear in the chain (nesting
-        them instead would share subtrees 2^rotations times)."""
-        defs: list[tuple[sp.Symbol, sp.Expr]] = []
-        names = sp.numbered_symbols("_j")
-
-        def bind(jet: dict) -> dict:
-            out = {}
-            for m, v in jet.items():
-                v = sp.expand(v) if v.is_Add or v.is_Mul else v
-                if v == 0:
-                    continue
-                if v.is_Atom or (v.is_Mul and len(v.args) == 2 and v.args[0].is_Number and v.args[1].is_Atom):
-                    out[m] = v
-                else:
-                    t = next(names)
-                    defs.append((t, v))
-                    out[m] = t
-            return out
-
-        p, d = self._propagate(list(self._exprs), sp, bind)
-        return defs, p, d
-
-    def _propagate(self, coeff: list, lib, bind) -> tuple[list[dict], list[dict] | None]:
+    def _propagate(self, coeff: list, lib) -> tuple[list[dict], list[dict] | None]:
         k = self.order
 
         def jet(part):
@@ -133,15 +107,14 @@ class JetModel:
                 for c, part in enumerate(parts):
                     for m, i in part:
                         p[c][m] = p[c][m] + coeff[i] if m in p[c] else coeff[i]
-                p = [bind(v) for v in p]
                 continue
             angle = jet(parts[0])
             theta0 = angle.pop((), 0)
             c0, s0 = lib.cos(theta0), lib.sin(theta0)
             if angle:
                 s_d, c_d = _sin_cos(angle, k)
-                cos_t = bind(_lin(c_d, c0, s_d, -s0))
-                sin_t = bind(_lin(c_d, s0, s_d, c0))
+                cos_t = _lin(c_d, c0, s_d, -s0)
+                sin_t = _lin(c_d, s0, s_d, c0)
             else:
                 cos_t, sin_t = {(): c0}, {(): s0}
             i, j = ROT_PLANE[axis]
@@ -149,10 +122,10 @@ class JetModel:
                 vi, vj = vec[i], vec[j]
                 if set(cos_t) <= {()} and set(sin_t) <= {()}:  # by a large angle only: no jet products
                     c, s = cos_t.get((), 0), sin_t.get((), 0)
-                    vec[i], vec[j] = bind(_lin(vi, c, vj, -s)), bind(_lin(vi, s, vj, c))
+                    vec[i], vec[j] = _lin(vi, c, vj, -s), _lin(vi, s, vj, c)
                 else:
-                    vec[i] = bind(_lin(S.mul_all(cos_t, vi, k), 1, S.mul_all(sin_t, vj, k), -1))
-                    vec[j] = bind(_lin(S.mul_all(sin_t, vi, k), 1, S.mul_all(cos_t, vj, k), 1))
+                    vec[i] = _lin(S.mul_all(cos_t, vi, k), 1, S.mul_all(sin_t, vj, k), -1)
+                    vec[j] = _lin(S.mul_all(sin_t, vi, k), 1, S.mul_all(cos_t, vj, k), 1)
         return p, d
 
     def _at_errors(self, jet: dict, eps: list, order: int):

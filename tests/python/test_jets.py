@@ -110,25 +110,3 @@ def test_ur5_gains_against_central_differences(ur5):
         up[s.name], down[s.name] = h, -h
         fd = (np.array(exact.pose(up)[0]) - np.array(exact.pose(down)[0])) / (2 * h)
         assert np.allclose([g["dx"][i], g["dy"][i], g["dz"][i]], fd, atol=1e-5 * max(1, np.abs(fd).max()))
-
-
-@pytest.mark.parametrize("path", BUNDLED + ["ur5"], ids=lambda p: os.path.basename(p))
-def test_symbolic_jets_as_straight_line_code(path, ur5):
-    """JetModel.symbolic(): temporaries evaluated in order give the numeric jets' gains and
-    second-order terms; the number of temporaries grows with the chain, not its expansion."""
-    import sympy as sp
-    m = ur5 if path == "ur5" else load_machine(path)
-    jm = JetModel(m, 2)
-    defs, p, d = jm.symbolic()
-    rng = np.random.default_rng(4)
-    v = random_values(m, rng, 0.0)
-    env = {s.sym: v[s.name] if s.role == "axis" else s.to_internal(s.nominal) for s in m.symbols
-           if s.role != "error"}
-    for t, e in defs:
-        env[t] = float(e.xreplace(env))
-    num_p, num_d = jm.jets(v)
-    for sym_jet, num_jet in zip(p + (d or []), num_p + (num_d or [])):
-        for mono in set(sym_jet) | set(num_jet):
-            got = float(sp.sympify(sym_jet.get(mono, 0)).xreplace(env))
-            assert got == pytest.approx(float(num_jet.get(mono, 0.0)), rel=1e-12, abs=1e-12)
-    assert len(defs) < 3000
