@@ -75,7 +75,10 @@ class Run:
 
 
 def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeout: float = 120.0,
-        work: str | None = None) -> Run:
+        work: str | None = None, params: str | None = None, stale_ms: float = 50.0) -> Run:
+    """One run of the configuration's program. `env`: the driver's settings (drive.py);
+    `params`: the bridge's chaincompd params (default the machine's demo params); `stale_ms`:
+    the bridge's stale age."""
     if route not in ROUTES:
         raise ValueError(f"route {route!r}: expected one of {', '.join(ROUTES)}")
     src = os.path.join(HERE, config)
@@ -83,12 +86,14 @@ def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeo
     for f in glob.glob(os.path.join(src, "*")) + [os.path.join(HERE, "drive.py")]:
         shutil.copy(f, work)
     shutil.copy(os.path.join(src, f"route-{route}.hal"), os.path.join(work, "route.hal"))
+    params = os.path.abspath(params or os.path.join(ROOT, "configs", "params", f"{config}-demo.yaml"))
+    with open(os.path.join(work, f"{config}.ini"), "a") as f:  # what the HAL files read as [CHAINCOMP]KEY
+        f.write(f"\n[CHAINCOMP]\nROOT = {ROOT}\nPARAMS = {params}\nSTALE_MS = {stale_ms!r}\n")
     with open(NML) as f:
         nml = f.read().replace(" TCP=5005", "")  # no socket at all
     with open(os.path.join(work, "linuxcnc.nml"), "w") as f:
         f.write(nml)
-    cmd_env = {"CHAINCOMP_ROOT": ROOT, **(env or {})}
-    cmd = ["env", "-u", "DISPLAY", *(f"{k}={v}" for k, v in cmd_env.items()), "linuxcnc",
+    cmd = ["env", "-u", "DISPLAY", *(f"{k}={v}" for k, v in (env or {}).items()), "linuxcnc",
            os.path.join(work, f"{config}.ini")]
     if os.geteuid() == 0:
         pw = pwd.getpwnam(USER)
@@ -101,6 +106,13 @@ def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeo
         fcntl.flock(lock, fcntl.LOCK_EX)  # one LinuxCNC at a time
         proc = subprocess.run(cmd, cwd=work, stdin=subprocess.DEVNULL, capture_output=True, text=True,
                               timeout=timeout)
+    log = proc.stdout + proc.stderr
+    home = os.path.expanduser(f"~{USER}") if os.geteuid() == 0 else os.path.expanduser("~")
+    try:  # LinuxCNC's own output goes to ~/linuxcnc_print.txt
+        with open(os.path.join(home, "linuxcnc_print.txt"), errors="replace") as f:
+            log += f.read()
+    except OSError:
+        pass
     samples_path = os.path.join(work, "samples.txt")
     rows = np.loadtxt(samples_path, ndmin=2) if os.path.exists(samples_path) and os.path.getsize(samples_path) \
         else np.zeros((0, COL_FAULT + 1))
@@ -108,7 +120,7 @@ def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeo
     if os.path.exists(os.path.join(work, "events.txt")):
         with open(os.path.join(work, "events.txt")) as f:
             events = [json.loads(line) for line in f if line.strip()]
-    return Run(work, rows, events, proc.stdout + proc.stderr, proc.returncode)
+    return Run(work, rows, events, log, proc.returncode)
 
 
 def to_internal(machine, joints: np.ndarray) -> dict:
