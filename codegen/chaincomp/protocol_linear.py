@@ -286,8 +286,7 @@ def _gains(models, rd: Reading, errors: list[str], slide: dict, measure: list[st
     point, rotation = pose_gains(models, rd.axes, errors)
     if rd.vector is None:
         idx = [COMPONENTS.index(c) for c in measure]
-        rd.gains = point[:, idx, :].reshape(-1, len(errors))
-        rd.axes = {k: np.repeat(v, len(idx)) for k, v in rd.axes.items()}
+        rd.gains = point[:, idx, :].reshape(-1, len(errors))     # set-up major, coordinate minor
     else:
         rd.gains = np.einsum("c,rcn->rn", rd.vector, point if rd.channel == "point" else rotation)
     if rd.kind != "laser":
@@ -305,10 +304,11 @@ def _gains(models, rd: Reading, errors: list[str], slide: dict, measure: list[st
 
 def _rows(proto: LinearProtocol, rd: Reading, errors: list[str]) -> np.ndarray:
     power = {"constant": 0, "offset": 0, "slope": 1, "shape": 2}
+    per = len(rd.gains) // len(next(iter(rd.axes.values())))     # rows per set-up (tracker: coordinates)
     cols = []
     for p in proto.params:
         g = rd.gains[:, errors.index(p.error)]
-        cols.append(g * _t(proto.machine, p.axis, rd.axes[p.axis]) ** power[p.part] if p.axis else g)
+        cols.append(g * _t(proto.machine, p.axis, np.repeat(rd.axes[p.axis], per)) ** power[p.part] if p.axis else g)
     return np.stack(cols, axis=1) if cols else np.zeros((len(rd.gains), 0))
 
 
