@@ -356,7 +356,7 @@ def _volume_figure(d: VolumeData):
         set_label(F.label(f"tool point {c}", d.length_unit))
     fig.colorbar(cm.ScalarMappable(norm=norm, cmap="viridis"), ax=ax, shrink=0.6,
                  label=F.label("|tool point error|", d.unit))
-    ax.set_title(d.title, fontsize="medium")
+    fig.suptitle(d.title, fontsize="medium")
     return fig
 
 
