@@ -55,10 +55,12 @@ _chaincomp() {
           esac;;
         plot)
           case "$prev" in
+            --view) words='map surface volume';;
+            --style) words='heatmap surface';;
             --component) words='dx dy dz dkx dky dkz norm';;
             --order|--model) words='1 2 exact 2-1 exact-1 exact-2';;
-            --style) words='heatmap surface';;
-            *) words='-h --help --params --set --component --over --range --range2 --grid --order --model --style --replay --table --error -o --output'; [[ $cur == -* ]] || return 0;;
+            --units) words='people internal';;
+            *) words='-h --help --params --set --view --style --component --over --range --range2 --grid --order --model --units --replay --table --error -o --output --html'; [[ $cur == -* ]] || return 0;;
           esac;;
         check)
           case "$prev" in
