@@ -102,7 +102,7 @@ def _travel(machine: Machine, model: ExactModel, values: dict) -> dict[str, np.n
 
 
 def plane_axes(machine: Machine, plane: str, values: dict, given: list[str] | None = None,
-               model: ExactModel | None = None) -> tuple[str, str]:
+               model: ExactModel | None = None, what: str = "--axes") -> tuple[str, str]:
     """The linear axes that move the tool (relative to the workpiece) along the plane's two
     directions at ``values``, found from the nominal model, not from their names."""
     model = model or ExactModel(machine)
@@ -114,17 +114,20 @@ def plane_axes(machine: Machine, plane: str, values: dict, given: list[str] | No
         if given:
             name = given[i]
             if name not in [s.name for s in machine.axes]:
-                raise ChaincompError(f"--axes: {name!r} is not an axis of {machine.name} "
+                raise ChaincompError(f"{what}: {name!r} is not an axis of {machine.name} "
                                      f"(axes: {', '.join(s.name for s in machine.axes)})")
             if name not in along:
-                raise ChaincompError(f"--axes: {name} does not move the tool along {coord} here"
+                raise ChaincompError(f"{what}: {name} does not move the tool along {coord} here"
                                      + (f" (it is not a linear axis)" if name not in travel else
                                         f" (it moves it by {np.round(travel[name], 6).tolist()} per mm)"))
             picked.append(name)
             continue
         if not along:
+            rotary = [s.name for s in machine.axes if s.unit.kind == "angle"]
             raise ChaincompError(f"plane {plane}: no linear axis of {machine.name} moves the tool along {coord} "
-                                 f"here (linear axes: {', '.join(travel) or 'none'}; hold rotary axes with --set)")
+                                 f"here (linear axes: {', '.join(travel) or 'none'}"
+                                 + (f"; rotary axes {', '.join(rotary)} may be set with --set)" if rotary and travel
+                                    else ")"))
         if len(along) > 1:
             raise ChaincompError(f"plane {plane}: axes {', '.join(along)} all move the tool along {coord}: "
                                  "choose with --axes")
@@ -167,6 +170,14 @@ def commanded(machine: Machine, model: ExactModel, setup: Setup, values: dict, a
     travel = _travel(machine, model, base)
     jac = np.array([[travel[a][i], travel[b][i]], [travel[a][j], travel[b][j]]])
     target = circle_points(setup, angle)
+    at = tool_point(model, base)
+    if abs(at[n] - setup.centre[n]) > _TOL:
+        c = "xyz"[n]
+        held = ", ".join(f"{k} = {machine.symbol(k).from_internal(v):g} {machine.symbol(k).unit.name}"
+                         for k, v in setup.held.items()) or "the other axes where they are"
+        raise ChaincompError(f"the centre's {c} ({setup.centre[n]:g} mm) is not the tool's {c} with {held} "
+                             f"({at[n]:g} mm): the circle must lie in the plane the tool moves in (move the "
+                             "other axes, or the centre)")
     q = {a: np.full(len(angle), base[a]), b: np.full(len(angle), base[b])}
     for _ in range(8):
         p = tool_point(model, {**base, **q})
@@ -485,6 +496,7 @@ class Term:
     axis: str | None = None
     power: int = 0
     column: np.ndarray = field(default=None, repr=False)   # radial gain at every trace point
+    kind: str = ""             # of a slide's error: positioning or straightness
 
     def unit(self, machine: Machine) -> tuple[str, float]:
         """Display unit and its size in internal units (mm/mm^k ...)."""
@@ -510,15 +522,28 @@ class Fit:
     points: int
     dof: int
     residual: np.ndarray                    # mm, per trace point
+    covariance: np.ndarray = field(default=None, repr=False)
+
+    def scale_mismatch(self, axes: tuple[str, str]) -> tuple[float, float] | None:
+        """The difference of the two plane axes' scale errors (the slopes of their positioning
+        errors, mm/mm) and its standard uncertainty, where both are fitted."""
+        k = [next((i for i, t in enumerate(self.terms) if t.kind == "positioning" and t.power == 1 and t.axis == a),
+                  None) for a in axes]
+        if None in k:
+            return None
+        a, b = k
+        c = self.covariance
+        return float(self.estimates[a] - self.estimates[b]), math.sqrt(max(c[a, a] + c[b, b] - 2 * c[a, b], 0.0))
 
 
-def _slide_terms(machine: Machine, axes: tuple[str, str]) -> list[tuple[str, str]]:
-    """(error, axis) pairs: the positioning and straightness errors of the slides of the plane axes."""
+def _slide_terms(machine: Machine, axes: tuple[str, str]) -> list[tuple[str, str, str]]:
+    """(error, axis, kind): the positioning and straightness errors of the slides of the plane axes."""
     from .calibration import find_slides
     out = []
     for slide in find_slides(machine):
         if slide.axis in axes:
-            out += [(c.error, slide.axis) for c in slide.components if c.kind in ("positioning", "straightness")]
+            out += [(c.error, slide.axis, c.kind) for c in slide.components
+                    if c.kind in ("positioning", "straightness")]
     return out
 
 
@@ -546,7 +571,6 @@ def fit(machine: Machine, trace: Trace, values: dict, axes: dict, start: np.ndar
     index = {s.name: k for k, s in enumerate(machine.errors)}
     centre = [Term(f"centre {'xyz'[c]}", column=n[:, c].copy()) for c in (i, j)]
     location, slide_consts, powers = [], [], []
-    slide_errors = {e for e, _ in _slide_terms(machine, setup.axes)}
     from .calibration import find_slides
     in_slides = {c.error for s in find_slides(machine) for c in s.components}
     for e in free:
@@ -554,11 +578,11 @@ def fit(machine: Machine, trace: Trace, values: dict, axes: dict, start: np.ndar
             continue
         t = Term(e, e, column=radial(index[e]))
         (slide_consts if e in in_slides else location).append(t)
-    for e, a in _slide_terms(machine, setup.axes):
+    for e, a, kind in _slide_terms(machine, setup.axes):
         if e in free and e not in not_fitted:
             for p in range(1, degree + 1):
                 powers.append(Term(f"{e}·{a}" + (f"^{p}" if p > 1 else ""), e, a, p,
-                                   radial(index[e]) * np.asarray(axes[a], float) ** p))
+                                   radial(index[e]) * np.asarray(axes[a], float) ** p, kind))
     candidates = centre + location + slide_consts + powers
     norms = np.array([np.linalg.norm(t.column) for t in candidates])
     big = norms.max()
@@ -595,4 +619,4 @@ def fit(machine: Machine, trace: Trace, values: dict, axes: dict, start: np.ndar
             if abs(f) * np.linalg.norm(tf.column) > 1e-6 * norms[k]:
                 combos[tf.name].append((t.name, float(f)))
     return Fit(terms, est, np.sqrt(np.diag(cov)), combos, unseen, list(assume_zero), not_fitted,
-               math.sqrt(float(res @ res) / m), math.sqrt(float(y @ y) / m), m, dof, res)
+               math.sqrt(float(res @ res) / m), math.sqrt(float(y @ y) / m), m, dof, res, cov)

@@ -244,6 +244,8 @@ def test_fit_on_vmc_xyz_recovers_squareness_and_scale_as_polynomials(tmp_path):
         t = terms[name]
         assert abs(t["value"] - want) < 3 * t["uncertainty"], (name, t)
         assert t["uncertainty"] < 0.05 * abs(want)
+    sm = doc["scale_mismatch"]
+    assert sm["axes"] == ["X", "Y"] and abs(sm["value"] - 16.0) < 3 * sm["uncertainty"] < 1.0
     assert "ECX" in [s["term"] for s in terms["EC0Y"]["stands_for"]]       # yaw of X: the same signature
     assert {"EZX", "EZY", "EZZ"} <= set(doc["not_seen"])                   # out of the plane: not seen
     fitted = load_params(str(out), machine)
@@ -283,7 +285,7 @@ def _refused(capsys, *args, match: str):
     (["--plane", "XY", "--radius", "350"], "beyond its limits"),
     (["--plane", "XY", "--radius", "50", "--set", "V=290"], "the circle takes V from 240 to 340"),
     (["--plane", "XY", "--radius", "50", "--centre", "x=1,q=2"], "--centre: expected"),
-    (["--plane", "XY", "--radius", "50", "--centre", "z=10"], "out of the XY plane"),
+    (["--plane", "XY", "--radius", "50", "--centre", "z=10"], "the centre's z (10 mm) is not the tool's z with W = 0 mm (25 mm)"),
     (["--plane", "XY", "--radius", "50", "--axes", "V,W"], "--axes: W does not move the tool along y"),
     (["--plane", "XY", "--radius", "50", "--degree", "2"], "--degree applies to --fit only"),
 ])

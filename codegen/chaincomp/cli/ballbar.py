@@ -140,10 +140,16 @@ def _figures_text(fig: dict) -> list[str]:
     for d, f in fig.items():
         fmax = f"{f['F_max']:8.3f} {f['F_min']:8.3f}" if "F_max" in f else f"{'':8} {'':8}"
         cx, cy = f["centre_offset"]
-        out.append(f"  {names[d]:22} {f['G']:8.3f} {fmax}   {cx:+9.3f}, {cy:+9.3f} {f['radius_minus_R']:+11.3f}")
+        out.append(f"  {names[d]:22} {f['G']:8.3f} {fmax}   {_z(cx):+9.3f}, {_z(cy):+9.3f} "
+                   f"{_z(f['radius_minus_R']):+11.3f}")
     out.append("G: circular deviation, the radial range about the least-squares circle's centre (ISO 230-4); "
                "F: radial deviation, the largest and smallest deviation from R about the pivot")
     return out
+
+
+def _z(v: float) -> float:
+    """v as printed to 3 decimals, without a sign on zero ('-0.000')."""
+    return round(v, 3) + 0.0
 
 
 def _division(span_um: float) -> float:
@@ -219,7 +225,7 @@ def _other_unit(machine, name: str, terms: dict) -> tuple[str, float]:
     return ("um/m" if k == 1 else "um/m^2"), UM / 1000.0 ** k
 
 
-def fit_doc(machine, fit: bb.Fit) -> dict:
+def fit_doc(machine, fit: bb.Fit, axes) -> dict:
     out = []
     for t, v, s in zip(fit.terms, fit.estimates, fit.uncertainties):
         unit, size = t.unit(machine)
@@ -227,12 +233,15 @@ def fit_doc(machine, fit: bb.Fit) -> dict:
                     "uncertainty": s / size, "unit": unit,
                     "stands_for": [{"term": o, "factor": f * _other_unit(machine, o, {})[1] / size}
                                    for o, f in fit.combinations[t.name]]})
-    return {"terms": out, "not_seen": fit.unseen, "assumed_zero": fit.assumed_zero, "not_fitted": fit.not_fitted,
+    sm = fit.scale_mismatch(axes)
+    return {"terms": out, "scale_mismatch": None if sm is None else
+            {"axes": list(axes), "value": sm[0] / (UM / 1000), "uncertainty": sm[1] / (UM / 1000), "unit": "um/m"},
+            "not_seen": fit.unseen, "assumed_zero": fit.assumed_zero, "not_fitted": fit.not_fitted,
             "rms_residual_um": fit.rms / UM, "rms_before_um": fit.rms_before / UM, "points": fit.points,
             "degrees_of_freedom": fit.dof}
 
 
-def fit_text(machine, fit: bb.Fit) -> list[str]:
+def fit_text(machine, fit: bb.Fit, axes) -> list[str]:
     out = [f"fit: {fit.points} points, {len(fit.terms)} unknowns, {fit.dof} degrees of freedom; rms of the trace "
            f"against the start values {fit.rms_before / UM:.4g} µm, residual after the fit {fit.rms / UM:.4g} µm",
            f"  {'term':<14} {'estimate':>14} {'std. uncertainty':>18}   stands also for"]
@@ -240,6 +249,10 @@ def fit_text(machine, fit: bb.Fit) -> list[str]:
         unit, size = t.unit(machine)
         out.append(f"  {t.name:<14} {v / size:>14.6g} {s / size:>11.3g} {unit:<6}   "
                    f"{_combination(machine, fit, t) or '-'}")
+    sm = fit.scale_mismatch(axes)
+    if sm:
+        out.append(f"scale mismatch {axes[0]} − {axes[1]} (the difference of their scale errors): "
+                   f"{sm[0] / (UM / 1000):.4g} ± {sm[1] / (UM / 1000):.2g} um/m")
     out.append("'stands also for': terms that move the trace only as fitted ones do; each estimate is its "
                "term plus the factors times those (assume some zero with --assume-zero to choose others)")
     if fit.unseen:
@@ -388,7 +401,8 @@ def run_fit(args) -> int:
     setup = trace.setup
     values.update(setup.held)
     model = ExactModel(machine)
-    setup.axes = bb.plane_axes(machine, setup.plane, values, list(setup.axes) if setup.axes else None, model)
+    setup.axes = bb.plane_axes(machine, setup.plane, values, list(setup.axes) if setup.axes else None, model,
+                               what=f"{args.fit}: axes")
     for n in setup.held:
         if n in setup.axes:
             raise ChaincompError(f"{n} drives the circle; it cannot be held", args.fit)
@@ -401,11 +415,11 @@ def run_fit(args) -> int:
     if args.format == "json":
         print(to_json({"machine": machine.name, "trace": args.fit, "start_params": args.params,
                        "standard": "ISO 230-4", "plane": setup.plane, "axes": list(setup.axes),
-                       "units": {"figures": "um"}, "figures": fig, "fit": fit_doc(machine, fit)}))
+                       "units": {"figures": "um"}, "figures": fig, "fit": fit_doc(machine, fit, setup.axes)}))
     else:
         print("\n".join([f"ballbar fit of {machine.name} ({machine.file}) to {args.fit}"
                          + (f", start values {args.params}" if args.params else ""), where]
-                        + _figures_text(fig) + fit_text(machine, fit)))
+                        + _figures_text(fig) + fit_text(machine, fit, setup.axes)))
     if args.output:
         command = " ".join(shlex.quote(c) for c in ["chaincomp", "ballbar", args.machine, "--fit", args.fit]
                            + (["--params", args.params] if args.params else []) + ["-o", args.output])
