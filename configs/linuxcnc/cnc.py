@@ -93,7 +93,8 @@ def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeo
         nml = f.read().replace(" TCP=5005", "")  # no socket at all
     with open(os.path.join(work, "linuxcnc.nml"), "w") as f:
         f.write(nml)
-    cmd = ["env", "-u", "DISPLAY", *(f"{k}={v}" for k, v in (env or {}).items()), "linuxcnc",
+    # HOME: LinuxCNC writes linuxcnc_print.txt and linuxcnc_debug.txt there
+    cmd = ["env", "-u", "DISPLAY", f"HOME={work}", *(f"{k}={v}" for k, v in (env or {}).items()), "linuxcnc",
            os.path.join(work, f"{config}.ini")]
     if os.geteuid() == 0:
         pw = pwd.getpwnam(USER)
@@ -107,9 +108,8 @@ def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeo
         proc = subprocess.run(cmd, cwd=work, stdin=subprocess.DEVNULL, capture_output=True, text=True,
                               timeout=timeout)
     log = proc.stdout + proc.stderr
-    home = os.path.expanduser(f"~{USER}") if os.geteuid() == 0 else os.path.expanduser("~")
     try:  # LinuxCNC's own output goes to ~/linuxcnc_print.txt
-        with open(os.path.join(home, "linuxcnc_print.txt"), errors="replace") as f:
+        with open(os.path.join(work, "linuxcnc_print.txt"), errors="replace") as f:
             log += f.read()
     except OSError:
         pass

@@ -33,7 +33,6 @@ import select
 import signal
 import subprocess
 import sys
-import threading
 import time
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
@@ -65,6 +64,8 @@ def parse_args(argv):
                    help="largest change of a correction per loop when ramping out, mm or deg (default 0.001: "
                         "chaincompd's max_correction_step)")
     p.add_argument("--pid-file", help="write chaincompd's process id here")
+    p.add_argument("--daemon-log", default="chaincompd.log",
+                   help="chaincompd's output (default chaincompd.log in the current folder)")
     args = p.parse_args(argv)
     for name in ("stale_ms", "max_step"):
         v = getattr(args, name)
@@ -74,7 +75,8 @@ def parse_args(argv):
 
 
 def start_daemon(args):
-    """chaincompd as a child that gets SIGTERM when this process dies; waits for its ready line."""
+    """chaincompd as a child that gets SIGTERM when this process dies, its output in
+    --daemon-log; waits for its ready line."""
     libc = ctypes.CDLL(None, use_errno=True)
 
     def die_with_parent():
@@ -83,15 +85,18 @@ def start_daemon(args):
     cmd = [binary("chaincompd"), "--machine", args.machine, "--params", args.params]
     if args.config:
         cmd += ["--config", args.config]
-    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, preexec_fn=die_with_parent)
-    for line in proc.stderr:
-        sys.stderr.write(line)
-        if line.rstrip().endswith("; ready"):
-            break
-    else:
-        raise ChaincompError(f"chaincompd exited before it was ready (status {proc.wait()})")
-    # its later warnings, so that a full pipe never blocks it
-    threading.Thread(target=lambda: [sys.stderr.write(ln) for ln in proc.stderr], daemon=True).start()
+    try:
+        log = open(args.daemon_log, "w+")
+    except OSError as exc:
+        raise ChaincompError(f"--daemon-log {args.daemon_log}: cannot write ({exc.strerror})") from None
+    proc = subprocess.Popen(cmd, stdout=log, stderr=log, preexec_fn=die_with_parent)
+    end = time.monotonic() + 120.0  # a machine outside configs/ is built first (about 25 s)
+    while "; ready\n" not in open(args.daemon_log).read():
+        if proc.poll() is not None or time.monotonic() > end:
+            proc.kill()
+            lines = open(args.daemon_log).read().strip().splitlines() or ["no output"]
+            raise ChaincompError(f"chaincompd did not start (its log: {args.daemon_log}): {lines[-1]}")
+        time.sleep(0.02)
     if args.pid_file:
         with open(args.pid_file, "w") as f:
             f.write(f"{proc.pid}\n")

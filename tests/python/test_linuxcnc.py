@@ -54,7 +54,7 @@ def program_dwells(run):
 
 def completed(run):
     assert run.returncode == 0, run.log[-3000:]
-    assert [e["event"] for e in run.events if e["event"] != "error"] == ["homed", "run", "done"], run.events
+    assert [e["event"] for e in run.events if e["event"] not in ("error", "at")] == ["homed", "run", "done"], run.events
     assert not [e for e in run.events if e["event"] == "error"], run.events
     assert len(run.samples) > 3000
     tags = run.samples[:, 0]
@@ -101,3 +101,69 @@ def test_realtime_component_puts_the_tool_on_the_programmed_point(rt_run, machin
     assert err_nm[program].max() < 1.0, err_nm[program].max()
     assert np.linalg.norm(direction[program], axis=1).max() < 1e-8
     assert rt_run.samples[:, cnc.COL_FAULT].max() == 0
+
+
+STALE_MS = 50.0
+KILL_AT_S = 2.0  # into the program: during the second move
+
+
+@pytest.fixture(scope="module")
+def bridge_run():
+    return cnc.run("bridge", stale_ms=STALE_MS)
+
+
+@pytest.fixture(scope="module")
+def bridge_kill_run():
+    return cnc.run("bridge", stale_ms=STALE_MS, env={"CHAINCOMP_AT_S": f"{KILL_AT_S}:kill $(cat chaincompd.pid)"})
+
+
+def daemon_counts(run):
+    import re
+    with open(os.path.join(run.work, "chaincompd.log")) as f:
+        log = f.read()
+    found = re.findall(r"chaincompd: stopped: received (\d+), published (\d+)", log)
+    assert found, log[-3000:]
+    return tuple(int(v) for v in found[-1])
+
+
+def test_bridge_puts_the_tool_on_the_programmed_point(bridge_run, machine, params):
+    completed(bridge_run)
+    received, published = daemon_counts(bridge_run)
+    assert received == published > 3000  # every command the bridge sent was compensated
+    first, dwells = program_dwells(bridge_run)
+    point, _ = cnc.tool_errors(machine, params, bridge_run.commands, bridge_run.drives)
+    err_um = np.linalg.norm(point, axis=1) * 1e3
+    for s in dwells:
+        assert err_um[s].max() < 1.0, (s, err_um[s].max())
+    program = slice(dwells[0].start, len(err_um))
+    age = bridge_run.samples[program, cnc.COL_AGE]
+    assert bridge_run.samples[program, cnc.COL_STALE].max() == 0
+    # in motion the applied correction is `age` old: at most ~150 mm/s times a few ms of a
+    # correction gradient of about 1e-3 (tens of µm over the travel): a few µm
+    assert err_um[program].max() < 10.0, (err_um[program].max(), np.percentile(age, [50, 99, 100]))
+    # the realtime rate limit holds whatever the userspace loop did
+    assert np.abs(np.diff(bridge_run.corrections, axis=0)).max() <= 0.001 + 1e-9
+
+
+def test_bridge_goes_stale_and_ramps_out_when_the_daemon_dies(bridge_kill_run, machine, params):
+    run = bridge_kill_run
+    completed(run)  # LinuxCNC runs on (fault is not wired to stop it here)
+    assert any(e["event"] == "at" for e in run.events)
+    stale = run.samples[:, cnc.COL_STALE] > 0
+    assert stale.any()
+    first = int(np.argmax(stale))
+    assert stale[first:].all()  # it stays stale: no daemon any more
+    age = run.samples[:, cnc.COL_AGE]
+    # stale within the configured age (plus one userspace loop, which may stall for a few ms)
+    assert STALE_MS < age[first] < STALE_MS + 20.0, age[first]
+    assert run.samples[first:, cnc.COL_FAULT].min() == 1
+    # the correction held before stale, then ramped out without a step beyond 0.001 per period
+    steps = np.abs(np.diff(run.corrections, axis=0))
+    assert steps.max() <= 0.001 + 1e-9
+    assert np.abs(run.corrections[first - 1]).max() > 0.005
+    assert np.all(run.corrections[-1] == 0.0)
+    # uncompensated after the ramp: the true machine's error is the exact model's again
+    _, dwells = program_dwells(run)
+    last = dwells[-1]
+    point, _ = cnc.tool_errors(machine, params, run.commands[last], run.drives[last])
+    assert np.linalg.norm(point, axis=1).min() * 1e3 > 10.0
