@@ -87,7 +87,7 @@ _chaincomp() {
           esac;;
         build)
           case "$prev" in
-            *) words='-h --help -o --output'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help -o --output --linuxcnc --params --install'; [[ $cur == -* ]] || return 0;;
           esac;;
         lint)
           case "$prev" in
