@@ -30,8 +30,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import sympy as sp
 
-from .derive import derive
+from .derive import EXPANDED_TERMS_LIMIT, Derivation, derive
 from .errors import ChaincompError
+from .jets import JetModel
 from .machine import Machine, Symbol
 from .numeric import ExactModel, TruncatedModel
 from .tolerances import Tolerance, Tolerances
@@ -116,9 +117,9 @@ def components(machine: Machine) -> tuple[str, ...]:
 class _Series:
     """Order-1 or order-2 gains from the derivation, lambdified once per component."""
 
-    def __init__(self, machine: Machine, order: int):
+    def __init__(self, machine: Machine, order: int, d: Derivation):
         self.machine, self.order = machine, order
-        self.d = derive(machine, order)
+        self.d = d
         self.syms = [s.sym for s in machine.symbols]
         self.n = len(machine.errors)
         vecs = list(self.d.point) + (list(self.d.direction) if self.d.direction else [])
@@ -139,22 +140,8 @@ class _Series:
         """(gains: list of arrays or scalars, second-order bound or 0) for one component."""
         f, quad = self._fn(comp)
         out = f(*[args[s.name] for s in self.machine.symbols])
-        g = list(out[:self.n])
-        qb = 0.0
-        if quad:
-            eps = [centre.get(s.name, 0.0) for s in self.machine.errors]
-            for (i, j), c in zip(quad, out[self.n:]):
-                if i == j:
-                    if eps[i]:
-                        g[i] = g[i] + 2.0 * c * eps[i]
-                else:
-                    if eps[j]:
-                        g[i] = g[i] + c * eps[j]
-                    if eps[i]:
-                        g[j] = g[j] + c * eps[i]
-                if bounds[i] and bounds[j]:
-                    qb = qb + np.abs(c) * bounds[i] * bounds[j]
-        return g, qb
+        eps = [centre.get(s.name, 0.0) for s in self.machine.errors]
+        return _second_order(list(out[:self.n]), zip(quad, out[self.n:]), eps, bounds)
 
     def gains(self, args: dict, centre: dict, bounds: np.ndarray):
         """Yields (component, gains, second-order bound), one component at a time."""
@@ -166,6 +153,72 @@ class _Series:
             self._truncated = TruncatedModel(self.d)
         dp, dd = self._truncated.error(args, self.order, "numpy")
         return dict(zip(components(self.machine), list(dp) + (list(dd) if dd is not None else [])))
+
+
+def _second_order(g: list, quad, eps: list, bounds: np.ndarray):
+    """(gains at the centre, bound of the quadratic terms over the tolerance box): the linear
+    gains ``g`` plus the gradient of the quadratic terms ``quad`` ((i, j), coefficient) at the
+    centre ``eps``, and sum |c_ij| b_i b_j."""
+    qb = 0.0
+    for (i, j), c in quad:
+        if i == j:
+            if eps[i]:
+                g[i] = g[i] + 2.0 * c * eps[i]
+        else:
+            if eps[j]:
+                g[i] = g[i] + c * eps[j]
+            if eps[i]:
+                g[j] = g[j] + c * eps[i]
+        if bounds[i] and bounds[j]:
+            qb = qb + np.abs(c) * bounds[i] * bounds[j]
+    return g, qb
+
+
+class _Jets:
+    """The same gains for a long chain, whose expanded series would take minutes: the numeric
+    jets (chaincomp.jets) through the chain on the open mesh, a slice of the first grid axis at
+    a time (its jets hold every monomial at every point of the slice)."""
+
+    def __init__(self, machine: Machine, order: int):
+        self.machine, self.order = machine, order
+        self.jets = JetModel(machine, order)
+        self.n = len(machine.errors)
+
+    def gains(self, args: dict, centre: dict, bounds: np.ndarray):
+        comps = components(self.machine)
+        eps = [centre.get(s.name, 0.0) for s in self.machine.errors]
+
+        def block(values):
+            p, d = self.jets.jets(values)
+            out = []
+            for jet in p + (d or []):
+                quad = sorted((m, v) for m, v in jet.items() if len(m) == 2)
+                g, qb = _second_order([jet.get((i,), 0.0) for i in range(self.n)], quad, eps, bounds)
+                out += g + [qb]
+            return out
+
+        cols = _by_slices(args, block)
+        for k, c in enumerate(comps):
+            yield c, cols[k * (self.n + 1):(k + 1) * (self.n + 1) - 1], cols[(k + 1) * (self.n + 1) - 1]
+
+    def systematic(self, args: dict) -> dict:
+        def block(values):
+            dp, dd = self.jets.error(values, self.order)
+            return list(dp) + (list(dd) if dd is not None else [])
+
+        return dict(zip(components(self.machine), _by_slices(args, block)))
+
+
+def _by_slices(args: dict, f) -> list:
+    """f(args) (a list of arrays on the open mesh), one slice of the first grid axis at a time,
+    the slices joined again."""
+    shape = np.broadcast_shapes(*[np.shape(v) for v in args.values()])
+    if not shape:
+        return f(args)
+    parts = [f({k: (v[r:r + 1] if np.ndim(v) and np.shape(v)[0] > 1 else v) for k, v in args.items()})
+             for r in range(shape[0])]
+    sub = (1,) + shape[1:]
+    return [np.concatenate([np.broadcast_to(x, sub) for x in col]) for col in zip(*parts)]
 
 
 class _Exact:
@@ -201,7 +254,10 @@ class _Exact:
 def gain_model(machine: Machine, order: str):
     if order not in ORDERS:
         raise ChaincompError(f"--order must be 1, 2 or exact, got {order!r}")
-    return _Exact(machine) if order == "exact" else _Series(machine, int(order))
+    if order == "exact":
+        return _Exact(machine)
+    d = derive(machine, int(order), max_terms=EXPANDED_TERMS_LIMIT)
+    return _Series(machine, int(order), d) if d else _Jets(machine, int(order))
 
 
 # ----------------------------------------------------------------------------- the budget

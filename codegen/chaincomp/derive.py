@@ -19,6 +19,13 @@ from .machine import ROT_PLANE, Machine, Rotation
 
 COMPONENTS = ("x", "y", "z")
 
+# Up to this many terms in the expanded series (orders 1..k, every pose component) a machine
+# is a short chain: generate evaluates the expanded forms, which CSE shrinks best, and budget
+# lambdifies them; beyond it the expansion grows with every rotation (a UR5 with constant
+# twists: 32 883 terms, minutes to derive) and they propagate through the chain instead
+# (chaincomp.straightline, chaincomp.jets).
+EXPANDED_TERMS_LIMIT = 5000
+
 
 class Progress:
     """Reports steps on stderr, but only once the work has taken longer than a second."""

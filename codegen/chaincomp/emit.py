@@ -15,7 +15,7 @@ import sympy as sp
 from sympy.printing.cxx import CXX17CodePrinter
 
 from . import straightline
-from .derive import derive
+from .derive import EXPANDED_TERMS_LIMIT, derive
 from .machine import ROT_PLANE, Machine, Rotation
 from .units import UNITS
 
@@ -332,11 +332,6 @@ def _paths(exact: list[sp.Expr]) -> int:
     return sum(paths(e) for e in exact)
 
 
-# Up to this many terms in the expanded series (orders 1..k, every pose component) the
-# generated functions evaluate the expanded forms, which CSE shrinks best on short chains;
-# beyond it, the straight-line code, whose size grows linearly with the chain where the
-# expansion grows with every rotation (a UR5 with constant twists: 32 883 terms).
-EXPANDED_TERMS_LIMIT = 5000
 
 
 def _kind(unit) -> str:

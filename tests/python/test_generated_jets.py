@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from chaincomp import ExactModel, load_machine
-from chaincomp.emit import EXPANDED_TERMS_LIMIT, generate
+from chaincomp.derive import EXPANDED_TERMS_LIMIT
+from chaincomp.emit import generate
 from chaincomp.jets import JetModel
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
