@@ -349,7 +349,8 @@ def test_trace_round_trip(machine_file, tmp_path):
     p = params_file(tmp_path, {"SV": "5 ppm", "SQ": "-4 arcsec"})
     trace = tmp_path / "t.csv"
     run_cli("ballbar", machine_file, "--params", p, "--plane", "YZ", "--radius", "40", "--set", "V=12",
-            "--feed", "1500", "--points", "90", "-o", str(trace))
+            "--feed", "1500", "--points", "90", "-o", str(trace), "--plot", str(tmp_path / "polar.png"))
+    assert (tmp_path / "polar.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     machine = load_machine(machine_file)
     t = bb.read_trace(str(trace), machine)
     assert t.setup.plane == "YZ" and t.setup.axes == ("U", "W") and t.setup.radius == 40

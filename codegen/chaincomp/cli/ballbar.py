@@ -352,11 +352,11 @@ def run(args) -> int:
     check_image(args.plot, args.machine, args.params, args.output, option="--plot")
     machine = load(args.machine)
     values, has_errors = values_for(machine, args.params, args.sets)
+    model = ExactModel(machine)
+    setup = _setup(args, machine, model, values)
     if not has_errors:
         print("chaincomp ballbar: warning: no error values given (--params or --set): the trace is a perfect "
               "circle", file=sys.stderr)
-    model = ExactModel(machine)
-    setup = _setup(args, machine, model, values)
     trace = bb.predict(machine, values, setup, args.points, model)
     ev = bb.evaluate(trace)
     fig = _figures(ev, setup.radius)
