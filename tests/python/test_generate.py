@@ -53,3 +53,16 @@ def test_bundled_machine_names_match_file_names():
     from chaincomp import load_machine
     for name in BUNDLED:
         assert load_machine(machine_path(name)).name == name
+
+
+def test_long_chain_straight_line_code_is_byte_identical_across_runs(tmp_path):
+    """The benchmark UR5 (past the expansion limit: the straight-line emitter) under two hash seeds."""
+    outs = []
+    for seed in (1, 4242):
+        out = tmp_path / str(seed)
+        env = dict(os.environ, PYTHONHASHSEED=str(seed))
+        subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "generate",
+                        os.path.join(ROOT, "tools", "bench_machines", "ur5.yaml"), "-o", str(out)],
+                       check=True, capture_output=True, cwd=ROOT, env=env)
+        outs.append({f: (out / f).read_bytes() for f in sorted(os.listdir(out))})
+    assert outs[0] == outs[1] and sorted(outs[0]) == ["ur5.cpp", "ur5.hpp"]
