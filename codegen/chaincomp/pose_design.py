@@ -42,7 +42,7 @@ _WORK = 3e9               # flops the greedy and exchange passes may spend (abou
 
 
 def point_jacobian(machine: Machine, model: ExactModel, axes: dict[str, np.ndarray],
-                   errors: list[str], measure=COMPONENTS) -> np.ndarray:
+                   errors: list[str], measure=COMPONENTS, say=None) -> np.ndarray:
     """(rows, len(measure), len(errors)): the measured tool-point coordinates' derivatives in
     the errors at zero errors, internal units, by the complex step (central differences where
     the chain cannot take complex values), as identify's fit takes them."""
@@ -61,13 +61,17 @@ def point_jacobian(machine: Machine, model: ExactModel, axes: dict[str, np.ndarr
             d = (plus - minus) / (2 * _STEP)
         d = np.broadcast_to(d, (n, len(next(iter(part.values()))), 3))
         out[start:start + _CHUNK] = np.transpose(d[:, :, idx], (1, 2, 0))
+        if say:
+            say(f"Jacobian: {min(start + _CHUNK, rows)} of {rows} candidate poses")
     return out
 
 
 def is_arm(machine: Machine) -> bool:
-    """Every axis a revolute joint (an angle), and a serial chain of them (no structural loop)."""
+    """An arm gets a pose design by default: every axis a revolute joint (an angle) of a serial
+    chain (no structural loop), written as dh/mdh joints or four or more of them (an angle grid
+    over four axes already has 256 set-ups, past what the paper's search can pair)."""
     return bool(machine.axes) and all(s.unit.kind == "angle" for s in machine.axes) \
-        and not machine.workpiece_chain
+        and not machine.workpiece_chain and (bool(machine.joints) or len(machine.axes) >= 4)
 
 
 def index_value(blocks: np.ndarray, index: str) -> float:
@@ -141,8 +145,7 @@ def design_poses(machine: Machine, n: int, seed: int, index: str = "min-sv", mea
     fixed = fixed or {}
     cand = {s.name: s.to_internal(rng.uniform(*s.limits, pool)) for s in machine.axes}
     cand.update({k: np.full(pool, v) for k, v in fixed.items()})
-    say(f"Jacobian at {pool} candidate poses")
-    jac = point_jacobian(machine, ExactModel(machine), cand, errors, measure)     # (pool, c, n)
+    jac = point_jacobian(machine, ExactModel(machine), cand, errors, measure, say)   # (pool, c, n)
     scale = np.sqrt((jac ** 2).sum(axis=(0, 1)) / pool)
     visible = scale > 1e-12 * max(scale.max(initial=0.0), 1e-300)
     invisible = [e for e, v in zip(errors, visible) if not v]
@@ -281,14 +284,18 @@ def design_json(design: Design, output: str | None) -> dict:
     }
 
 
+def _redundant(design: Design) -> str:
+    k = len(design.errors) - len(design.invisible) - design.rank
+    return f"{k} combination{'s' if k != 1 else ''} of them no pose can see" if k > 0 else ""
+
+
 def design_text(design: Design, output: str | None) -> str:
     m = design.machine
     lines = [f"POSE DESIGN for {m.name} ({m.file}): {len(design)} poses within the axis limits, "
              f"seed {design.seed}, from {design.pool} random candidates",
              f"Measured: {', '.join(c.upper() for c in design.measure)} of the tool point; "
              f"{len(design.errors)} errors, of which the pool identifies {design.rank} independent combinations"
-             + (f" (the other {len(design.errors) - design.rank - len(design.invisible)} are redundant: "
-                "identify names them)" if design.rank + len(design.invisible) < len(design.errors) else ""),
+             + (f"; {_redundant(design)} (identify names the errors in them)" if _redundant(design) else ""),
              f"Index {design.index}: {_WHAT[design.index]}",
              f"  chosen poses   {design.value:.6g}   (greedy {design.greedy_value:.6g}, "
              f"then {design.exchanges} exchanges)",

@@ -110,6 +110,21 @@ class Protocol:
                 f"{'-' if eq.sign < 0 else '+'} {self.label(b)}")
 
 
+def plan_text(machine: Machine, assume_zero=()) -> str:
+    """What ``chaincomp protocol MACHINE`` prints with its defaults, whatever the machine: the
+    laser runs, diagonals and tracker points of a machine with linear axes only, the pose design
+    of an arm, else the search over the angle grid."""
+    from .cli.common import DEFAULT_SEED
+    from .pose_design import DEFAULT_POSES, design_poses, design_text, is_arm
+    from .protocol_linear import build_linear_protocol, linear_only
+    from .protocol_linear import to_text as linear_text
+    if is_arm(machine):
+        return design_text(design_poses(machine, DEFAULT_POSES, DEFAULT_SEED, assume_zero=assume_zero), None)
+    if linear_only(machine):
+        return linear_text(build_linear_protocol(machine, assume_zero=assume_zero))
+    return to_text(build_protocol(machine, assume_zero=assume_zero))
+
+
 def build_protocol(machine: Machine, angles=(0.0, 90.0, 180.0, 270.0), assume_zero=(),
                    measure=COMPONENTS, fixed: dict[str, float] | None = None, prefer=()) -> Protocol:
     """Search the set-ups of ``machine``'s rotary axes over ``angles`` for the simplest tests."""

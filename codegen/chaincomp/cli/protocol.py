@@ -92,7 +92,7 @@ def run(args) -> int:
             raise ChaincompError(f"--set: {n!r} is not an axis (constants and errors are not set here)")
     assume = names(",".join(args.assume_zero), "--assume-zero")
     measure = names(args.measure, "--measure")
-    if args.poses is not None or (is_arm(machine) and (machine.joints or len(machine.axes) >= 4)):
+    if args.poses is not None or is_arm(machine):
         for option, given in (("--angles", args.angles is not None), ("--prefer", bool(args.prefer))):
             if given:
                 raise ChaincompError(f"{option}: not with a pose design (--poses; arms get one by default)")
