@@ -33,8 +33,9 @@ _chaincomp() {
           esac;;
         protocol)
           case "$prev" in
+            --index) words='min-sv o1';;
             --format) words='text json';;
-            *) words='-h --help --angles --assume-zero --measure --prefer --set --order --format --json'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --angles --assume-zero --measure --prefer --set --order --poses --index --pool --seed -o --output --format --json'; [[ $cur == -* ]] || return 0;;
           esac;;
         identify)
           case "$prev" in
