@@ -240,10 +240,30 @@ def test_replay_plot_one_unit_per_panel_and_the_error_with_and_without(figures, 
     labels = [line.get_label() for line in panel.get_lines()]
     assert labels[0] == "without compensation" and labels[1].startswith("with compensation")
     without, with_ = (line.get_ydata() for line in panel.get_lines())
-    # the ramp starts from no correction: there the two agree (computed apart: Python's exact
-    # model, the compiled compensator's residual); afterwards the compensated error is far below
+    # with compensation: Python's exact model at the corrected axes, which must agree with the
+    # compiled compensator's own residual in the CSV (1 pm), ramp included
+    import csv
+    with open(replay_csv, newline="") as f:
+        residual = np.array([float(r["residual_point_mm"]) for r in csv.DictReader(f)]) * 1000.0
+    assert np.allclose(with_, residual, rtol=0, atol=1e-6)
+    # the ramp starts from next to no correction; afterwards the compensated error is far below
     assert without[0] == pytest.approx(with_[0], rel=0.05)
     assert np.max(with_[len(with_) // 2:]) < 1e-3 * np.min(without)
+
+
+def test_replay_plot_of_a_three_axis_machine_leaves_the_tilt(figures, tmp_path):
+    """vmc_xyz's slides cannot turn the tool axis: its tilt is the same with and without
+    compensation, while the tool point error drops."""
+    log, table = tmp_path / "axes.lcmlog", tmp_path / "replay.csv"
+    vmc, params = machine_path("vmc_xyz"), _params("vmc_xyz")
+    run_cli("simulate-log", vmc, "-o", str(log), "--seconds", "0.1")
+    run_cli("replay", vmc, str(log), "--params", params, "--csv", str(table))
+    fig = figures("plot", vmc, "--params", params, "--replay", table)
+    assert [ax.get_ylabel() for ax in fig.axes] == ["commanded [mm]", "correction [µm]", "|tool point error| [µm]",
+                                                    "tool axis error [arcsec]"]
+    (p_without, p_with), (d_without, d_with) = ([line.get_ydata() for line in ax.get_lines()] for ax in fig.axes[2:])
+    assert np.allclose(d_with, d_without, rtol=1e-9) and d_with.min() > 1.0
+    assert p_with[-1] < 1e-3 * p_without[-1]
 
 
 def test_replay_plot_without_a_machine_warns(figures, replay_csv, capsys):

@@ -62,15 +62,16 @@ def evaluate(machine, values: dict, with_errors: bool) -> dict:
         out["error"] = err
         if derr:
             out["direction_error"] = derr
-            out["direction_angle"] = {name: _angle(direction, d) for name, d in derr.items()}
+            n = np.asarray(direction, float)
+            out["direction_angle"] = {name: float(angle_between(n, n + np.asarray(d, float)))
+                                      for name, d in derr.items()}
     return out
 
 
-def _angle(nominal, error) -> float:
-    """Angle (rad) between the nominal tool axis and nominal + error, stable for tiny angles."""
-    n = np.asarray(nominal, float)
-    a = n + np.asarray(error, float)
-    return float(np.arctan2(np.linalg.norm(np.cross(n, a)), n @ a))
+def angle_between(a, b):
+    """Angle (rad) between vectors a and b (along the last axis), stable for tiny angles."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
 
 
 def run(args) -> int:

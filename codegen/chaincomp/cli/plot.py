@@ -21,6 +21,7 @@ from ..units import UNITS
 from . import figures as F
 from .common import (MODEL_NAMES, add_machine_argument, add_model_argument, add_values_arguments, check_image,
                      check_output, integer, load, parse_number, values_for)
+from .eval import angle_between
 
 COMPONENTS = ("dx", "dy", "dz", "dkx", "dky", "dkz", "norm")
 # 1000 x 1000 points: 4-5 s for one model, 39 s for exact minus second (five_axis_ac, 2026-12)
@@ -413,13 +414,21 @@ def _replay_figure(args):
     linear = [a for a in axes if a.endswith("_mm")]
     rotary = [a for a in axes if not a.endswith("_mm")]
     machine = load(args.machine) if args.machine else None
-    without = _uncompensated(args, machine, axes, cols)
+    predicted = _predicted(args, machine, axes, cols)
+    if predicted:
+        errors = predicted
+        source = "the exact model at the corrected axes (ramp included)"
+    else:   # the compensator's own residuals
+        direction = cols.get("residual_direction_rad")
+        errors = {"with": (cols["residual_point_mm"], direction if direction is not None and direction.any()
+                           else None)}
+        source = "the compensator's residual (ramp included)"
     um, arcsec = display_unit("length", args.units), display_unit("angle", args.units)
     panels = [("commanded", linear, "mm", 1.0), ("commanded", rotary, "deg", 1.0),
               ("correction", linear, um.name, 1.0 / um.to_internal),
               ("correction", rotary, arcsec.name, UNITS["deg"].to_internal / arcsec.to_internal)]
     panels = [p for p in panels if p[1]]
-    has_direction = "residual_direction_rad" in cols
+    has_direction = errors["with"][1] is not None
     n = len(panels) + 1 + has_direction
     fig, grid = plt.subplots(n, 1, figsize=(10, 2.1 * n + 1.2), dpi=100, sharex=True, squeeze=False)
     grid = grid[:, 0]
@@ -428,32 +437,27 @@ def _replay_figure(args):
             ax.plot(t, cols[f"{what}_{a}"] * k, label=a.rsplit("_", 1)[0])
         ax.set_ylabel(F.label(what, unit))
         ax.legend(loc="upper right", fontsize="small", ncol=len(names))
-    ax = grid[len(panels)]
-    if without is not None:
-        ax.plot(t, without[0] / um.to_internal, label="without compensation", color="C3")
-    with_ = cols["residual_point_mm"] / um.to_internal
-    ax.plot(t, with_, label=f"with compensation (median {np.median(with_):.2g} {um.name})", color="C2")
-    ax.set_ylabel(F.label("|tool point error|", um.name))
-    ax.legend(loc="upper right", fontsize="small")
-    if has_direction:
-        ax = grid[-1]
-        if without is not None and without[1] is not None:
-            ax.plot(t, without[1] / arcsec.to_internal, label="without compensation", color="C3")
-        with_ = cols["residual_direction_rad"] / arcsec.to_internal
-        ax.plot(t, with_, label=f"with compensation (median {np.median(with_):.2g} {arcsec.name})", color="C2")
-        ax.set_ylabel(F.label("tool axis error", arcsec.name))
+    for k, (quantity, unit) in enumerate([("|tool point error|", um)] + ([("tool axis error", arcsec)]
+                                                                        if has_direction else [])):
+        ax = grid[len(panels) + k]
+        if "without" in errors:
+            ax.plot(t, errors["without"][k] / unit.to_internal, label="without compensation", color="C3")
+        with_ = errors["with"][k] / unit.to_internal
+        ax.plot(t, with_, label=f"with compensation (median {np.median(with_):.2g} {unit.name})", color="C2")
+        ax.set_ylabel(F.label(quantity, unit.name))
         ax.legend(loc="upper right", fontsize="small")
     grid[-1].set_xlabel(F.label("time", "s"))
     what = f"replay of {os.path.basename(args.replay)}, {ok} corrected, {rows - ok} rejected"
-    fig.suptitle(F.title(machine or "(no machine file)", what, args.params, args.sets, "exact", extra="with compensation: as the compiled compensator "
-                         "left it (ramp included)"), fontsize="medium")
+    fig.suptitle(F.title(machine or "(no machine file)", what, args.params, args.sets, "exact",
+                         extra=f"with compensation: {source}"), fontsize="medium")
     fig.tight_layout()
     return fig
 
 
-def _uncompensated(args, machine, axes: list[str], cols: dict):
-    """(|tool point error|, tool axis angle error or None) at the commanded axes, internal units:
-    the error the machine would make without compensation; None without a machine and params."""
+def _predicted(args, machine, axes: list[str], cols: dict):
+    """{"without": (|point error|, axis angle or None), "with": (...)}, internal units, per record:
+    the exact model's tool pose at the commanded and at the corrected axes, each against the
+    nominal pose at the commanded axes. None without a machine and error values."""
     if not (machine and (args.params or args.sets)):
         F.warn("the tool error without compensation needs MACHINE.yaml and --params: only the error with "
                "compensation is drawn")
@@ -463,20 +467,30 @@ def _uncompensated(args, machine, axes: list[str], cols: dict):
     if have != [a.name for a in machine.axes]:
         raise ChaincompError(f"the CSV's axes ({', '.join(have)}) are not those of {machine.name} "
                              f"({', '.join(a.name for a in machine.axes)})", args.replay, 1)
-    v = dict(values)
-    for a in axes:
-        name, unit = a.rsplit("_", 1)
-        v[name] = cols["commanded_" + a] * UNITS[unit].to_internal
-    dp, dd = ExactModel(machine).error(v)
-    point = np.sqrt(sum(np.asarray(c, float) ** 2 for c in dp))
-    if dd is None:
-        return point, None
-    nominal = {k: (0.0 * x if machine.symbol(k).role == "error" else x) for k, x in v.items()}
-    _, n = ExactModel(machine).pose(nominal)
-    n = np.stack([np.broadcast_to(np.asarray(c, float), point.shape) for c in n], axis=1)
-    a = n + np.stack([np.broadcast_to(np.asarray(c, float), point.shape) for c in dd], axis=1)
-    angle = np.arctan2(np.linalg.norm(np.cross(n, a), axis=1), np.einsum("ij,ij->i", n, a))
-    return point, angle
+    missing = [a for a in axes if "corrected_" + a not in cols]
+    if missing:
+        raise ChaincompError(f"no corrected_{missing[0]} column: the error with compensation needs the corrected "
+                             "axes", args.replay, 1)
+    exact = ExactModel(machine)
+    shape = cols["utime"].shape
+
+    def pose(prefix: str, with_errors: bool):
+        v = dict(values)
+        for a in axes:
+            name, unit = a.rsplit("_", 1)
+            v[name] = cols[prefix + a] * UNITS[unit].to_internal
+        if not with_errors:
+            v.update({s.name: 0.0 for s in machine.errors})
+        p, d = exact.pose(v)
+        stack = lambda c: np.stack([np.broadcast_to(np.asarray(x, float), shape) for x in c], axis=1)  # noqa: E731
+        return stack(p), (stack(d) if d is not None else None)
+
+    p0, d0 = pose("commanded_", False)
+    out = {}
+    for key, prefix in (("without", "commanded_"), ("with", "corrected_")):
+        p, d = pose(prefix, True)
+        out[key] = (np.linalg.norm(p - p0, axis=1), angle_between(d0, d) if d0 is not None else None)
+    return out
 
 
 def _read_replay_csv(path: str) -> tuple[int, dict[str, np.ndarray]]:
@@ -491,12 +505,12 @@ def _read_replay_csv(path: str) -> tuple[int, dict[str, np.ndarray]]:
             reader = csv.DictReader(f)
             names = reader.fieldnames or []
             wanted = ["utime", "residual_point_mm"] + [c for c in names if c == "residual_direction_rad"
-                                                        or c.startswith(("commanded_", "correction_"))]
+                                                        or c.startswith(("commanded_", "corrected_", "correction_"))]
             missing = [c for c in ("result", "utime", "residual_point_mm") if c not in names]
             if missing or not any(c.startswith("commanded_") for c in names):
                 fail(f"not a 'chaincomp replay' CSV: no {(missing or ['commanded_*'])[0]} column", 1)
             for c in wanted:
-                if c.startswith(("commanded_", "correction_")) and not c.endswith(("_mm", "_deg")):
+                if c.startswith(("commanded_", "corrected_", "correction_")) and not c.endswith(("_mm", "_deg")):
                     fail(f"column {c}: an axis column ends in _mm or _deg (the units on the wire)", 1)
             out: dict[str, list[float]] = {c: [] for c in wanted}
             rows = 0
