@@ -139,6 +139,26 @@ def test_lcm_spy_script_refuses_without_a_usable_url(args, match):
     assert proc.returncode == 2 and match in proc.stderr, proc.stderr
 
 
+def test_lcm_spy_finds_every_type_of_ours():
+    """The wheel's own lcm-spy with the jar on its CLASSPATH (as tools/lcm-spy starts it) reports
+    the types it found before it opens its window; without a display it stops there, before it
+    creates its LCM (lcm.spy.Spy builds the window first), so nothing is ever sent."""
+    import glob
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    env["CLASSPATH"] = JAR
+    proc = subprocess.run([os.path.join(ROOT, ".venv", "bin", "lcm-spy"), "--lcm-url=memq://"], env=env,
+                          capture_output=True, text=True, timeout=120)
+    types = len(glob.glob(os.path.join(ROOT, "runtime", "lcmtypes", "*.lcm")))
+    assert f"Found {types} LCM types" in proc.stdout, proc.stdout[-2000:]
+
+
+def test_lcm_spy_script_needs_a_display():
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    proc = subprocess.run([SPY, "--url", "udpm://239.255.76.67:7667?ttl=0"], env=env, capture_output=True,
+                          text=True, timeout=30)
+    assert proc.returncode == 2 and "no display" in proc.stderr, proc.stderr
+
+
 def test_lcm_spy_script_help():
     proc = subprocess.run([SPY, "--help"], capture_output=True, text=True, timeout=30)
     text = " ".join(proc.stdout.split())
