@@ -32,10 +32,11 @@ USER = os.environ.get("CHAINCOMP_LINUXCNC_USER", "chaincomp-cnc")
 LOCK = os.path.join(tempfile.gettempdir(), "chaincomp-linuxcnc.lock")
 NML = "/usr/share/linuxcnc/linuxcnc.nml"
 ROUTES = ("off", "rt", "bridge")
-# sampler.0 columns after halsampler's tag: 5 commands (mm, deg), 5 observed corrections
-# (drive - command, nm and udeg), the bridge's age-ms, stale and fault
+# sampler.0 columns after halsampler's tag: 5 commands and 5 observed corrections (drive -
+# command), both in nm and udeg, then the bridge's age-ms or chaincomp_rt's cost-ns, stale, fault
 N_JOINTS = 5
 COL_CMD, COL_OBS, COL_AGE, COL_STALE, COL_FAULT = 1, 6, 11, 12, 13
+COL_COST = COL_AGE
 
 
 def unavailable() -> str | None:
@@ -62,7 +63,8 @@ class Run:
 
     @property
     def commands(self) -> np.ndarray:
-        return self.samples[:, COL_CMD:COL_CMD + N_JOINTS]
+        """joint.N.motor-pos-cmd, LinuxCNC units (mm, deg)."""
+        return self.samples[:, COL_CMD:COL_CMD + N_JOINTS] * 1e-6
 
     @property
     def corrections(self) -> np.ndarray:
