@@ -413,7 +413,8 @@ class Fit:
 
 
 def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_iterations: int = 50,
-             model: ExactModel | None = None, vary=(), smooth: float = 0.0, minimal: bool = False) -> Fit:
+             model: ExactModel | None = None, vary=(), smooth: float = 0.0, minimal: bool = False,
+             prefer=()) -> Fit:
     """Fit the errors of ``machine`` (all but ``assume_zero``) to the measured tool points and
     directions.
 
@@ -421,7 +422,8 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     for x, y, z (internal units), or {column: sigma} (lengths for x, y, z, angles in rad for
     kx, ky, kz). ``vary``: ``Vary`` specs of errors fitted as tables or polynomials along an
     axis; ``smooth``: the weight of their tables' second differences (declared unit). ``minimal``:
-    fit a minimal identifiable set, every other parameter held at zero. ``model``: the machine's
+    fit a minimal identifiable set, every other parameter held at zero; ``prefer``: errors to take
+    into that set (and keep out of the suggested assume-zero set) first. ``model``: the machine's
     ExactModel, to reuse its compiled functions across fits. Raises ChaincompError when the data
     identify nothing, leave no redundancy to estimate the uncertainty (without ``sigma``), or
     give non-finite values."""
@@ -430,6 +432,9 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     if smooth and not any(v.kind == "table" for v in varies.values()):
         raise ChaincompError("--smooth: no error is fitted as a table (--vary NAME=table:...) to smooth")
     free = [s.name for s in machine.errors if s.name not in assume_zero]
+    both = [n for n in prefer if n in assume_zero]
+    if both:
+        raise ChaincompError(f"--prefer {both[0]}: it is also assumed zero (--assume-zero)")
     if not free:
         raise ChaincompError("--assume-zero: every error is assumed zero, nothing is left to fit")
     obs = table.observations
@@ -484,7 +489,8 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     if rank == 0:
         raise ChaincompError(f"none of the {n} parameters fitted moves the {data}: nothing to identify",
                              table.file)
-    kept = [int(cols[k]) for k in _spanning(scaled, rank)]
+    first = [k for name in prefer for k, j in enumerate(cols) if params[j].error == name]
+    kept = [int(cols[k]) for k in _spanning(scaled, rank, first)]
     redundant, carried = {}, {}
     if minimal:
         for j in cols:
@@ -568,18 +574,25 @@ def _count(k: int, what: str) -> str:
     return f"{k} {what}{'' if k == 1 else 's'}"
 
 
-def _spanning(a: np.ndarray, rank: int) -> list[int]:
-    """``rank`` columns of ``a`` that span its column space, picked greedily, each time the one
-    least explained by those already picked (QR with column pivoting). Ties (remaining norms
-    within 1e-9 of the largest, relative) go to the first column: machine order."""
+def _spanning(a: np.ndarray, rank: int, first=()) -> list[int]:
+    """``rank`` columns of ``a`` (unit norm) that span its column space: the columns ``first``
+    in that order, each that still adds a direction (remaining norm above 1e-6), then, greedily,
+    each time the one least explained by those already picked (QR with column pivoting). Ties
+    (remaining norms within 1e-9 of the largest, relative) go to the first column: machine order."""
     a = a.copy()
-    picked = []
-    for _ in range(rank):
-        norms = np.linalg.norm(a, axis=0)
-        j = int(np.flatnonzero(norms >= norms.max() * (1 - _TIE))[0])
-        q = a[:, j] / norms[j]
-        a -= np.outer(q, q @ a)
+    picked: list[int] = []
+
+    def pick(j):
+        q = a[:, j] / np.linalg.norm(a[:, j])
+        a[:] -= np.outer(q, q @ a)
         picked.append(j)
+
+    for j in first:
+        if len(picked) < rank and j not in picked and np.linalg.norm(a[:, j]) > 1e-6:
+            pick(j)
+    while len(picked) < rank:
+        norms = np.linalg.norm(a, axis=0)
+        pick(int(np.flatnonzero(norms >= norms.max() * (1 - _TIE))[0]))
     return picked
 
 
@@ -678,11 +691,10 @@ def to_json(fit: Fit, source: str) -> dict:
 
 
 def _residuals(fit: Fit, units: str) -> str:
-    parts = []
-    if not math.isnan(fit.rms):
-        parts.append(f"tool point {quantity(fit.rms, 'length', units)}")
-    if not math.isnan(fit.rms_direction):
-        parts.append(f"tool direction {quantity(fit.rms_direction, 'angle', units)}")
+    """'rms residual 0.785 µm', or with directions '... 0.785 µm (tool point), 9.8 arcsec (tool direction)'."""
+    point, direction = not math.isnan(fit.rms), not math.isnan(fit.rms_direction)
+    parts = ([quantity(fit.rms, "length", units) + (" (tool point)" if direction else "")] if point else []) \
+        + ([quantity(fit.rms_direction, "angle", units) + " (tool direction)"] if direction else [])
     return "rms residual " + ", ".join(parts)
 
 

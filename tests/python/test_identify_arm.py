@@ -156,6 +156,23 @@ def test_without_minimal_the_same_rank_and_a_minimal_suggestion(tmp_path, capsys
     assert "cannot be told apart from" in out
 
 
+def test_preferred_errors_enter_the_minimal_set_first(tmp_path, capsys, arm):
+    """The tool block's offsets instead of the last joint's d and a (they move the tool point
+    alike): --prefer takes them first; the rank and the residual do not change."""
+    m, rng, truth = arm
+    q_deg = poses(np.random.default_rng(6), 50)
+    data = ur5_pose(q_deg * DEG, truth)
+    data[:, :3] += NOISE * np.random.default_rng(7).standard_normal((50, 3))
+    write_csv(tmp_path / "meas.csv", q_deg, data, [0, 1, 2])
+    plain = fit_json(capsys, tmp_path / "meas.csv", "--minimal")
+    preferred = fit_json(capsys, tmp_path / "meas.csv", "--minimal", "--prefer", "tx,ty,tz")
+    assert {"tx", "ty", "tz"} <= set(preferred["estimates"]) and not {"tx", "ty", "tz"} & set(plain["estimates"])
+    assert preferred["rank"] == plain["rank"] == len(preferred["estimates"])
+    assert preferred["rms_residual"] == pytest.approx(plain["rms_residual"], rel=1e-6)
+    rc, _, err = run(capsys, "identify", UR5, tmp_path / "meas.csv", "--prefer", "tx", "--assume-zero", "tx")
+    assert rc == 2 and "--prefer tx: it is also assumed zero" in err
+
+
 def test_full_poses_weighted_by_their_sigmas(tmp_path, capsys, arm):
     """Tool points and directions at 40 poses (20 µm, 10 arcsec): the rank is this file's own
     for the two kinds weighted by their sigmas, above the rank of the points alone, and every

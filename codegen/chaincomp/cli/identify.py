@@ -149,6 +149,10 @@ def add_parser(sub) -> None:
                    help="fit a minimal identifiable set (QR with column pivoting of the scaled Jacobian); "
                         "every other parameter is held at zero and reported with the combination that "
                         "carries it")
+    p.add_argument("--prefer", action="append", default=[], metavar="E1,E2",
+                   help="errors to take into the minimal set first, in this order, each where it adds a "
+                        "combination the data see (the rest chosen by pivoting); also kept out of the "
+                        "suggested --assume-zero set; names separated by commas (repeatable)")
     p.add_argument("--vary", action="append", default=[], metavar="NAME=table:K1,K2,...|NAME=poly:DEG",
                    help="fit error NAME as a table on these knots (the axis' declared unit; linear between "
                         "them, held beyond) or a polynomial of this degree along its slide's axis "
@@ -170,9 +174,11 @@ def run(args) -> int:
     check_output(args.output, args.measurements, args.machine)
     assume = check_errors(machine, names(",".join(args.assume_zero)), "--assume-zero")
     sigma = sigma_spec(machine, args.sigma) if args.sigma is not None else None
+    prefer = check_errors(machine, names(",".join(args.prefer)), "--prefer")
     vary = [vary_spec(machine, v) for v in args.vary]
     table = read_table(args.measurements, machine)
-    fit = identify(machine, table, assume, sigma, vary=vary, smooth=args.smooth, minimal=args.minimal)
+    fit = identify(machine, table, assume, sigma, vary=vary, smooth=args.smooth, minimal=args.minimal,
+                   prefer=prefer)
     if not fit.converged:
         raise ChaincompError(f"the fit did not converge in {fit.iterations} Gauss-Newton iterations "
                              f"(rms residual {fit.rms / UNITS[machine.length_unit].to_internal:.4g} "
