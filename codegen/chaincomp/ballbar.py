@@ -513,7 +513,7 @@ class Fit:
     terms: list[Term]                       # fitted, in order
     estimates: np.ndarray                   # internal units
     uncertainties: np.ndarray
-    combinations: dict[str, list[tuple[str, float]]]   # fitted term -> [(other term, factor)], internal
+    combinations: dict[str, list[tuple[Term, float]]]  # fitted term -> [(term it stands for too, factor)]
     unseen: list[str]                       # errors that move no trace point
     assumed_zero: list[str]
     not_fitted: dict[str, str]              # error -> why (a table in P0, ...)
@@ -610,13 +610,13 @@ def fit(machine: Machine, trace: Trace, values: dict, axes: dict, start: np.ndar
     dof = m - len(terms)
     var = float(res @ res) / dof
     cov = var * np.linalg.inv(jac.T @ jac)
-    combos: dict[str, list[tuple[str, float]]] = {t.name: [] for t in terms}
+    combos: dict[str, list[tuple[Term, float]]] = {t.name: [] for t in terms}
     for k, t in enumerate(candidates):
         if k in picked or norms[k] <= 1e-12 * big:
             continue
         a = np.linalg.lstsq(jac, t.column, rcond=None)[0]
         for f, tf in zip(a, terms):
             if abs(f) * np.linalg.norm(tf.column) > 1e-6 * norms[k]:
-                combos[tf.name].append((t.name, float(f)))
+                combos[tf.name].append((t, float(f)))
     return Fit(terms, est, np.sqrt(np.diag(cov)), combos, unseen, list(assume_zero), not_fitted,
                math.sqrt(float(res @ res) / m), math.sqrt(float(y @ y) / m), m, dof, res, cov)

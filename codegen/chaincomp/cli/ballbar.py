@@ -199,30 +199,10 @@ def plot(trace: bb.Trace, ev: dict, fig_um: dict, title: str, output: str) -> No
     plt.close(fig)
 
 
-def _value_text(machine, t: bb.Term, v: float) -> str:
-    unit, size = t.unit(machine)
-    return f"{v / size:.6g} {unit}"
-
-
-def _combination(machine, fit: bb.Fit, t: bb.Term) -> str:
-    terms = {x.name: x for x in fit.terms}
-    parts = []
-    _, size = t.unit(machine)
-    for other, f in fit.combinations[t.name]:
-        o_unit, o_size = _other_unit(machine, other, terms)
-        parts.append(f"{f * o_size / size:+.4g}·{other}")
-    return " ".join(parts)
-
-
-def _other_unit(machine, name: str, terms: dict) -> tuple[str, float]:
-    base, _, power = name.partition("·")
-    if name.startswith("centre"):
-        return "um", UM
-    if not power:
-        s = machine.symbol(base)
-        return s.unit.name, s.unit.to_internal
-    k = int(power.partition("^")[2] or 1)
-    return ("um/m" if k == 1 else "um/m^2"), UM / 1000.0 ** k
+def _combination(machine, fit: bb.Fit, t: bb.Term) -> list[tuple[str, float]]:
+    """The terms t's estimate stands for too, each with its factor in display units."""
+    size = t.unit(machine)[1]
+    return [(o.name, f * o.unit(machine)[1] / size) for o, f in fit.combinations[t.name]]
 
 
 def fit_doc(machine, fit: bb.Fit, axes) -> dict:
@@ -231,8 +211,7 @@ def fit_doc(machine, fit: bb.Fit, axes) -> dict:
         unit, size = t.unit(machine)
         out.append({"term": t.name, "error": t.error, "axis": t.axis, "power": t.power, "value": v / size,
                     "uncertainty": s / size, "unit": unit,
-                    "stands_for": [{"term": o, "factor": f * _other_unit(machine, o, {})[1] / size}
-                                   for o, f in fit.combinations[t.name]]})
+                    "stands_for": [{"term": o, "factor": f} for o, f in _combination(machine, fit, t)]})
     sm = fit.scale_mismatch(axes)
     return {"terms": out, "scale_mismatch": None if sm is None else
             {"axes": list(axes), "value": sm[0] / (UM / 1000), "uncertainty": sm[1] / (UM / 1000), "unit": "um/m"},
@@ -248,7 +227,7 @@ def fit_text(machine, fit: bb.Fit, axes) -> list[str]:
     for t, v, s in zip(fit.terms, fit.estimates, fit.uncertainties):
         unit, size = t.unit(machine)
         out.append(f"  {t.name:<14} {v / size:>14.6g} {s / size:>11.3g} {unit:<6}   "
-                   f"{_combination(machine, fit, t) or '-'}")
+                   f"{' '.join(f'{f:+.4g}·{o}' for o, f in _combination(machine, fit, t)) or '-'}")
     sm = fit.scale_mismatch(axes)
     if sm:
         out.append(f"scale mismatch {axes[0]} − {axes[1]} (the difference of their scale errors): "
