@@ -236,8 +236,8 @@ def fit_text(machine, fit: bb.Fit, axes) -> list[str]:
                "term plus the factors times those (assume some zero with --assume-zero to choose others)")
     if fit.unseen:
         out.append(f"not seen by this trace (move no point of it): {', '.join(fit.unseen)}")
-    for e, why in fit.not_fitted.items():
-        out.append(f"not fitted: {e}: {why}")
+    if fit.not_fitted:   # one reason today: a table or polynomial in the start values
+        out.append(f"not fitted, given as tables or polynomials in the start values: {', '.join(fit.not_fitted)}")
     return out
 
 
