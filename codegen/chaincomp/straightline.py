@@ -202,7 +202,7 @@ class Graph:
             else:
                 p = _PRECEDENCE[op]
                 left = self._wrap(text[node[1]], p)
-                right = self._wrap(text[node[2]], p + (op in ("sub", "div")))
+                right = self._wrap(text[node[2]], p + 1)  # as the IR associates, so as it rounds
                 s, prec = f"{left} {dict(add='+', sub='-', mul='*', div='/')[op]} {right}", p
             if uses.get(n, 0) > 1:
                 name = f"{temp}{len(lines)}"
