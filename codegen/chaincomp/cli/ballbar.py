@@ -401,13 +401,19 @@ def run_fit(args) -> int:
                         + _figures_text(fig) + fit_text(machine, fit, setup.axes)))
     if args.output:
         command = " ".join(shlex.quote(c) for c in ["chaincomp", "ballbar", args.machine, "--fit", args.fit]
-                           + (["--params", args.params] if args.params else []) + ["-o", args.output])
+                           + (["--params", args.params] if args.params else [])
+                           + ([f"--degree={args.degree}"] if args.degree != 1 else [])
+                           + ([f"--assume-zero={','.join(assume)}"] if assume else []) + ["-o", args.output])
         start_vals = {}
         if args.params:
             from ..params import load_params
             start_vals = load_params(args.params, machine)
         text = params_text(machine, fit, start_vals, args.fit, args.params, command)
         _write_loadable(args.output, text, machine)
+        if not any(t.error for t in fit.terms):
+            print("chaincomp ballbar: warning: no error of the machine was fitted (the trace shows only the centre "
+                  f"offset): {args.output} holds " + ("the start values unchanged" if args.params else "no values"),
+                  file=sys.stderr)
         print(f"ballbar: fitted values -> {args.output}", file=sys.stderr)
     if args.plot:
         plot(trace, ev, fig, f"ISO 230-4 circular test of {machine.name}: {os.path.basename(args.fit)}\n"
