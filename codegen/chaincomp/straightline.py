@@ -27,7 +27,6 @@ from .machine import ROT_PLANE, Machine, Rotation
 
 _FUNCTIONS = {sp.sin: "std::sin", sp.cos: "std::cos", sp.tan: "std::tan", sp.asin: "std::asin",
               sp.acos: "std::acos", sp.atan: "std::atan", sp.atan2: "std::atan2"}
-_COMMUTATIVE = ("add", "mul")
 _PRECEDENCE = {"add": 1, "sub": 1, "mul": 2, "div": 2, "neg": 3}
 
 
@@ -142,13 +141,13 @@ class Graph:
                 self.sub(self.mul(u[2], v[0]), self.mul(u[0], v[2])),
                 self.sub(self.mul(u[0], v[1]), self.mul(u[1], v[0]))]
 
-    def evaluate(self, inputs: dict[str, float], upto: int | None = None) -> list[float]:
+    def evaluate(self, inputs: dict[str, float]) -> list[float]:
         """Every node's value (the tests' reference for what the printed code computes)."""
         fns = {"std::sin": math.sin, "std::cos": math.cos, "std::tan": math.tan, "std::asin": math.asin,
                "std::acos": math.acos, "std::atan": math.atan, "std::atan2": math.atan2,
                "std::sqrt": math.sqrt, "std::pow": math.pow}
         out: list[float] = []
-        for node in self.nodes[:upto]:
+        for node in self.nodes:
             op, args = node[0], node[1:]
             if op == "const":
                 out.append(args[0])
@@ -433,7 +432,7 @@ def pose_and_derivatives(b: Builder, machine: Machine, variables: list[sp.Symbol
     return pose, derivatives
 
 
-def functions(machine: Machine, order: int, hoist) -> list[tuple[str, bool, list[tuple[str, "Builder", int]]]]:
+def functions(machine: Machine, order: int, hoist) -> list[tuple[str, bool, Builder, list[tuple[str, int]]]]:
     """Per generated function: (name, takes Trig, builder, [(target, node)])."""
     axes = [a.sym for a in machine.axes]
     errors = [s.sym for s in machine.errors]
