@@ -357,3 +357,13 @@ def test_trace_round_trip(machine_file, tmp_path):
     assert t.setup.held == {"V": 12.0} and t.setup.feed == 1500
     assert t.setup.centre.tolist() == [12.0, 0.0, 25.0]
     assert len(t.angle) == 180
+
+
+def test_a_params_file_name_cannot_write_the_set_up(machine_file, tmp_path):
+    """The trace's comment names the params file: its line breaks are escaped, so that a name
+    cannot add a '# plane: ...' line."""
+    p = tmp_path / "p\n# plane: YZ\n.yaml"
+    p.write_text("machine: bb_test\nvalues:\n  SV: 3 ppm\n")
+    trace = tmp_path / "t.csv"
+    run_cli("ballbar", machine_file, "--params", str(p), "--plane", "XY", "--radius", "40", "-o", str(trace))
+    assert bb.read_trace(str(trace), load_machine(machine_file)).setup.plane == "XY"

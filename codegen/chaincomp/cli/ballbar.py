@@ -356,7 +356,8 @@ def run(args) -> int:
                          + f": ISO 230-4 circular test predicted by the exact model, {args.points} points each way",
                          where] + _figures_text(fig)))
     if args.output:
-        bb.write_trace(args.output, machine, trace, [f"predicted by chaincomp ballbar from {args.params or 'no params'}"])
+        bb.write_trace(args.output, machine, trace,
+                       [_one_line(f"predicted by chaincomp ballbar from {args.params or 'no params'}")])
         print(f"ballbar: trace -> {args.output}", file=sys.stderr)
     if args.plot:
         plot(trace, ev, fig, f"ISO 230-4 circular test predicted for {machine.name}"
