@@ -256,7 +256,8 @@ def lsq_circle(angle: np.ndarray, dev: np.ndarray, radius: float) -> tuple[np.nd
 def evaluate(trace: Trace) -> dict:
     """ISO 230-4 figures (mm): per direction G (radial range about the least-squares circle's
     centre), F_max and F_min (largest and smallest deviation from R about the pivot), the
-    circle's centre offset and radius; bidirectional G(b) about the circle of both paths."""
+    circle's centre offset and radius; bidirectional G(b) about the circle of both paths, and the
+    circular hysteresis H."""
     r = trace.setup.radius
     out = {}
     for d in (CCW, CW):
@@ -268,9 +269,19 @@ def evaluate(trace: Trace) -> dict:
                   "centre": c.tolist(), "radius": rho, "points": int(len(th))}
     if len(out) == 2:
         c, rho, dist = lsq_circle(trace.angle, trace.deviation, r)
-        out["bidirectional"] = {"G": float(np.ptp(dist)), "centre": c.tolist(), "radius": rho,
-                                "points": int(len(trace.angle))}
+        out["bidirectional"] = {"G": float(np.ptp(dist)), "H": hysteresis(trace), "centre": c.tolist(),
+                                "radius": rho, "points": int(len(trace.angle))}
     return out
+
+
+def hysteresis(trace: Trace) -> float:
+    """Circular hysteresis H (ISO 230-4): the largest radial difference between the two paths,
+    the cw one interpolated (periodically, linearly in angle) at the ccw one's angles."""
+    (a, da), (b, db) = trace.of(CCW), trace.of(CW)
+    b = np.mod(b, 2 * np.pi)
+    order = np.argsort(b)
+    at = np.interp(np.mod(a, 2 * np.pi), b[order], db[order], period=2 * np.pi)
+    return float(np.abs(da - at).max())
 
 
 # ----------------------------------------------------------------------------- the trace CSV

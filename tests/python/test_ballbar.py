@@ -168,7 +168,9 @@ def test_g_and_f_against_a_kasa_circle(machine_file, tmp_path):
         assert out[d]["radius_minus_R"] == pytest.approx((rho - r) * 1e3, abs=1e-7)
         kx, ky, _ = kasa(x, y)   # the algebraic fit: another criterion, the same circle to ~dev²/R
         assert out[d]["G"] == pytest.approx(np.ptp(np.hypot(x - kx, y - ky)) * 1e3, abs=1e-3)
-        if d != "bidirectional":
+        if d == "bidirectional":   # H: the same angles both ways here
+            assert out[d]["H"] == pytest.approx(np.abs(dev["ccw"] - dev["cw"]).max(), abs=1e-9)
+        else:
             assert out[d]["F_max"] == pytest.approx(v.max(), abs=1e-9)
             assert out[d]["F_min"] == pytest.approx(v.min(), abs=1e-9)
 

@@ -130,6 +130,8 @@ def _figures(ev: dict, radius: float) -> dict:
              "radius_minus_R": (f["radius"] - radius) / UM, "points": f["points"]}
         if "F_max" in f:
             g.update(F_max=f["F_max"] / UM, F_min=f["F_min"] / UM)
+        if "H" in f:
+            g["H"] = f["H"] / UM
         out[d] = g
     return out
 
@@ -142,6 +144,8 @@ def _figures_text(fig: dict) -> list[str]:
         cx, cy = f["centre_offset"]
         out.append(f"  {names[d]:22} {f['G']:8.3f} {fmax}   {_z(cx):+9.3f}, {_z(cy):+9.3f} "
                    f"{_z(f['radius_minus_R']):+11.3f}")
+    if "H" in fig.get("bidirectional", {}):
+        out.append(f"  circular hysteresis H (largest radial difference of the two paths) {fig['bidirectional']['H']:.3f} µm")
     out.append("G: circular deviation, the radial range about the least-squares circle's centre (ISO 230-4); "
                "F: radial deviation, the largest and smallest deviation from R about the pivot")
     return out
