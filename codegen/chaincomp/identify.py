@@ -43,6 +43,8 @@ _CSTEP = 1e-20    # complex step, internal units (mm, rad): any tiny value gives
 _STEP = 1e-6      # central-difference step, where the chain cannot take complex values
 _RANK_TOL = 1e-9  # singular values below this, relative to the largest, are zero
 MAX_ROWS = 20_000  # set-ups in a file or a --setups spec: bounds the fit's memory (rows x errors)
+MAX_JACOBIAN = 10_000_000   # measured coordinates x parameters (80 MB a copy): bounds the fit's memory
+_CHUNK = 1_000_000          # parameter sets x rows evaluated in one broadcast call of the chain
 _TIE = 1e-9       # pivoted QR: columns this close (relative) to the largest remaining norm tie
 DIRECTIONS = ("kx", "ky", "kz")       # measured tool direction (unit vector components)
 COLUMNS = COMPONENTS + DIRECTIONS     # every measured column, in the order of Table.observations
@@ -318,6 +320,9 @@ def _check_vary(machine: Machine, vary, assume_zero) -> dict[str, Vary]:
             raise ChaincompError(f"--vary {v.error}: the degree must be 0 to {MAX_POLYNOMIAL_COEFFICIENTS - 1}")
         if v.kind not in ("table", "poly"):
             raise ChaincompError(f"--vary {v.error}: expected table or poly, got {v.kind!r}")
+        a = machine.symbol(v.axis)
+        if len({f"{a.from_internal(k):.10g}" for k in v.knots}) < len(v.knots):
+            raise ChaincompError(f"--vary {v.error}: knots must differ in 10 significant digits")
         out[v.error] = v
     if len(out) > MAX_VARYING_ERRORS:
         raise ChaincompError(f"--vary: at most {MAX_VARYING_ERRORS} varying errors (the params format's limit), "
@@ -446,6 +451,10 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     penalty = _penalty(params, varies, smooth)
     names = [p.name for p in params]
     n, m = len(params), int(mask.sum())
+    if n * (m + len(penalty)) > MAX_JACOBIAN:
+        raise ChaincompError(f"{n} parameters for {m} measured coordinates: the fit's Jacobian would hold "
+                             f"{n * (m + len(penalty)):.3g} numbers, more than {MAX_JACOBIAN:.0e}; fit fewer knots "
+                             f"or use fewer set-ups", table.file)
     data = f"{_count(m, 'coordinate')} ({', '.join(measured)}) at {_count(len(table.lines), 'set-up')}"
     nonfinite = ChaincompError(f"the fit went to non-finite values on these {data} (coordinates in "
                                f"{machine.length_unit}? axes in their declared units?)", table.file)
@@ -457,12 +466,18 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
             raise nonfinite
         return f
 
-    def jacobian(p: np.ndarray) -> np.ndarray:           # (m + penalty rows, n), weighted
+    chunk = max(1, _CHUNK // len(table.lines))            # parameters per broadcast call: bounded memory
+
+    def columns(p: np.ndarray, steps: np.ndarray) -> np.ndarray:
         try:
-            j = predict(p + 1j * _CSTEP * np.eye(n)).imag.T / _CSTEP
+            return predict(p + 1j * _CSTEP * steps).imag.T / _CSTEP
         except TypeError:      # numpy has no complex arctan2: an error inside atan2
-            f = predict(np.vstack([p + _STEP * np.eye(n), p - _STEP * np.eye(n)]))
-            j = ((f[:n] - f[n:]) / (2 * _STEP)).T
+            f = predict(np.vstack([p + _STEP * steps, p - _STEP * steps]))
+            return ((f[:len(steps)] - f[len(steps):]) / (2 * _STEP)).T
+
+    def jacobian(p: np.ndarray) -> np.ndarray:           # (m + penalty rows, n), weighted
+        eye = np.eye(n)
+        j = np.hstack([columns(p, eye[i:i + chunk]) for i in range(0, n, chunk)])
         return np.vstack([w[:, None] * j, penalty])
 
     def residual(p: np.ndarray) -> np.ndarray:

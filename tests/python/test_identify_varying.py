@@ -242,3 +242,13 @@ def test_a_polynomial_needs_positions(machine, tmp_path, capsys):
     write_csv(tmp_path / "meas.csv", X, Y, points(X, Y, 0 * X, 0 * X, 0 * X))
     rc, _, err = cli(capsys, "identify", path, tmp_path / "meas.csv", "--vary", "EXX=poly:1")
     assert rc == 2 and "every set-up has X = 50 mm; a polynomial along X needs measurements" in err
+
+
+def test_the_fit_size_is_bounded(machine, tmp_path, capsys, monkeypatch):
+    import chaincomp.identify as identify_module
+    monkeypatch.setattr(identify_module, "MAX_JACOBIAN", 500)
+    path, m, _ = machine
+    X, Y = setups()
+    write_csv(tmp_path / "meas.csv", X, Y, points(X, Y, 0 * X, 0 * X, 0 * X))
+    rc, _, err = cli(capsys, "identify", path, tmp_path / "meas.csv", "--vary", "EXX=table:0,50,100,150,200,250,300")
+    assert rc == 2 and "10 parameters for 64 measured coordinates: the fit's Jacobian would hold 640 numbers" in err
