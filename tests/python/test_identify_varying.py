@@ -252,3 +252,11 @@ def test_the_fit_size_is_bounded(machine, tmp_path, capsys, monkeypatch):
     write_csv(tmp_path / "meas.csv", X, Y, points(X, Y, 0 * X, 0 * X, 0 * X))
     rc, _, err = cli(capsys, "identify", path, tmp_path / "meas.csv", "--vary", "EXX=table:0,50,100,150,200,250,300")
     assert rc == 2 and "10 parameters for 64 measured coordinates: the fit's Jacobian would hold 640 numbers" in err
+
+
+def test_direction_columns_need_a_tool_direction(machine, tmp_path, capsys):
+    path, m, _ = machine
+    (tmp_path / "meas.csv").write_text("X,Y,x,kx\n0,0,0,1\n")
+    rc, _, err = cli(capsys, "identify", path, tmp_path / "meas.csv")
+    assert rc == 2 and err.strip().endswith("meas.csv:1: header: column 'kx' is a measured tool direction, but "
+                                            f"x_slide has no tool direction (tool: direction in {path})")
