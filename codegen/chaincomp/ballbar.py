@@ -559,12 +559,13 @@ def _slide_terms(machine: Machine, axes: tuple[str, str]) -> list[tuple[str, str
 
 
 def fit(machine: Machine, trace: Trace, values: dict, axes: dict, start: np.ndarray, assume_zero=(),
-        degree: int = 1, model: JetModel | None = None) -> Fit:
+        degree: int = 1, model: JetModel | None = None, prefer=()) -> Fit:
     """Linear least squares of the trace's deviation from ``start`` (the deviation the start
     values predict) on the radial gains: the centre offset, every error of the machine that
     moves the trace (constants), and for degree >= 1 the powers 1..degree of the plane axes in
     their slides' positioning and straightness errors. Terms that move the trace only as others
-    do are left out and their combination reported on the term that stands for it."""
+    do are left out and their combination reported on the term that stands for it; the terms of
+    the errors in ``prefer`` are taken first (after the centre), in that order."""
     model = model or JetModel(machine, 1)
     setup = trace.setup
     i, j, _ = PLANES[setup.plane]
@@ -594,7 +595,9 @@ def fit(machine: Machine, trace: Trace, values: dict, axes: dict, start: np.ndar
             for p in range(1, degree + 1):
                 powers.append(Term(f"{e}·{a}" + (f"^{p}" if p > 1 else ""), e, a, p,
                                    radial(index[e]) * np.asarray(axes[a], float) ** p, kind))
-    candidates = centre + location + slide_consts + powers
+    rest = location + slide_consts + powers
+    first = [t for e in prefer for t in rest if t.error == e]
+    candidates = centre + first + [t for t in rest if t not in first]
     norms = np.array([np.linalg.norm(t.column) for t in candidates])
     big = norms.max()
     unseen = [t.name for t, nm in zip(candidates, norms) if t.error and t.power == 0 and nm <= 1e-12 * big]

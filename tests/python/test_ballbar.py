@@ -249,6 +249,11 @@ def test_fit_on_vmc_xyz_recovers_squareness_and_scale_as_polynomials(tmp_path):
     sm = doc["scale_mismatch"]
     assert sm["axes"] == ["X", "Y"] and abs(sm["value"] - 16.0) < 3 * sm["uncertainty"] < 1.0
     assert "ECX" in [s["term"] for s in terms["EC0Y"]["stands_for"]]       # yaw of X: the same signature
+    # --prefer ECX: the yaw of X stands for the squareness instead, with the same value
+    other = json.loads(run_cli("ballbar", machine_path("vmc_xyz"), "--fit", str(path), "--prefer", "ECX",
+                               "--format", "json").stdout)["fit"]
+    swapped = {t["term"]: t for t in other["terms"]}
+    assert "EC0Y" not in swapped and swapped["ECX"]["value"] == pytest.approx(terms["EC0Y"]["value"], rel=1e-9)
     assert {"EZX", "EZY", "EZZ"} <= set(doc["not_seen"])                   # out of the plane: not seen
     fitted = load_params(str(out), machine)
     assert fitted["EXX"].axis == "X" and fitted["EYY"].axis == "Y"
@@ -342,7 +347,7 @@ def test_fit_refuses_setup_options(capsys, machine_file, tmp_path):
     path = tmp_path / "t.csv"
     path.write_text(GOOD_HEAD + GOOD_ROWS)
     _refused(capsys, "ballbar", machine_file, "--fit", str(path), "--plane", "XY", match="--plane: with --fit")
-    _refused(capsys, "ballbar", machine_file, "--fit", str(path), "--assume-zero", "NOPE", match="'NOPE' is not an error")
+    _refused(capsys, "ballbar", machine_file, "--fit", str(path), "--assume-zero", "NOPE", match="--assume-zero: unknown error 'NOPE'")
     _refused(capsys, "ballbar", machine_file, "--fit", str(path), "-o", str(path), match="is also an input")
 
 

@@ -18,7 +18,9 @@ from ..numeric import ExactModel
 from ..varying import Varying
 from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, add_values_arguments,
                      check_image, check_output, integer, load, number, to_json, values_for)
+from ..protocol import check_errors
 from .laser_to_params import _one_line, merge
+from .protocol import names
 
 UM = bb.UM
 
@@ -61,6 +63,11 @@ def add_parser(sub) -> None:
                         "straightness errors (0 constants only; 1, default, adds scale errors and straightness "
                         "slopes; 2 the bows too)")
     add_assume_zero_argument(p, "with --fit: errors not fitted (held at their start values)")
+    p.add_argument("--prefer", action="append", default=[], metavar="E1,E2",
+                   help="with --fit: errors to fit first, in this order, where several move the trace alike "
+                        "(by default the centre, then errors outside the slides' error blocks such as "
+                        "squareness, then the slides' errors, then their powers of the axes); names separated "
+                        "by commas (repeatable)")
     add_format_argument(p, what="report format")
     p.add_argument("--plot", metavar="OUT.png", help="draw the polar plot: deviation magnified, both "
                    "directions, the nominal circle, a scale in µm per division")
@@ -88,15 +95,6 @@ def _centre(text: str | None, machine, default: np.ndarray) -> np.ndarray:
         except Exception as exc:   # argparse.ArgumentTypeError: its text is the reason
             raise ChaincompError(f"--centre {c}: {exc}") from None
     return out
-
-
-def _assume_zero(args, machine) -> list[str]:
-    names = [n.strip() for item in args.assume_zero for n in item.split(",") if n.strip()]
-    errors = [s.name for s in machine.errors]
-    for n in names:
-        if n not in errors:
-            raise ChaincompError(f"--assume-zero: {n!r} is not an error of {machine.name} (errors: {', '.join(errors)})")
-    return names
 
 
 def _setup(args, machine, model, values) -> bb.Setup:
@@ -328,7 +326,7 @@ def run(args) -> int:
     for opt, v in (("--plane", args.plane), ("--radius", args.radius)):
         if v is None:
             raise ChaincompError(f"{opt} is needed to predict a trace (or give --fit TRACE.csv)")
-    for opt, v in (("--degree", args.degree != 1), ("--assume-zero", args.assume_zero)):
+    for opt, v in (("--degree", args.degree != 1), ("--assume-zero", args.assume_zero), ("--prefer", args.prefer)):
         if v:
             raise ChaincompError(f"{opt} applies to --fit only")
     check_output(args.output, args.machine, args.params)
@@ -379,7 +377,8 @@ def run_fit(args) -> int:
     check_output(args.output, args.machine, args.params, args.fit)
     check_image(args.plot, args.machine, args.params, args.fit, args.output, option="--plot")
     machine = load(args.machine)
-    assume = _assume_zero(args, machine)
+    assume = check_errors(machine, names(",".join(args.assume_zero), "--assume-zero"), "--assume-zero")
+    prefer = check_errors(machine, names(",".join(args.prefer), "--prefer"), "--prefer")
     trace = bb.read_trace(args.fit, machine)
     values, _ = values_for(machine, args.params, [])
     setup = trace.setup
@@ -392,7 +391,7 @@ def run_fit(args) -> int:
             raise ChaincompError(f"{n} drives the circle; it cannot be held", args.fit)
     axes = bb.commanded(machine, model, setup, values, trace.angle)
     start = bb.deviation(machine, model, setup, values, axes)
-    fit = bb.fit(machine, trace, values, axes, start, assume, args.degree, JetModel(machine, 1))
+    fit = bb.fit(machine, trace, values, axes, start, assume, args.degree, JetModel(machine, 1), prefer)
     ev = bb.evaluate(trace)
     fig = _figures(ev, setup.radius)
     where = _where(machine, setup)
@@ -408,7 +407,8 @@ def run_fit(args) -> int:
         command = " ".join(shlex.quote(c) for c in ["chaincomp", "ballbar", args.machine, "--fit", args.fit]
                            + (["--params", args.params] if args.params else [])
                            + ([f"--degree={args.degree}"] if args.degree != 1 else [])
-                           + ([f"--assume-zero={','.join(assume)}"] if assume else []) + ["-o", args.output])
+                           + ([f"--assume-zero={','.join(assume)}"] if assume else [])
+                           + ([f"--prefer={','.join(prefer)}"] if prefer else []) + ["-o", args.output])
         start_vals = {}
         if args.params:
             from ..params import load_params
