@@ -121,7 +121,7 @@ _chaincomp() {
           case "$prev" in
             --plane) words='XY YZ ZX';;
             --format) words='text json';;
-            *) words='-h --help --params --set --plane --radius --centre --center --axes --points --feed --fit --degree --assume-zero --format --json --plot -o --output'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --params --set --plane --radius --centre --center --axes --points --feed --fit --degree --assume-zero --prefer --format --json --plot -o --output'; [[ $cur == -* ]] || return 0;;
           esac;;
         *) return 0;;
         esac
