@@ -60,6 +60,7 @@ class Run:
     events: list         # the driver's timeline
     log: str             # LinuxCNC's output
     returncode: int
+    route: str = ""
 
     @property
     def commands(self) -> np.ndarray:
@@ -74,6 +75,16 @@ class Run:
     @property
     def drives(self) -> np.ndarray:
         return self.commands + self.corrections
+
+    @property
+    def lag_ms(self) -> np.ndarray:
+        """The bridge's lag at every period: the age of the applied target. Its age-ms pin is
+        written when the bridge's loop runs; while the loop stalls the pin stands still and
+        the real age grows by a period a row."""
+        age = self.samples[:, COL_AGE]
+        rows = np.arange(len(age))
+        changed = np.r_[True, np.diff(age) != 0]
+        return age + (rows - np.maximum.accumulate(np.where(changed, rows, 0)))
 
 
 def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeout: float = 120.0,
@@ -122,7 +133,7 @@ def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeo
     if os.path.exists(os.path.join(work, "events.txt")):
         with open(os.path.join(work, "events.txt")) as f:
             events = [json.loads(line) for line in f if line.strip()]
-    return Run(work, rows, events, log, proc.returncode)
+    return Run(work, rows, events, log, proc.returncode, route)
 
 
 def to_internal(machine, joints: np.ndarray) -> dict:

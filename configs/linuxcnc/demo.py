@@ -1,0 +1,142 @@
+"""tools/linuxcnc-demo: the five_axis_ac program under LinuxCNC with compensation off, through
+chaincomp-lcm-bridge (chaincompd) and through chaincomp_rt, and the tool-point error the
+simulated true machine makes along the path: max and RMS at the dwells and in motion, the
+bridge's lag and the realtime component's cost, and a plot."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+
+import numpy as np
+
+import cnc
+
+MACHINE = os.path.join(cnc.ROOT, "configs", "machines", "five_axis_ac.yaml")
+PARAMS = os.path.join(cnc.ROOT, "configs", "params", "five_axis_ac-demo.yaml")
+LABELS = {"off": "compensation off", "bridge": "chaincomp-lcm-bridge + chaincompd", "rt": "chaincomp_rt"}
+
+
+def say(text: str) -> None:
+    print(f"linuxcnc-demo: {text}", file=sys.stderr, flush=True)
+
+
+def install_rt() -> None:
+    chaincomp = os.path.join(cnc.ROOT, ".venv", "bin", "chaincomp")
+    say("building chaincomp_rt for five_axis_ac with the demo params")
+    out = subprocess.run([chaincomp, "build", "--linuxcnc", MACHINE, "--params", PARAMS],
+                         stdout=subprocess.PIPE, text=True, check=True).stdout.split()[0]
+    if os.geteuid() == 0:
+        subprocess.run([chaincomp, "build", "--linuxcnc", MACHINE, "--params", PARAMS, "--install"],
+                       stdout=subprocess.DEVNULL, check=True)
+    else:
+        say("installing it into /usr/lib/linuxcnc/modules (sudo)")
+        subprocess.run(["sudo", "install", "-m", "644", out, "/usr/lib/linuxcnc/modules/chaincomp_rt.so"], check=True)
+
+
+def stats(values: np.ndarray) -> dict:
+    return {"max": float(values.max()), "rms": float(np.sqrt(np.mean(values ** 2)))} if len(values) else {}
+
+
+def summarize(run, machine, params) -> dict:
+    found = cnc.dwells(run.commands)
+    if run.returncode != 0 or len(found) < 2:
+        raise SystemExit(f"linuxcnc-demo: the run in {run.work} failed:\n{run.log[-2000:]}")
+    point, _ = cnc.tool_errors(machine, params, run.commands, run.drives)
+    err_um = np.linalg.norm(point, axis=1) * 1e3
+    program = np.zeros(len(err_um), bool)
+    # from the first dwell on: the move there leaves A = 0 at home, a singular pose (the tool
+    # along C), where the rate limit spreads a large C correction over a few hundred ms
+    program[found[1].start:] = True
+    at_dwell = np.zeros(len(err_um), bool)
+    for s in found[1:]:
+        at_dwell[s] = True
+    out = {"periods": int(program.sum()), "dwells": stats(err_um[at_dwell]),
+           "motion": stats(err_um[program & ~at_dwell]), "t": (np.arange(len(err_um)) - found[0].stop) * 1e-3,
+           "error_um": err_um}
+    extra = (run.lag_ms if run.route == "bridge" else run.samples[:, cnc.COL_COST])[program]
+    return out, extra
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="tools/linuxcnc-demo", description=__doc__)
+    p.add_argument("--plot", default=os.path.join(cnc.ROOT, "out", "linuxcnc-demo.png"), metavar="OUT.png",
+                   help="where the plot goes (default out/linuxcnc-demo.png)")
+    p.add_argument("--routes", default="off,bridge,rt", help="comma list of off, bridge, rt (default all three)")
+    p.add_argument("--format", choices=("text", "json"), default="text", help="output format (default text)")
+    args = p.parse_args(argv)
+    routes = args.routes.split(",")
+    for r in routes:
+        if r not in cnc.ROUTES:
+            p.error(f"--routes: unknown route {r!r} (expected off, bridge, rt)")
+    reason = cnc.unavailable()
+    if reason:
+        raise SystemExit(f"linuxcnc-demo: {reason}")
+    from chaincomp import load_machine, load_params
+
+    machine, params = load_machine(MACHINE), None
+    params = load_params(PARAMS, machine)
+    if "rt" in routes:
+        install_rt()
+    results = {}
+    for r in routes:
+        say(f"running the program: {LABELS[r]}")
+        run = cnc.run(r)
+        summary, extra = summarize(run, machine, params)
+        if r == "bridge":
+            summary["lag_ms"] = dict(zip(("p50", "p99", "max"), map(float, np.percentile(extra, [50, 99, 100]))))
+        if r == "rt":
+            summary["cost_ns"] = dict(zip(("p50", "p99", "max"), map(float, np.percentile(extra, [50, 99, 100]))))
+        results[r] = summary
+    hardware = f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, {platform.release()}"
+    try:
+        with open("/proc/cpuinfo") as f:
+            hardware = next(ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")) + \
+                f", {os.cpu_count()} CPUs"
+    except (OSError, StopIteration):
+        pass
+    if args.format == "json":
+        print(json.dumps({"hardware": hardware, "routes": {r: {k: v for k, v in s.items() if k not in ("t", "error_um")}
+                                                           for r, s in results.items()}}))
+    else:
+        print(f"five_axis_ac under LinuxCNC (trivkins, 1 ms servo period, POSIX non-realtime); {hardware}")
+        print("tool-point error of the simulated true machine (exact model, demo params), um, from the first "
+              "dwell on (the move there leaves the singular pose A = 0):")
+        print(f"  {'route':36s} {'dwells max':>11s} {'RMS':>9s} {'motion max':>11s} {'RMS':>9s}")
+        for r, s in results.items():
+            print(f"  {LABELS[r]:36s} {s['dwells']['max']:11.4f} {s['dwells']['rms']:9.4f} "
+                  f"{s['motion']['max']:11.4f} {s['motion']['rms']:9.4f}")
+        if "bridge" in results:
+            lag = results["bridge"]["lag_ms"]
+            print(f"bridge lag (age of the applied correction): p50 {lag['p50']:.2f} ms, p99 {lag['p99']:.2f} ms, "
+                  f"max {lag['max']:.2f} ms")
+        if "rt" in results:
+            c = results["rt"]["cost_ns"]
+            print(f"chaincomp_rt cost per servo period: p50 {c['p50']:.0f} ns, p99 {c['p99']:.0f} ns, "
+                  f"max {c['max']:.0f} ns")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    for r, s in results.items():
+        keep = s["t"] >= 0
+        ax.semilogy(s["t"][keep], np.maximum(s["error_um"][keep], 1e-6), label=LABELS[r], lw=1)
+    ax.set_xlabel("time into the program, s")
+    ax.set_ylabel("tool-point error, um")
+    ax.set_title("five_axis_ac under LinuxCNC: actual minus programmed tool point")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    os.makedirs(os.path.dirname(os.path.abspath(args.plot)), exist_ok=True)
+    fig.savefig(args.plot, dpi=120, bbox_inches="tight")
+    say(f"plot: {args.plot}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
