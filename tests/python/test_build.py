@@ -293,3 +293,60 @@ def test_build_output_folder_is_checked_before_the_build(tmp_path):
                            "machines", "angle_head.yaml"), "-o", str(tmp_path / "f")],
                           capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert proc.returncode == 2 and "is a file, expected a folder" in proc.stderr, proc.stderr
+
+
+# --- chaincomp build --linuxcnc: the realtime HAL component chaincomp_rt ------------------
+
+FIVE = os.path.join(ROOT, "configs", "machines", "five_axis_ac.yaml")
+DEMO = os.path.join(ROOT, "configs", "params", "five_axis_ac-demo.yaml")
+
+
+def test_linuxcnc_options_are_checked_before_any_work(tmp_path):
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path)}
+    proc = chaincomp(env, "build", FIVE, "--params", DEMO)
+    assert proc.returncode == 2 and "--params goes with --linuxcnc" in proc.stderr, proc.stderr
+    proc = chaincomp(env, "build", FIVE, "--install")
+    assert proc.returncode == 2 and "--install goes with --linuxcnc" in proc.stderr, proc.stderr
+    # tables and polynomials: not in the realtime component (yet), refused naming the file and error
+    laser = os.path.join(ROOT, "configs", "params", "five_axis_ac-laser.yaml")
+    proc = chaincomp(env, "build", "--linuxcnc", FIVE, "--params", laser)
+    assert proc.returncode == 2, proc.stderr
+    assert "five_axis_ac-laser.yaml: EXX is a table or polynomial" in proc.stderr
+    assert "Traceback" not in proc.stderr and not os.listdir(tmp_path)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("machine: five_axis_ac\nvalues:\n  EXX: 4 parsecs\n")
+    proc = chaincomp(env, "build", "--linuxcnc", FIVE, "--params", str(bad))
+    assert proc.returncode == 2 and "bad.yaml:3" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+
+
+def test_linuxcnc_header_bakes_the_params_in_internal_units():
+    from chaincomp.build import rt_model_header
+    from chaincomp.machine import load_machine
+
+    m = load_machine(FIVE)
+    text = rt_model_header(m, {"EXX": 0.004, "G": 151.0}, "p.yaml")
+    values = re.findall(r"^    (\S+),  // (\w+)$", text, re.M)
+    got = {name: float(v) for v, name in values}
+    assert got["EXX"] == 0.004 and got["G"] == 151.0       # given
+    assert got["Yp"] == pytest.approx(50 * 3.141592653589793 / 180, rel=1e-15)  # a constant at its nominal, in rad
+    assert got["EYX"] == 0.0                                 # an error not given
+    # one value per constant and error, in the machine file's order (kParams)
+    assert [n for _, n in values] == [s.name for s in m.symbols if s.role != "axis"]
+    # chaincompd's default limits, the machine file's travel
+    assert "{-400.0, 400.0, 10.0, 0.5, 0.001},  // X [mm]" in text
+    assert "{-95.0, 95.0, 5.0, 0.5, 0.001},  // Ap [deg]" in text
+
+
+@pytest.mark.skipif(not os.path.exists("/usr/share/linuxcnc/Makefile.modinc"),
+                    reason="LinuxCNC's development files are not installed (tools/setup-linuxcnc)")
+def test_linuxcnc_module_exports_only_the_rtapi_entry_points(tmp_path):
+    proc = chaincomp(dict(os.environ), "build", "--linuxcnc", FIVE, "--params", DEMO,
+                     "-o", str(tmp_path / "out"))
+    assert proc.returncode == 0, proc.stderr
+    path = proc.stdout.split()[0]
+    assert path == str(tmp_path / "out" / "chaincomp_rt.so")
+    syms = subprocess.run(["nm", "-D", "--defined-only", path], capture_output=True, text=True).stdout.split()
+    assert {"rtapi_app_main", "rtapi_app_exit"} <= set(syms)
+    assert not [s for s in syms if s.startswith("_Z")]  # no C++ symbol leaks into rtapi_app
+    needed = subprocess.run(["objdump", "-p", path], capture_output=True, text=True).stdout
+    assert "NEEDED               libstdc++.so.6" in needed
