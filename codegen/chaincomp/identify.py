@@ -248,6 +248,7 @@ class Param:
     to_internal: float   # a value in ``unit`` times this is internal (mm, rad, 1 per mm^k or rad^k)
     power: int = 0       # a polynomial coefficient's power of the axis
     axis: str | None = None
+    knot: bool = False   # a table's value at a knot
 
 
 def _hat(x: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -280,7 +281,7 @@ def _parameters(machine: Machine, free: list[str], varies: dict[str, Vary], tabl
         if v.kind == "table":
             x = np.array(v.knots, float)
             params += [Param(f"{name}@{v.axis}={a.from_internal(k):.10g}", name, s.unit.kind, s.unit.name,
-                             s.unit.to_internal, axis=v.axis) for k in x]
+                             s.unit.to_internal, axis=v.axis, knot=True) for k in x]
             basis = _hat(x, t)
             out = int(((t < x[0]) | (t > x[-1])).sum())
             if out:
@@ -611,8 +612,27 @@ def _spanning(a: np.ndarray, rank: int, first=()) -> list[int]:
     return picked
 
 
-def _terms(params: list[Param], pairs) -> str:
-    return ", ".join(f"{x:+.4g} {params[i].unit} in {params[i].name}" for i, x in pairs)
+def _grouped(params: list[Param], pairs) -> list[tuple[str, float, str, str]]:
+    """(name, coefficient, unit, short name) per term; a table whose knots all take part alike
+    is one term, 'every knot of EXX' ("EXX's knots"): a constant the table carries."""
+    out, done = [], set()
+    coeff = dict(pairs)
+    for i, x in pairs:
+        if i in done:
+            continue
+        p = params[i]
+        knots = [k for k, q in enumerate(params) if q.error == p.error] if p.knot else [i]
+        if len(knots) > 1 and all(k in coeff and abs(coeff[k] - x) <= 1e-6 * abs(x) for k in knots):
+            out.append((f"every knot of {p.error}", x, p.unit, f"{p.error}'s knots"))
+            done.update(knots)
+        else:
+            out.append((p.name, x, p.unit, p.name))
+            done.add(i)
+    return out
+
+
+def _terms(terms) -> str:
+    return ", ".join(f"{x:+.4g} {unit} in {name}" for name, x, unit, _ in terms)
 
 
 def _carried(params: list[Param], j0: np.ndarray, kept: list[int], j: int):
@@ -623,10 +643,10 @@ def _carried(params: list[Param], j0: np.ndarray, kept: list[int], j: int):
     pairs = [(i, c[k] * params[j].to_internal / params[i].to_internal)
              for k, i in enumerate(kept) if size[k] > 1e-6 * size.max()]
     me = params[j]
-    text = (f"to first order a change of 1 {me.unit} in {me.name} moves "
-            f"the measured coordinates as {_terms(params, pairs)} {'does' if len(pairs) == 1 else 'do'}; "
-            f"the estimate{'' if len(pairs) == 1 else 's'} of {', '.join(params[i].name for i, _ in pairs)} "
-            f"carr{'ies' if len(pairs) == 1 else 'y'} it")
+    terms = _grouped(params, pairs)
+    names = ", ".join(short for *_, short in terms)
+    text = (f"to first order a change of 1 {me.unit} in {me.name} moves the measured coordinates as "
+            f"{_terms(terms)} {'does' if len(pairs) == 1 else 'do'}: carried by {names}")
     return text, {params[i].name: float(x) for i, x in pairs}
 
 
@@ -636,8 +656,9 @@ def _inseparable_reason(params: list[Param], cols, proj, k, d) -> str:
     me = params[cols[k]]
     pairs = [(int(j), v[i] / v[k] * me.to_internal / params[j].to_internal) for i, j in enumerate(cols)
              if i != k and abs(proj[i, k]) > 1e-6 * proj[k, k]]
-    return (f"cannot be told apart from {', '.join(params[j].name for j, _ in pairs)} at these set-ups: "
-            f"a change of 1 {me.unit} in {me.name} with {_terms(params, pairs)} moves no measured "
+    terms = _grouped(params, pairs)
+    return (f"cannot be told apart from {', '.join(short for *_, short in terms)} at these set-ups: "
+            f"a change of 1 {me.unit} in {me.name} with {_terms(terms)} moves no measured "
             f"coordinate (to first order)")
 
 
