@@ -274,6 +274,12 @@ def evaluate(trace: Trace) -> dict:
     return out
 
 
+def largest_gap(angle: np.ndarray) -> float:
+    """The largest arc of the circle (rad) with no point of ``angle`` on it."""
+    a = np.sort(np.mod(angle, 2 * np.pi))
+    return float(np.diff(np.r_[a, a[0] + 2 * np.pi]).max())
+
+
 def hysteresis(trace: Trace) -> float:
     """Circular hysteresis H (ISO 230-4): the largest radial difference between the two paths,
     the cw one interpolated (periodically, linearly in angle) at the ccw one's angles."""

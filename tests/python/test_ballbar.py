@@ -374,3 +374,13 @@ def test_a_params_file_name_cannot_write_the_set_up(machine_file, tmp_path):
     trace = tmp_path / "t.csv"
     run_cli("ballbar", machine_file, "--params", str(p), "--plane", "XY", "--radius", "40", "-o", str(trace))
     assert bb.read_trace(str(trace), load_machine(machine_file)).setup.plane == "XY"
+
+
+def test_a_half_circle_is_fitted_with_a_warning(capsys, machine_file, tmp_path):
+    path = tmp_path / "half.csv"
+    path.write_text(GOOD_HEAD + "".join(f"{a},ccw,{-9000 + a}\n" for a in range(0, 181, 10)))
+    capsys.readouterr()
+    assert main(["ballbar", machine_file, "--fit", str(path), "--plot", str(tmp_path / "half.png")]) == 0
+    err = capsys.readouterr().err
+    assert "the ccw points leave 180° of the circle without a point" in err
+    assert (tmp_path / "half.png").stat().st_size > 1000      # a scale of a few divisions, whatever the values

@@ -167,7 +167,8 @@ def plot(trace: bb.Trace, ev: dict, fig_um: dict, title: str, output: str) -> No
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    lo, hi = float(trace.deviation.min()) / UM, float(trace.deviation.max()) / UM
+    # the scale spans the trace and the nominal circle (0): a few divisions, whatever the values
+    lo, hi = min(float(trace.deviation.min()) / UM, 0.0), max(float(trace.deviation.max()) / UM, 0.0)
     div = _division(hi - lo)
     rings = max(4, math.ceil(-lo / div) + 2)    # divisions from the plot's centre to the nominal circle
     fig = plt.figure(figsize=(7, 7.8))
@@ -380,6 +381,11 @@ def run_fit(args) -> int:
     assume = check_errors(machine, names(",".join(args.assume_zero), "--assume-zero"), "--assume-zero")
     prefer = check_errors(machine, names(",".join(args.prefer), "--prefer"), "--prefer")
     trace = bb.read_trace(args.fit, machine)
+    for d in (bb.CCW, bb.CW):
+        th = trace.of(d)[0]
+        if len(th) and bb.largest_gap(th) > math.radians(45):
+            print(f"chaincomp ballbar: warning: {args.fit}: the {d} points leave {math.degrees(bb.largest_gap(th)):.0f}° "
+                  "of the circle without a point: G, F and the fit see only part of it", file=sys.stderr)
     values, _ = values_for(machine, args.params, [])
     setup = trace.setup
     values.update(setup.held)
