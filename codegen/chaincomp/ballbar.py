@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import units as U
+from .calibration import find_slides
 from .errors import ChaincompError
 from .expressions import MAX_LITERAL
 from .iso230_2 import _number, _split
@@ -453,7 +454,7 @@ def read_trace(path: str, machine: Machine) -> Trace:
             raise ChaincompError(f"no column {f!r} (header: {', '.join(cells)}; expected "
                                  "'angle [deg],direction,deviation [um]')", path, hline, f)
     units = {}
-    for f, kind, default in (("angle", "angle", None), ("deviation", "length", None)):
+    for f, kind in (("angle", "angle"), ("deviation", "length")):
         written = col_unit[f]
         if written is None:
             raise ChaincompError(f"no unit for column {f!r}: write it in the header ('{f} "
@@ -555,7 +556,6 @@ class Fit:
 
 def _slide_terms(machine: Machine, axes: tuple[str, str]) -> list[tuple[str, str, str]]:
     """(error, axis, kind): the positioning and straightness errors of the slides of the plane axes."""
-    from .calibration import find_slides
     out = []
     for slide in find_slides(machine):
         if slide.axis in axes:
@@ -589,7 +589,6 @@ def fit(machine: Machine, trace: Trace, values: dict, axes: dict, start: np.ndar
     index = {s.name: k for k, s in enumerate(machine.errors)}
     centre = [Term(f"centre {'xyz'[c]}", column=n[:, c].copy()) for c in (i, j)]
     location, slide_consts, powers = [], [], []
-    from .calibration import find_slides
     in_slides = {c.error for s in find_slides(machine) for c in s.components}
     for e in free:
         if e in not_fitted:
