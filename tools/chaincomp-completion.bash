@@ -97,14 +97,14 @@ _chaincomp() {
         iso230-2)
           case "$prev" in
             --format) words='text json';;
-            *) words='-h --help --columns --units --format --json --plot'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --columns --column-units --format --json --plot'; [[ $cur == -* ]] || return 0;;
           esac;;
         laser-to-params)
           case "$prev" in
             --direction) words='mean up down';;
             --interpolation) words='linear monotone_cubic';;
             --outside) words='hold reject';;
-            *) words='-h --help --machine --columns --units --error --axis --direction -o --output --merge --interpolation --outside'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --machine --columns --column-units --error --axis --direction -o --output --merge --interpolation --outside'; [[ $cur == -* ]] || return 0;;
           esac;;
         status)
           case "$prev" in

@@ -15,7 +15,7 @@ Columns (case-insensitive; others are ignored): ``target`` (the target position 
 direction of approach, ``down``/``-``/``↓`` for the negative), and either ``deviation``
 (x_ij = P_ij - P_i) or ``actual`` (the measured position P_ij; the deviation is actual minus
 target). Units in brackets or parentheses after a column's name, or from the caller
-(``--units``); ``column_map`` maps these names onto another program's header.
+(``--column-units``); ``column_map`` maps these names onto another program's header.
 
 Every target must have the same runs in both directions, and at least 2 runs (the standard
 deviation s needs n >= 2; with n = 1 the file is refused), and there must be 2 targets or more.
@@ -123,7 +123,7 @@ def parse_column_map(text: str | None, option: str = "--columns") -> dict[str, s
     return out
 
 
-def parse_units(text: str | None, option: str = "--units") -> tuple[U.Unit | None, U.Unit | None]:
+def parse_units(text: str | None, option: str = "--column-units") -> tuple[U.Unit | None, U.Unit | None]:
     """'mm,um' -> (position unit, deviation unit)."""
     if not text:
         return None, None
@@ -212,14 +212,14 @@ def read_runs(path: str, column_map: dict[str, str] | None = None,
         if written is None:
             if given is None:
                 raise ChaincompError(f"no unit for column {wanted[field]!r}: write it in the header "
-                                     f"('{wanted[field]} [mm]') or give --units", path, hline, wanted[field])
+                                     f"('{wanted[field]} [mm]') or give --column-units", path, hline, wanted[field])
             return given
         try:
             u = U.unit(written)
         except KeyError as exc:
             raise ChaincompError(exc.args[0], path, hline, wanted[field]) from None
         if given is not None and given != u:
-            raise ChaincompError(f"the header says {u.name}, --units says {given.name}", path, hline, wanted[field])
+            raise ChaincompError(f"the header says {u.name}, --column-units says {given.name}", path, hline, wanted[field])
         return u
 
     pos_unit = unit_of("target", units[0])

@@ -28,7 +28,10 @@ NO_MACHINE_FIRST = {
     "iso230-2": "reads laser runs only",
     "status": "listens to the daemons on the bus; --machine there names axes of several daemons",
     "generate": "takes several machine files (all positional)",
+    "import-urdf": "reads a URDF and writes the machine file",
 }
+UNITS_CHOICES, UNITS_DEFAULT = ("people", "internal"), "people"   # µm/arcsec, or mm/rad
+UNITS_VERBS = {"eval", "plot", "identify"}   # verbs that print errors for people
 
 
 def _verbs() -> dict[str, argparse.ArgumentParser]:
@@ -74,6 +77,10 @@ def test_shared_options_have_the_same_names_and_defaults(verb):
     for name in ("--params", "--set"):   # values: the same everywhere
         if name in opts:
             assert opts[name].metavar in ("P.yaml", "NAME=VALUE", "AXIS=VALUE"), (verb, name)
+    if "--units" in opts:
+        assert tuple(opts["--units"].choices) == UNITS_CHOICES and opts["--units"].default == UNITS_DEFAULT, verb
+    if verb in UNITS_VERBS:
+        assert "--units" in opts, verb
     if "--order" in opts and verb in ("budget", "plot"):
         assert opts["--order"].default == MODEL_DEFAULT
         assert opts["--order"].type("exact") == "exact"

@@ -171,7 +171,7 @@ def test_units_from_the_option_and_angles(tmp_path, capsys):
     readings = make_runs([0.0, 90.0, 180.0, 270.0], 3, 0.5, seed=1)
     write_csv(tmp_path / "mm.csv", {k: v / 1000 for k, v in readings.items()}, header="target,run,direction,"
                                                                                      "deviation")
-    um = evaluate(capsys, tmp_path / "mm.csv", "--units", "mm,mm")
+    um = evaluate(capsys, tmp_path / "mm.csv", "--column-units", "mm,mm")
     assert um["units"]["deviation"] == "um"
     per, _ = reference(readings)
     assert [p["mean_up"] for p in um["positions"]] == pytest.approx([q["mean_up"] for q in per], abs=1e-9)
@@ -233,8 +233,8 @@ def test_bad_rows_are_refused_with_file_line_and_column(tmp_path, capsys, row, f
     ("target [mm],run,direction\n0,1,up\n", (), ":1: deviation: ", "no column 'deviation' or 'actual'"),
     ("target,run,direction,deviation [um]\n0,1,up,0.1\n", (), ":1: target: ", "no unit for column 'target'"),
     ("target [furlong],run,direction,deviation [um]\n", (), ":1: target: ", "unknown unit 'furlong'"),
-    ("target [mm],run,direction,deviation [um]\n", ("--units", "m,um"), ":1: target: ",
-     "the header says mm, --units says m"),
+    ("target [mm],run,direction,deviation [um]\n", ("--column-units", "m,um"), ":1: target: ",
+     "the header says mm, --column-units says m"),
     ("target [mm],run,direction,deviation [um]\n", (), ":1: ", "no readings below the header"),
     ("target [mm],run,direction,deviation [um]\n" + "".join(f"{t},1,{d},0.1\n" for t in (0, 5) for d in ("up", "down")),
      (), ":1: run: ", "only one run"),

@@ -34,12 +34,12 @@ def add_columns_arguments(p) -> None:
     p.add_argument("--columns", metavar="MAP", help="header names of another program's export, e.g. "
                    "'target=Target Position,actual=Measured,run=Run,direction=Dir' (fields: "
                    f"{', '.join(iso.FIELDS)})")
-    p.add_argument("--units", metavar="POS,DEV", help="units of the target (and actual) and deviation columns "
+    p.add_argument("--column-units", metavar="POS,DEV", help="units of the target (and actual) and deviation columns "
                    "when the header has none, e.g. mm,um")
 
 
 def read(args) -> iso.Runs:
-    return iso.read_runs(args.runs, iso.parse_column_map(args.columns), iso.parse_units(args.units))
+    return iso.read_runs(args.runs, iso.parse_column_map(args.columns), iso.parse_units(args.column_units))
 
 
 def add_parser(sub) -> None:
