@@ -106,7 +106,7 @@ def run(args) -> int:
         proto = build_linear_protocol(machine, measure, assume, fixed)
         print(to_json(linear_json(proto)) if args.format == "json" else linear_text(proto))
         return 0
-    angles = list(dict.fromkeys(number_list("--angles", args.angles or "0,90,180,270")))
+    angles = list(dict.fromkeys(number_list("--angles", "0,90,180,270" if args.angles is None else args.angles)))
     proto = build_protocol(machine, angles, assume, measure, fixed, names(",".join(args.prefer), "--prefer"))
     print(to_json(protocol_json(proto)) if args.format == "json" else to_text(proto))
     return 0
