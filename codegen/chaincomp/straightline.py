@@ -304,6 +304,9 @@ class Builder:
         x = sp.Add(*moving)
         if x in self.angular:
             sx, cx = self.axis_sin_cos(x)
+        elif -x in self.angular:  # a rotation of the workpiece branch, inverted
+            sx, cx = self.axis_sin_cos(-x)
+            sx = self.g.neg(sx)
         else:
             node = self.expr(x)
             sx, cx = self.g.call("std::sin", node), self.g.call("std::cos", node)
