@@ -384,3 +384,19 @@ def test_a_half_circle_is_fitted_with_a_warning(capsys, machine_file, tmp_path):
     err = capsys.readouterr().err
     assert "the ccw points leave 180° of the circle without a point" in err
     assert (tmp_path / "half.png").stat().st_size > 1000      # a scale of a few divisions, whatever the values
+
+
+def test_an_axis_that_moves_the_tool_backwards(tmp_path):
+    """A table axis moving the tool along -x (the machine file writes -V): the commands are the
+    circle's coordinates negated, and the trace is still the actual tool point's distance."""
+    path = tmp_path / "bb_test.yaml"
+    path.write_text(MACHINE.replace('"V*(1 + SV) + U*sin(SQ) + OX"', '"-V*(1 + SV) + U*sin(SQ) + OX"'))
+    p = params_file(tmp_path, {"SV": "20 ppm", "SQ": "-6 arcsec"})
+    out = json.loads(run_cli("ballbar", str(path), "--params", p, "--plane", "XY", "--radius", "80",
+                             "--centre", "x=-40", "--points", "36", "--format", "json").stdout)
+    assert out["axes"] == ["V", "U"]
+    th = np.radians(out["trace"][0]["angle"])
+    v, u = -(-40 + 80 * np.cos(th)), 80 * np.sin(th)
+    actual = chain(-v, u, 0.0, 20e-6, 0.0, -6 * ARCSEC)     # x = -V (1 + SV) + ...: chain of -V
+    want = np.linalg.norm(actual - [-40, 0, 25], axis=1) - 80
+    assert np.abs(np.array(out["trace"][0]["deviation"]) * 1e-3 - want).max() < 1e-9
