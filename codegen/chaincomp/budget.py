@@ -19,7 +19,9 @@ a Monte Carlo run of the exact model (seeded) gives the mean, the standard devia
 the p-quantile of |deviation| that rss and worst should bracket.
 
 Everything runs vectorised: the gains are lambdified once per component and evaluated on
-an open mesh of the grid axes, so trig of an axis is computed once per grid value.
+an open mesh of the grid axes, so trig of an axis is computed once per grid value. On a long
+chain, whose expanded series would take minutes, the numeric jets carry the same
+coefficients through the chain instead (chaincomp.jets), on the same open mesh.
 """
 
 from __future__ import annotations
