@@ -486,44 +486,10 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
 
     p = np.zeros(n)
     j0 = jacobian(p)                                      # first-order gains at these set-ups
-    scale = np.linalg.norm(j0, axis=0)
-    visible = scale > 1e-12 * max(scale.max(initial=0.0), 1e-300)
-    unidentifiable = {}
-    for j in np.flatnonzero(~visible):
-        unidentifiable[names[j]] = (f"does not move the measured coordinates ({', '.join(measured)}) "
-                                    f"at any of these set-ups")
-    cols = np.flatnonzero(visible)
-    d = np.zeros(n)
-    d[cols] = 1.0 / scale[cols]
-    scaled = j0[:, cols] * d[cols]
-    s, vt = np.zeros(0), np.zeros((0, 0))
-    if len(cols):
-        # with fewer data than parameters the reduced vt lacks part of the null space; only then
-        # is the full one needed (and small: U is data x data)
-        _, s, vt = np.linalg.svd(scaled, full_matrices=len(scaled) < len(cols))
-    rank = int((s > _RANK_TOL * s[0]).sum()) if len(s) else 0
+    rank, basis, unidentifiable, redundant, carried, suggested = _analyse(j0, params, measured, prefer, minimal)
     if rank == 0:
         raise ChaincompError(f"none of the {n} parameters fitted moves the {data}: nothing to identify",
                              table.file)
-    first = [k for name in prefer for k, j in enumerate(cols) if params[j].error == name]
-    kept = [int(cols[k]) for k in _spanning(scaled, rank, first)]
-    redundant, carried = {}, {}
-    if minimal:
-        for j in cols:
-            if j not in kept:
-                redundant[names[j]], carried[names[j]] = _carried(params, j0, kept, j)
-        basis = np.zeros((n, rank))                       # p = basis @ z: the minimal set, scaled
-        basis[sorted(kept), np.arange(rank)] = d[sorted(kept)]
-        suggested = []
-    else:
-        null = vt[rank:]
-        proj = null.T @ null    # projector on the null space: its blocks do not depend on the basis
-        for k, j in enumerate(cols):
-            if proj[k, k] > 1e-12:
-                unidentifiable[names[j]] = _inseparable_reason(params, cols, proj, k, d)
-        basis = np.zeros((n, rank))                       # the combinations the data see
-        basis[cols] = d[cols, None] * vt[:rank].T
-        suggested = [names[j] for j in cols if j not in kept]
     ident = [j for j in range(n) if names[j] not in unidentifiable and names[j] not in redundant]
     if not ident:
         raise ChaincompError(f"no error can be identified from these {data}: the {n} parameters fitted "
@@ -584,6 +550,49 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     if not dof > 0:
         raise ChaincompError(f"no redundancy: {data} leave no degrees of freedom", table.file)
     return fit
+
+
+def _analyse(j0: np.ndarray, params: list[Param], measured: list[str], prefer, minimal: bool):
+    """What the first-order Jacobian ``j0`` (weighted) tells: its rank (columns scaled to unit
+    norm), the basis p = basis @ z of the fit's parameter space (the combinations the data see,
+    or the minimal set), the unidentifiable parameters with the reason, the ones held at zero
+    outside the minimal set with the combination that carries them, and a suggested set to
+    assume zero."""
+    names = [p.name for p in params]
+    n = len(params)
+    scale = np.linalg.norm(j0, axis=0)
+    visible = scale > 1e-12 * max(scale.max(initial=0.0), 1e-300)
+    unidentifiable = {names[j]: f"does not move the measured coordinates ({', '.join(measured)}) at any of "
+                                f"these set-ups" for j in np.flatnonzero(~visible)}
+    cols = np.flatnonzero(visible)
+    d = np.zeros(n)
+    d[cols] = 1.0 / scale[cols]
+    scaled = j0[:, cols] * d[cols]
+    s, vt = np.zeros(0), np.zeros((0, 0))
+    if len(cols):
+        # with fewer data than parameters the reduced vt lacks part of the null space; only then
+        # is the full one needed (and small: U is data x data)
+        _, s, vt = np.linalg.svd(scaled, full_matrices=len(scaled) < len(cols))
+    rank = int((s > _RANK_TOL * s[0]).sum()) if len(s) else 0
+    basis = np.zeros((n, rank))
+    if rank == 0:
+        return rank, basis, unidentifiable, {}, {}, []
+    first = [k for name in prefer for k, j in enumerate(cols) if params[j].error == name]
+    kept = [int(cols[k]) for k in _spanning(scaled, rank, first)]
+    redundant, carried = {}, {}
+    if minimal:
+        for j in cols:
+            if j not in kept:
+                redundant[names[j]], carried[names[j]] = _carried(params, j0, kept, j)
+        basis[sorted(kept), np.arange(rank)] = d[sorted(kept)]      # the minimal set, scaled
+        return rank, basis, unidentifiable, redundant, carried, []
+    null = vt[rank:]
+    proj = null.T @ null        # projector on the null space: its blocks do not depend on the basis
+    for k, j in enumerate(cols):
+        if proj[k, k] > 1e-12:
+            unidentifiable[names[j]] = _inseparable_reason(params, cols, proj, k, d)
+    basis[cols] = d[cols, None] * vt[:rank].T                      # the combinations the data see
+    return rank, basis, unidentifiable, redundant, carried, [names[j] for j in cols if j not in kept]
 
 
 def _count(k: int, what: str) -> str:

@@ -205,7 +205,8 @@ def test_a_knot_no_measurement_sees_is_reported(machine, tmp_path, capsys):
 
 @pytest.mark.parametrize("args, message", [
     (["--vary", "EXX"], "--vary EXX: expected NAME=table:K1,K2,... or NAME=poly:DEGREE"),
-    (["--vary", "EQQ=poly:2"], "--vary EQQ=poly:2: unknown error 'EQQ' for machine 'x_slide' (errors: EXX, EYX, ECX, EC0Y)"),
+    (["--vary", "EQQ=poly:2"],
+     "--vary EQQ=poly:2: unknown error 'EQQ' for machine 'x_slide' (errors: EXX, EYX, ECX, EC0Y)"),
     (["--vary", "EXX@Q=poly:2"], "'Q' is not an axis of x_slide (axes: X, Y)"),
     (["--vary", "EC0Y=poly:1"], "EC0Y is not a component error of a slide"),
     (["--vary", "EXX=spline:3"], "unknown form 'spline'"),
