@@ -65,6 +65,19 @@ def check_errors(machine: Machine, names, option: str) -> list[str]:
     return out
 
 
+def check_measure(measure) -> list[str]:
+    """Validate --measure: tool-point coordinates x, y, z (any case), each once, at least one."""
+    out = [c.lower() for c in measure]
+    for i, c in enumerate(out):
+        if c not in COMPONENTS:
+            raise ChaincompError(f"--measure: unknown coordinate {c!r} (expected x, y, z)")
+        if c in out[:i]:
+            raise ChaincompError(f"--measure: {c!r} named twice")
+    if not out:
+        raise ChaincompError("--measure: name at least one coordinate (x, y, z)")
+    return out
+
+
 @dataclass
 class Equation:
     """``coord`` at set-up ``setups[0]`` plus ``sign`` times it at ``setups[1]``."""
@@ -130,12 +143,7 @@ def build_protocol(machine: Machine, angles=(0.0, 90.0, 180.0, 270.0), assume_ze
     """Search the set-ups of ``machine``'s rotary axes over ``angles`` for the simplest tests."""
     assume_zero = check_errors(machine, assume_zero, "--assume-zero")
     prefer = check_errors(machine, prefer, "--prefer")
-    measure = [c.lower() for c in measure]
-    for c in measure:
-        if c not in COMPONENTS:
-            raise ChaincompError(f"--measure: unknown coordinate {c!r} (expected x, y, z)")
-    if not measure:
-        raise ChaincompError("--measure: name at least one coordinate (x, y, z)")
+    measure = check_measure(measure)
     grid_axes = [s for s in machine.axes if s.unit.kind == "angle"]
     if not grid_axes:
         raise ChaincompError(f"machine {machine.name!r} has no rotary axis to set over the angle grid")

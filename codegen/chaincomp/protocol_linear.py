@@ -41,7 +41,6 @@ from .pose_design import point_jacobian
 RUN_POINTS = 11          # targets per laser run and per diagonal
 PARTS = ("offset", "slope", "shape")
 STAGES = ("laser runs", "diagonals", "tracker")
-_ROTATION_NAMES = "xyz"
 
 
 def linear_only(machine: Machine) -> bool:
@@ -151,14 +150,9 @@ def pose_gains(models: list[tuple[Machine, ExactModel]], axes: dict[str, np.ndar
 def build_linear_protocol(machine: Machine, measure=COMPONENTS, assume_zero=(),
                           fixed: dict[str, float] | None = None) -> LinearProtocol:
     """The laser runs, diagonals and tracker points of ``machine`` and what each identifies."""
-    from .protocol import check_errors
+    from .protocol import check_errors, check_measure
     assume_zero = check_errors(machine, assume_zero, "--assume-zero")
-    measure = [c.lower() for c in measure]
-    for c in measure:
-        if c not in COMPONENTS:
-            raise ChaincompError(f"--measure: unknown coordinate {c!r} (expected x, y, z)")
-    if not measure:
-        raise ChaincompError("--measure: name at least one coordinate (x, y, z)")
+    measure = check_measure(measure)
     errors = [s.name for s in machine.errors if s.name not in assume_zero]
     if not errors:
         raise ChaincompError("--assume-zero: every error is assumed zero, nothing is left to identify")

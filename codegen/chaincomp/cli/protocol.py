@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-from ..derive import COMPONENTS
 from ..errors import ChaincompError
 from ..params import parse_sets
 from ..pose_design import (DEFAULT_POSES, INDICES, MAX_POOL, MAX_POSES, design_json, design_poses, design_text,
                            is_arm, write_poses)
-from ..protocol import build_protocol, check_errors, to_text
+from ..protocol import build_protocol, check_errors, check_measure, to_text
 from ..protocol import to_json as protocol_json
 from ..protocol_linear import build_linear_protocol, linear_only
 from ..protocol_linear import to_json as linear_json
@@ -115,12 +114,7 @@ def run(args) -> int:
 def _poses(args, machine, fixed, assume, measure) -> int:
     check_output(args.output, args.machine)
     assume = check_errors(machine, assume, "--assume-zero")
-    measure = [c.lower() for c in measure]
-    for i, c in enumerate(measure):
-        if c not in COMPONENTS:
-            raise ChaincompError(f"--measure: unknown coordinate {c!r} (expected x, y, z)")
-        if c in measure[:i]:
-            raise ChaincompError(f"--measure: {c!r} named twice")
+    measure = check_measure(measure)
     for n, v in fixed.items():
         lo, hi = machine.symbol(n).limits
         if not lo <= v <= hi:

@@ -12,6 +12,7 @@ from ..errors import ChaincompError
 from ..expressions import MAX_LITERAL
 from ..identify import MAX_ROWS, coordinate_named_axes, read_table, simulate, write_table
 from ..params import load_params, parse_sets
+from ..protocol import check_measure
 from ..protocol_linear import auto_levels
 from .common import add_machine_argument, add_seed_argument, check_output, load, number_list
 from .identify import length
@@ -117,14 +118,7 @@ def run(args) -> int:
                              machine.file, s.line, "symbols")
     is_file = args.setups.partition(":")[0] not in ("auto", "grid", "random")
     check_output(args.output, args.machine, args.params, args.setups if is_file else None)
-    measure = [c.lower() for c in names(args.measure)]
-    for i, c in enumerate(measure):
-        if c not in ("x", "y", "z"):
-            raise ChaincompError(f"--measure: unknown coordinate {c!r} (expected x, y, z)")
-        if c in measure[:i]:
-            raise ChaincompError(f"--measure: {c!r} named twice")
-    if not measure:
-        raise ChaincompError("--measure: name at least one coordinate (x, y, z)")
+    measure = check_measure(names(args.measure))
     noise = length(machine, "--noise", args.noise)
     values = load_params(args.params, machine) if args.params else {}
     rng = np.random.default_rng(args.seed)
