@@ -110,8 +110,9 @@ class Design:
         return float(np.median(self.random_values))
 
     @property
-    def ratio(self) -> float:
-        return self.value / self.random_median if self.random_median > 0 else math.inf
+    def ratio(self) -> float | None:
+        """None where random sets of this size do not see every combination (index 0)."""
+        return self.value / self.random_median if self.random_median > 0 else None
 
 
 class _Progress:
@@ -301,7 +302,8 @@ def design_text(design: Design, output: str | None) -> str:
              f"then {design.exchanges} exchanges)",
              f"  random poses   {design.random_median:.6g}   (median of {len(design.random_values)} sets of "
              f"{len(design)} from the pool)",
-             f"  ratio          {design.ratio:.3f}"]
+             f"  ratio          " + (f"{design.ratio:.3f}" if design.ratio is not None else
+                                      "(random sets of this size do not see every combination)")]
     if design.invisible:
         lines.append(f"Not seen at any pose: {', '.join(design.invisible)} (they move no measured coordinate)")
     if output:

@@ -398,6 +398,15 @@ def _combination(rd: Reading) -> str:
     return text[2:] if text.startswith("+ ") else "-" + text[2:]
 
 
+def _grouped(labels: list[str]) -> str:
+    """'EXX shape', 'EYX shape', 'EXX slope', 'EC0Y' -> 'shape of EXX, EYX; slope of EXX; EC0Y'."""
+    parts: dict[str, list[str]] = {}
+    for lb in labels:
+        error, _, part = lb.partition(" ")
+        parts.setdefault(part, []).append(error)
+    return "; ".join((f"{part} of " if part else "") + ", ".join(errs) for part, errs in parts.items())
+
+
 def to_json(proto: LinearProtocol) -> dict:
     m = proto.machine
     def declared(axes, i):
@@ -443,24 +452,24 @@ def to_text(proto: LinearProtocol) -> str:
         if rd.slope_from:
             what += f"; sees {', '.join(rd.slope_from)} as a slope"
         lines.append(f"   {rd.name:<28} {what}   [{rd.instrument}]")
-    lines.append("   Positioning and angular runs read relative to their start, straightness runs up to "
-                 "a line: the offsets (and straightness slopes) are left to the tests below.")
+    lines += ["   Positioning and angular runs read relative to their start, straightness runs up to a line:",
+              "   the offsets and the straightness slopes are left to the tests below."]
     diag = [r for r in proto.readings if r.kind == "diagonal"]
     if diag:
         lines += ["", f"2. Diagonals (ISO 230-6, displacement along each, all axes at once; {RUN_POINTS} targets):"]
         lines += [f"   {rd.name}" for rd in diag]
     tracker = next(r for r in proto.readings if r.kind == "tracker")
-    lines += ["", f"3. Tracker points: {tracker.name}, every axis at its limits and mid-range "
-                  "(simulate-measurements --setups auto writes them)"]
-    lines += ["", "Zero by definition (ISO 230-1 datum): the offsets of the slides' errors at the reference "
-                  "position; the slopes of straightness errors (the squareness errors carry them)"]
-    lines += ["", "Identified, cumulatively (rank of the stacked readings, unknown zeros included):"]
+    lines += ["", f"3. Tracker points: {tracker.name}, every axis at its limits and mid-range",
+              "   (simulate-measurements --setups auto writes them)"]
+    lines += ["", "Zero by definition (ISO 230-1 datum): the offsets of the slides' errors at the reference position,",
+              "and the slopes of the straightness errors (the squareness errors carry them)"]
+    lines += ["", "Identified, cumulatively (rank of the stacked readings, their unknown zeros included):"]
     for st in proto.stages:
-        lines.append(f"   + {st['name']:<11} rank {st['rank']:<3} {st['total']} of {st['parameters']} "
-                     f"parameters; new: {', '.join(st['identified']) or '(none)'}")
+        lines.append(f"   + {st['name']:<11} rank {st['rank']}, {st['total']} of {st['parameters']} parameters"
+                     + (f": {_grouped(st['identified'])}" if st["identified"] else ": nothing new"))
         if st["name"] != STAGES[0]:
-            lines.append(f"     ({st['name']} alone: rank {st['rank_alone']}, identify "
-                         f"{', '.join(st['alone']) or 'none of them'})")
+            lines.append(f"     ({st['name']} alone: rank {st['rank_alone']}"
+                         + (f", identify {_grouped(st['alone'])})" if st["alone"] else ", identify nothing)"))
     if proto.unidentifiable:
         lines += ["", "Not identifiable:"]
         lines += [f"   {lb}: {why}" for lb, why in proto.unidentifiable.items()]
