@@ -470,6 +470,10 @@ def to_text(proto: LinearProtocol) -> str:
         if st["name"] != STAGES[0]:
             lines.append(f"     ({st['name']} alone: rank {st['rank_alone']}"
                          + (f", identify {_grouped(st['alone'])})" if st["alone"] else ", identify nothing)"))
+    quiet = [s.name for s in m.errors if s.unobservable and s.name not in proto.assumed_zero]
+    if quiet:
+        lines += ["", f"Marked unobservable in the machine file (they move neither the tool point nor its axis, "
+                      f"so need no compensation): {', '.join(quiet)}"]
     if proto.unidentifiable:
         lines += ["", "Not identifiable:"]
         lines += [f"   {lb}: {why}" for lb, why in proto.unidentifiable.items()]
