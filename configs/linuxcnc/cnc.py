@@ -88,10 +88,11 @@ class Run:
 
 
 def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeout: float = 120.0,
-        work: str | None = None, params: str | None = None, stale_ms: float = 50.0) -> Run:
+        work: str | None = None, params: str | None = None, stale_ms: float = 50.0,
+        program: str | None = None) -> Run:
     """One run of the configuration's program. `env`: the driver's settings (drive.py);
     `params`: the bridge's chaincompd params (default the machine's demo params); `stale_ms`:
-    the bridge's stale age."""
+    the bridge's stale age; `program`: G-code text in place of the configuration's program.ngc."""
     if route not in ROUTES:
         raise ValueError(f"route {route!r}: expected one of {', '.join(ROUTES)}")
     src = os.path.join(HERE, config)
@@ -99,6 +100,9 @@ def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeo
     for f in glob.glob(os.path.join(src, "*")) + [os.path.join(HERE, "drive.py")]:
         shutil.copy(f, work)
     shutil.copy(os.path.join(src, f"route-{route}.hal"), os.path.join(work, "route.hal"))
+    if program is not None:
+        with open(os.path.join(work, "program.ngc"), "w") as f:
+            f.write(program)
     params = os.path.abspath(params or os.path.join(ROOT, "configs", "params", f"{config}-demo.yaml"))
     with open(os.path.join(work, f"{config}.ini"), "a") as f:  # what the HAL files read as [CHAINCOMP]KEY
         f.write(f"\n[CHAINCOMP]\nROOT = {ROOT}\nPARAMS = {params}\nSTALE_MS = {stale_ms!r}\n")
@@ -159,10 +163,10 @@ def tool_errors(machine, params: dict, commands: np.ndarray, drives: np.ndarray)
     return point, direction
 
 
-def dwells(commands: np.ndarray, min_rows: int = 300, skip: int = 30) -> list[slice]:
+def dwells(commands: np.ndarray, min_rows: int = 300, skip: int = 30, tail: int = 0) -> list[slice]:
     """Stretches where every joint command stands still for at least `min_rows` periods (the
     program's G4 dwells and the end), without their first `skip` rows (the bridge's
-    correction catches up there)."""
+    correction catches up there) and their last `tail`."""
     still = np.r_[False, np.all(np.abs(np.diff(commands, axis=0)) < 1e-9, axis=1)]
     out, start = [], None
     for i, s in enumerate(np.r_[still, False]):
@@ -170,6 +174,6 @@ def dwells(commands: np.ndarray, min_rows: int = 300, skip: int = 30) -> list[sl
             start = i
         elif not s and start is not None:
             if i - start >= min_rows:
-                out.append(slice(start + skip, i))
+                out.append(slice(start + skip, i - tail))
             start = None
     return out

@@ -37,11 +37,15 @@ def main() -> int:
             s.poll()
             if cond():
                 return
-            err = e.poll()
-            if err:
-                event("error", text=err[1])
+            failed(e.poll())
             time.sleep(0.01)
         raise SystemExit(f"drive.py: timed out waiting for {what}")
+
+    def failed(err):
+        """An error from LinuxCNC (a G-code error, a limit): record it and stop."""
+        if err:
+            event("error", text=err[1])
+            raise SystemExit(f"drive.py: LinuxCNC: {err[1]}")
 
     wait(lambda: s.task_state != 0, "the task")
     c.state(linuxcnc.STATE_ESTOP_RESET)
@@ -69,9 +73,7 @@ def main() -> int:
         if pending and time.monotonic() - start >= pending[0][0]:
             event("at", command=pending[0][1])
             subprocess.run(["sh", "-c", pending.pop()[1]])
-        err = e.poll()
-        if err:
-            event("error", text=err[1])
+        failed(e.poll())
         if s.interp_state == linuxcnc.INTERP_IDLE and s.queue == 0:
             break
         time.sleep(0.005)

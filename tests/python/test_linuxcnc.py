@@ -218,3 +218,37 @@ def test_bridge_goes_stale_and_ramps_out_when_the_daemon_dies(bridge_kill_run, m
     last = dwells[-1]
     point, _ = cnc.tool_errors(machine, params, run.commands[last], run.drives[last])
     assert np.linalg.norm(point, axis=1).min() * 1e3 > 10.0
+
+
+def test_trunnion_model_equals_linuxcncs_xyzac_trt_kins():
+    """Peer check: LinuxCNC's xyzac-trt-kins (configs/linuxcnc/trunnion_ac: pivot at joint
+    Z = -350, no offsets) turns a program's workpiece points into joint positions; the
+    machine file trunnion_ac.yaml's nominal model at those joints gives the same points. The
+    mapping: the file's A and C are LinuxCNC's with the sign turned (the file's table turns by
+    -A and -C, LinuxCNC's by +A, +C seen from the tool) and the file's workpiece origin, the C
+    table top, is LinuxCNC's Z -300. Poses: random, within the joint limits; at each a short
+    dwell, where command and joints are static (in motion the Cartesian command leads)."""
+    machine = load_machine(os.path.join(ROOT, "configs", "machines", "trunnion_ac.yaml"))
+    rng = np.random.default_rng(18)
+    poses = np.round(np.column_stack([rng.uniform(-40, 40, 10), rng.uniform(-40, 40, 10),
+                                      rng.uniform(-290, -220, 10), rng.uniform(-60, 60, 10),
+                                      rng.uniform(-180, 180, 10)]), 4)
+    lines = ["G21 G90 G94 G64"]
+    for x, y, z, a, c in poses:
+        lines += [f"G1 X{x:.4f} Y{y:.4f} Z{z:.4f} A{a:.4f} C{c:.4f} F12000", "G4 P0.15"]
+    run = cnc.run("off", config="trunnion_ac", program="\n".join(lines + ["M2", ""]))
+    completed(run)
+    found = cnc.dwells(run.commands, min_rows=120, skip=10, tail=10)
+    cart = run.samples[:, cnc.COL_OBS:cnc.COL_OBS + 5] * 1e-6  # axis.L.pos-cmd (trunnion's recorder)
+    got = []
+    for s in found[1:]:
+        joints = run.commands[s].copy()
+        joints[:, 3:] *= -1
+        point, _ = ExactModel(machine).pose(cnc.to_internal(machine, joints))
+        point = np.stack([np.asarray(v) for v in point], axis=1)
+        np.testing.assert_allclose(point + [0, 0, -300], cart[s, :3], atol=1e-9)
+        np.testing.assert_allclose(joints[:, 3:], -cart[s, 3:], atol=1e-12)
+        got.append(cart[s.start, :3])
+    # every pose of the program was reached and checked
+    assert len(got) == len(poses)
+    np.testing.assert_allclose(np.array(got), np.array(poses)[:, :3], atol=1e-9)
