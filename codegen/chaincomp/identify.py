@@ -410,7 +410,7 @@ class Fit:
     ranges: dict[str, tuple[float, float]] = field(default_factory=dict)   # polynomials' span, internal
     minimal: bool = False
     redundant: dict[str, str] = field(default_factory=dict)        # minimal: held at zero -> the combination
-    carried: dict[str, dict[str, float]] = field(default_factory=dict)   # ... as coefficients (declared units)
+    carried: dict[str, dict[str, float]] = field(default_factory=dict)   # ... as coefficients (internal units)
     sigma: dict[str, float] = field(default_factory=dict)           # given standard uncertainty by column
     chi2: float | None = None              # weighted residual sum of squares / dof, with sigma given
     rms_direction: float = math.nan        # rms residual of the tool direction (rad; nan: not measured)
@@ -656,7 +656,7 @@ def _carried(params: list[Param], j0: np.ndarray, kept: list[int], j: int):
     names = ", ".join(short for *_, short in terms)
     text = (f"to first order a change of 1 {me.unit} in {me.name} moves the measured coordinates as "
             f"{_terms(terms)} {'does' if len(pairs) == 1 else 'do'}: carried by {names}")
-    return text, {params[i].name: float(x) for i, x in pairs}
+    return text, {params[i].name: float(x * params[i].to_internal / params[j].to_internal) for i, x in pairs}
 
 
 def _inseparable_reason(params: list[Param], cols, proj, k, d) -> str:
@@ -685,38 +685,38 @@ def _shown(fit: Fit, p: Param, units: str) -> tuple[float, str]:
     return vu.to_internal / au.to_internal ** p.power, f"{vu.name}/{au.name}" + (f"^{p.power}" if p.power > 1 else "")
 
 
-def _declared(fit: Fit, p: Param, value: float) -> float:
-    return value / p.to_internal
+def _internal_unit(p: Param, fit: Fit) -> str:
+    """The internal unit of a parameter: mm, rad or 1, per mm^k or rad^k for a coefficient."""
+    name = INTERNAL[p.kind]
+    if not p.power:
+        return name
+    pos = INTERNAL[fit.machine.symbol(p.axis).unit.kind]
+    return f"{name}/{pos}" + (f"^{p.power}" if p.power > 1 else "")
 
 
 def _varying_json(fit: Fit, e: str, v: Vary) -> dict:
+    """A varying error's parameters, internal units (named in ``units``, as in a params file)."""
     m = fit.machine
     a, s = m.symbol(v.axis), m.symbol(e)
     ps = [p for p in fit.params if p.error == e]
-    vals = [fit.estimates[p.name] / p.to_internal if p.name in fit.estimates else None for p in ps]
-    unc = [fit.uncertainties[p.name] / p.to_internal if p.name in fit.uncertainties else None for p in ps]
+    units = [INTERNAL[a.unit.kind], INTERNAL[s.unit.kind]]
+    out = {"axis": v.axis, "units": units, "parameters": [p.name for p in ps],
+           "uncertainties": [fit.uncertainties.get(p.name) for p in ps], "outside": "hold"}
+    vals = [fit.estimates.get(p.name) for p in ps]
     if v.kind == "table":
-        return {"kind": "table", "axis": v.axis, "units": [a.unit.name, s.unit.name], "interpolation": "linear",
-                "outside": "hold", "positions": [a.from_internal(k) for k in v.knots], "values": vals,
-                "uncertainties": unc, "parameters": [p.name for p in ps]}
-    lo, hi = fit.ranges[e]
-    return {"kind": "polynomial", "axis": v.axis, "units": [a.unit.name, s.unit.name], "degree": v.degree,
-            "coefficients": vals, "uncertainties": unc, "range": [a.from_internal(lo), a.from_internal(hi)],
-            "outside": "hold", "parameters": [p.name for p in ps]}
+        return {"kind": "table", **out, "interpolation": "linear", "positions": list(v.knots), "values": vals}
+    return {"kind": "polynomial", **out, "degree": v.degree, "coefficients": vals, "range": list(fit.ranges[e])}
 
 
 def to_json(fit: Fit, source: str) -> dict:
-    """Values in each error's declared unit (named beside it); residuals in the machine's length
-    unit and rad."""
-    m = fit.machine
-    lu = UNITS[m.length_unit].to_internal
+    """Every value in internal units (mm, rad, 1), named beside it; None where not measured or
+    not identified."""
     byname = {p.name: p for p in fit.params}
     return {
-        "machine": m.name, "measurements": source, "setups": fit.setups, "observations": fit.observations,
+        "machine": fit.machine.name, "measurements": source, "units": "internal (mm, rad, 1)",
+        "setups": fit.setups, "observations": fit.observations,
         "measured": fit.measured, "fitted": fit.fitted, "assumed_zero": fit.assumed_zero,
-        "estimates": {n: {"value": _declared(fit, byname[n], v), "uncertainty": _declared(fit, byname[n],
-                                                                                          fit.uncertainties[n]),
-                          "unit": byname[n].unit}
+        "estimates": {n: {"value": v, "uncertainty": fit.uncertainties[n], "unit": _internal_unit(byname[n], fit)}
                       for n, v in fit.estimates.items() if byname[n].error not in fit.varying},
         "varying": {e: _varying_json(fit, e, v) for e, v in fit.varying.items()},
         "parameters": len(fit.params), "minimal": fit.minimal,
@@ -725,11 +725,10 @@ def to_json(fit: Fit, source: str) -> dict:
         "suggested_assume_zero": fit.suggested_zero, "rank": fit.rank,
         "condition_number": fit.condition,
         "correlations": [{"errors": [a, b], "value": c} for a, b, c in fit.correlations],
-        "rms_residual": None if math.isnan(fit.rms) else fit.rms / lu, "length_unit": m.length_unit,
+        "rms_residual": None if math.isnan(fit.rms) else fit.rms, "length_unit": "mm",
         "rms_direction_residual": None if math.isnan(fit.rms_direction) else fit.rms_direction,
         "direction_unit": "rad",
-        "sigma": {c: {"value": v / lu if c in COMPONENTS else v, "unit": m.length_unit if c in COMPONENTS else "rad"}
-                  for c, v in fit.sigma.items()},
+        "sigma": {c: {"value": v, "unit": "mm" if c in COMPONENTS else "rad"} for c, v in fit.sigma.items()},
         "chi2_per_dof": fit.chi2, "smooth": fit.smooth, "notes": fit.notes,
         "degrees_of_freedom": fit.dof, "iterations": fit.iterations, "converged": fit.converged,
     }

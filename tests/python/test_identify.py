@@ -53,9 +53,11 @@ def test_noise_free_recovery_through_the_cli(tmp_path):
                              "json", "-o", str(out)).stdout)
     assert doc["converged"] and doc["unidentifiable"] == {}
     assert set(doc["estimates"]) == {n for n in truth if n not in ZERO}
+    assert doc["units"] == "internal (mm, rad, 1)"
     for name, est in doc["estimates"].items():
-        assert abs(est["value"] - truth[name]) <= 1e-9 * abs(truth[name]), name
-        assert est["unit"] == m.symbol(name).unit.name
+        assert est["unit"] == {"length": "mm", "angle": "rad"}[m.symbol(name).unit.kind]
+        truth_internal = m.symbol(name).to_internal(truth[name])
+        assert abs(est["value"] - truth_internal) <= 1e-9 * abs(truth_internal), name
     assert doc["condition_number"] < 10 and doc["correlations"] == []
     # the params file loads with the product's loader, values in internal units
     loaded = load_params(str(out), m)
@@ -119,7 +121,7 @@ def test_unidentifiable_errors_get_no_value(tmp_path):
     for name in ("Ocx", "Ocy", "ThetaCh", "ThetaCv"):
         # exact to first order: the inseparable pair, left at its minimum-norm split, adds
         # only second-order terms (a few 1e-5 of each value)
-        assert doc["estimates"][name]["value"] == pytest.approx(truth[name], rel=1e-3)
+        assert doc["estimates"][name]["value"] == pytest.approx(m.symbol(name).to_internal(truth[name]), rel=1e-3)
     text = run_cli("identify", path, str(meas), "--assume-zero", "DY").stdout
     assert "not identifiable from these set-ups (no value given):" in text
     assert "Rs: does not move" in text

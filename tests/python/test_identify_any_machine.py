@@ -194,6 +194,13 @@ def fit_json(capsys, *args):
     return json.loads(out, parse_constant=lambda c: pytest.fail(f"{c} in the JSON"))
 
 
+def declared_value(m, doc, name, key="value"):
+    """An estimate of identify's JSON (internal units, named beside it) in the error's declared unit."""
+    est = doc["estimates"][name]
+    assert est["unit"] == {"length": "mm", "angle": "rad", "ratio": "1"}[m.symbol(name).unit.kind]
+    return est[key] / m.symbol(name).unit.to_internal
+
+
 def injected(m, rng, names):
     """Errors in declared units (offsets ~5 µm, angles ~20 arcsec) on ``names``, zero elsewhere."""
     return {s.name: float(rng.normal() * (20.0 if s.unit.kind == "angle" else 5.0 * UM / internal(m, s.name)))
@@ -252,8 +259,8 @@ def test_identifiable_errors_as_an_independent_rank_analysis_finds_them(tmp_path
     assert doc["rank"] == rank
     assert set(doc["unidentifiable"]) == unident
     assert set(doc["estimates"]) == set(names) - unident
-    for name, est in doc["estimates"].items():
-        assert est["value"] == pytest.approx(truth[name], rel=1e-3), name
+    for name in doc["estimates"]:
+        assert declared_value(m, doc, name) == pytest.approx(truth[name], rel=1e-3), name
     assert not unident & set(load_params(str(tmp_path / "fit.yaml"), m))
     suggested = doc["suggested_assume_zero"]
     rest = [n for n in names if n not in suggested]
@@ -272,7 +279,7 @@ def test_noise_free_recovery_to_1e9_on_five_axis_ac(tmp_path, capsys, five_setup
     assert doc["converged"] and doc["unidentifiable"] == {} and doc["suggested_assume_zero"] == []
     assert set(doc["estimates"]) == set(kept)
     for name in kept:
-        assert abs(doc["estimates"][name]["value"] - truth[name]) <= 1e-9 * abs(truth[name]), name
+        assert abs(declared_value(m, doc, name) - truth[name]) <= 1e-9 * abs(truth[name]), name
     loaded = load_params(str(tmp_path / "fit.yaml"), m)
     for name in kept:
         assert loaded[name] == pytest.approx(truth[name] * internal(m, name), rel=1e-9)
@@ -289,7 +296,7 @@ def test_identifiable_errors_alone_are_recovered_without_assumptions(tmp_path, c
     doc = fit_json(capsys, FIVE, tmp_path / "meas.csv")
     assert set(doc["estimates"]) == set(ident)
     for name in ident:
-        assert abs(doc["estimates"][name]["value"] - truth[name]) <= 1e-9 * abs(truth[name]), name
+        assert abs(declared_value(m, doc, name) - truth[name]) <= 1e-9 * abs(truth[name]), name
 
 
 def test_noisy_five_axis_estimates_within_their_uncertainty(tmp_path, capsys, five_setups):
@@ -301,8 +308,8 @@ def test_noisy_five_axis_estimates_within_their_uncertainty(tmp_path, capsys, fi
     zero = [s.name for s in m.errors if s.name not in kept]
     doc = fit_json(capsys, FIVE, tmp_path / "meas.csv", "--assume-zero", ",".join(zero), "--sigma", "1um")
     for name in kept:
-        est = doc["estimates"][name]
-        assert 0 < est["uncertainty"] and abs(est["value"] - truth[name]) <= 4.5 * est["uncertainty"], name
+        u = declared_value(m, doc, name, "uncertainty")
+        assert 0 < u and abs(declared_value(m, doc, name) - truth[name]) <= 4.5 * u, name
 
 
 # ----------------------------------------------------------------- a three-axis machine
@@ -333,7 +340,7 @@ def test_three_axis_machine_default_setups_and_recovery(tmp_path, capsys, three_
     doc = fit_json(capsys, three_axis, tmp_path / "kept.csv", "--assume-zero", ",".join(zero))
     assert doc["unidentifiable"] == {} and set(doc["estimates"]) == set(kept)
     for name in kept:
-        assert abs(doc["estimates"][name]["value"] - truth[name]) <= 1e-9 * abs(truth[name]), name
+        assert abs(declared_value(m, doc, name) - truth[name]) <= 1e-9 * abs(truth[name]), name
 
 
 # ----------------------------------------------------------------- columns and refusals
@@ -469,4 +476,4 @@ def test_an_error_inside_atan2_is_fitted_too(tmp_path, capsys):
     write_csv(tmp_path / "meas.csv", m, declared, coords)
     doc = fit_json(capsys, path, tmp_path / "meas.csv")
     for name, value in truth.items():
-        assert doc["estimates"][name]["value"] == pytest.approx(value, rel=1e-9), name
+        assert declared_value(m, doc, name) == pytest.approx(value, rel=1e-9), name

@@ -229,7 +229,10 @@ def test_people_units_and_digits(tmp_path, capsys, arm):
     rows = {line.split()[0]: line.split()[1:] for line in out.splitlines() if line.startswith("  ") and "±" in line}
     for n, est in doc["estimates"].items():
         value, pm, unc, unit = rows[n]
-        assert pm == "±" and unit == {"um": "µm", "arcsec": "arcsec"}[est["unit"]]
+        declared = m.symbol(n).unit                                   # um or arcsec: as printed
+        assert pm == "±" and unit == {"um": "µm", "arcsec": "arcsec"}[declared.name]
+        assert est["unit"] == {"um": "mm", "arcsec": "rad"}[declared.name]       # JSON: internal
+        est = {k: est[k] / declared.to_internal for k in ("value", "uncertainty")}
         digits = unc.replace(".", "").lstrip("0")
         assert len(digits) == 2 or (len(digits) == 1 and "." not in unc), unc   # 2 significant digits
         assert len(value.partition(".")[2]) == len(unc.partition(".")[2])

@@ -178,11 +178,11 @@ def test_the_params_file_reads_back_as_tables_and_polynomials(machine, tmp_path,
     doc = json.loads(cli(capsys, "identify", path, tmp_path / "meas.csv", "--assume-zero", "EYX,EC0Y", "--vary",
                          "EXX=table:0,100,200,300", "--vary", "ECX=poly:2", "--format", "json")[1])
     v = doc["varying"]["EXX"]
-    assert v["positions"] == [0, 100, 200, 300] and v["units"] == ["mm", "um"]
-    assert np.allclose(v["values"], tab(KNOTS) / UM, atol=1e-9)
+    assert v["positions"] == [0, 100, 200, 300] and v["units"] == ["mm", "mm"]     # JSON: internal units
+    assert np.allclose(v["values"], tab(KNOTS), rtol=1e-9, atol=1e-15)
     p = doc["varying"]["ECX"]
-    assert p["range"] == [0, 300] and p["units"] == ["mm", "arcsec"]
-    assert np.allclose(np.polyval(p["coefficients"][::-1], X), poly(X) / ARCSEC, rtol=1e-9, atol=1e-9)
+    assert p["range"] == [0, 300] and p["units"] == ["mm", "rad"]
+    assert np.allclose(np.polyval(p["coefficients"][::-1], X), poly(X), rtol=1e-9, atol=1e-15)
 
 
 def test_a_knot_no_measurement_sees_is_reported(machine, tmp_path, capsys):
