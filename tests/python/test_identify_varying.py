@@ -261,3 +261,26 @@ def test_direction_columns_need_a_tool_direction(machine, tmp_path, capsys):
     rc, _, err = cli(capsys, "identify", path, tmp_path / "meas.csv")
     assert rc == 2 and err.strip().endswith("meas.csv:1: header: column 'kx' is a measured tool direction, but "
                                             f"x_slide has no tool direction (tool: direction in {path})")
+
+
+def test_minimal_ties_go_to_the_first_error_in_the_machine_file(tmp_path, capsys):
+    """ECX (yaw of X) and EC0Y (squareness of Y) turn the Y travel alike: their scaled columns
+    tie exactly, and the minimal set keeps whichever the machine file declares first."""
+    X, Y = setups()
+    for first, second in (("ECX", "EC0Y"), ("EC0Y", "ECX")):
+        text = MACHINE
+        if first == "EC0Y":        # declare EC0Y before ECX
+            lines = text.splitlines()
+            i, j = (next(k for k, s in enumerate(lines) if f"name: {n}," in s) for n in ("ECX", "EC0Y"))
+            lines[i], lines[j] = lines[j], lines[i]
+            text = "\n".join(lines) + "\n"
+        path = tmp_path / f"{first}.yaml"
+        path.write_text(text)
+        write_csv(tmp_path / "meas.csv", X, Y, points(X, Y, 0 * X, 0 * X, 4 * ARCSEC + 0 * X))
+        rc, out, err = cli(capsys, "identify", path, tmp_path / "meas.csv", "--minimal", "--sigma", "1um",
+                           "--format", "json")
+        assert rc == 0, err
+        doc = json.loads(out)
+        assert first in doc["estimates"] and second in doc["redundant"]
+        assert doc["redundant"][second]["carried_by"] == pytest.approx({first: 1.0}, rel=1e-9)
+        assert doc["estimates"][first]["value"] == pytest.approx(4 * ARCSEC, rel=1e-6)
