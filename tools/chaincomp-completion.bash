@@ -39,8 +39,9 @@ _chaincomp() {
           esac;;
         identify)
           case "$prev" in
+            --units) words='people internal';;
             --format) words='text json';;
-            *) words='-h --help --assume-zero --sigma -o --output --format --json'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --assume-zero --sigma --minimal --prefer --vary --smooth -o --output --units --format --json'; [[ $cur == -* ]] || return 0;;
           esac;;
         simulate-measurements)
           case "$prev" in
