@@ -37,6 +37,7 @@ from .machine import MAX_CHAIN_ELEMENTS, MAX_SYMBOLS
 from .yamlsource import read_text
 
 MAX_ELEMENTS = 50_000       # XML elements of one URDF (a humanoid's has a few thousand)
+MIN_MAGNITUDE = 1e-27      # smallest non-zero number: the machine format's 1e-30, in metres
 ERROR_MODES = ("none", "joint-offsets", "origins", "all")
 MOVING = ("revolute", "continuous", "prismatic")
 CONTINUOUS_LIMIT_DEG = 360.0
@@ -138,6 +139,8 @@ def _finite(src: _Source, values, what: str, line: int, fld: str, count: int = 3
             raise src.fail(f"{what}: {v!r} is not a finite number", line, fld)
         if abs(v) > MAX_LITERAL / 1000:
             raise src.fail(f"{what}: {v!r} is beyond {MAX_LITERAL / 1000:g} in magnitude", line, fld)
+        if 0 < abs(v) < MIN_MAGNITUDE:   # the machine format's numbers (in mm) stop at 1e-30
+            raise src.fail(f"{what}: {v!r} is below {MIN_MAGNITUDE:g} in magnitude (write 0)", line, fld)
     return values
 
 

@@ -324,6 +324,7 @@ def test_a_closed_loop_is_refused(tmp_path):
     ("0 inf 0", "-1", "origin xyz: inf is not a finite number"),
     ("0 1e400 0", "-1", "origin xyz: inf is not a finite number"),
     ("0 0", "-1", "origin xyz: expected 3 numbers, got 2"),
+    ("0 1e-40 0", "-1", "origin xyz: 1e-40 is below 1e-27 in magnitude (write 0)"),
     ("0 zero 0", "-1", "origin xyz: could not convert string to float"),
     ("0 0 0", "-inf", "limit: -inf is not a finite number"),
     ("0 0 0", "2", "lower limit 2.0 is not below upper limit 1.0"),
@@ -436,3 +437,18 @@ def test_any_axis_continuous_and_prismatic_joints(tmp_path):
         qk = np.array([math.cos(q["turn"]), math.sin(q["turn"]), q["slide"] / 1000])  # continuous: cos, sin
         pin.framesForwardKinematics(model, data, qk)
         assert np.abs(1000 * data.oMf[tip].act(np.array(TOOL) / 1000) - want_p).max() < 1e-9
+
+
+def test_xacro_and_incomplete_joints_are_refused(tmp_path):
+    path = tmp_path / "arm.urdf.xacro"
+    path.write_text('<robot name="r" xmlns:xacro="http://www.ros.org/wiki/xacro">\n'
+                    '  <xacro:include filename="arm.xacro"/>\n</robot>\n')
+    assert f"{path}:2: a xacro element: expand the file first" in refused(path)
+    path, text = robot(tmp_path, extra='  <joint name="j3" type="fixed"><child link="a"/></joint>\n')
+    assert f"{path}:{named(text, 'j3')}: joint j3: joint 'j3' has no <parent link=...>" in refused(path)
+
+
+def test_a_mimic_joint_off_the_path_does_not_matter(tmp_path):
+    """Franka's URDF has one (panda_finger_joint2 mimics panda_finger_joint1): the arm imports."""
+    assert "<mimic" in open(PANDA).read()
+    assert load_machine(imported(tmp_path, "panda")).name == "panda"
