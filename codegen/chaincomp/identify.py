@@ -435,8 +435,9 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     give non-finite values."""
     model = model or ExactModel(machine)
     varies = _check_vary(machine, vary, assume_zero)
-    if smooth and not any(v.kind == "table" for v in varies.values()):
-        raise ChaincompError("--smooth: no error is fitted as a table (--vary NAME=table:...) to smooth")
+    if smooth and not any(v.kind == "table" and len(v.knots) > 2 for v in varies.values()):
+        raise ChaincompError("--smooth: no error is fitted as a table of 3 or more knots (--vary NAME=table:...) "
+                             "to smooth")
     free = [s.name for s in machine.errors if s.name not in assume_zero]
     both = [n for n in prefer if n in assume_zero]
     if both:
