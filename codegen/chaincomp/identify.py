@@ -44,6 +44,7 @@ _STEP = 1e-6      # central-difference step, where the chain cannot take complex
 _RANK_TOL = 1e-9  # singular values below this, relative to the largest, are zero
 MAX_ROWS = 20_000  # set-ups in a file or a --setups spec: bounds the fit's memory (rows x errors)
 MAX_JACOBIAN = 10_000_000   # measured coordinates x parameters (80 MB a copy): bounds the fit's memory
+MAX_PARAMETERS = 2000       # the rank analysis holds parameters x parameters (32 MB)
 _CHUNK = 1_000_000          # parameter sets x rows evaluated in one broadcast call of the chain
 _TIE = 1e-9       # pivoted QR: columns this close (relative) to the largest remaining norm tie
 DIRECTIONS = ("kx", "ky", "kz")       # measured tool direction (unit vector components)
@@ -453,6 +454,9 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     penalty = _penalty(params, varies, smooth)
     names = [p.name for p in params]
     n, m = len(params), int(mask.sum())
+    if n > MAX_PARAMETERS:
+        raise ChaincompError(f"{n} parameters to fit (errors, knots and coefficients), more than {MAX_PARAMETERS}; "
+                             f"fit fewer knots")
     if n * (m + len(penalty)) > MAX_JACOBIAN:
         raise ChaincompError(f"{n} parameters for {m} measured coordinates: the fit's Jacobian would hold "
                              f"{n * (m + len(penalty)):.3g} numbers, more than {MAX_JACOBIAN:.0e}; fit fewer knots "

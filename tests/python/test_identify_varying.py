@@ -284,3 +284,13 @@ def test_minimal_ties_go_to_the_first_error_in_the_machine_file(tmp_path, capsys
         assert first in doc["estimates"] and second in doc["redundant"]
         assert doc["redundant"][second]["carried_by"] == pytest.approx({first: 1.0}, rel=1e-9)
         assert doc["estimates"][first]["value"] == pytest.approx(4 * ARCSEC, rel=1e-6)
+
+
+def test_the_number_of_parameters_is_bounded(machine, tmp_path, capsys):
+    path, m, _ = machine
+    X, Y = setups()
+    write_csv(tmp_path / "meas.csv", X, Y, points(X, Y, 0 * X, 0 * X, 0 * X))
+    knots = ",".join(f"{k:g}" for k in np.linspace(0, 300, 1001))
+    rc, _, err = cli(capsys, "identify", path, tmp_path / "meas.csv", "--vary", f"EXX=table:{knots}",
+                     "--vary", f"EYX=table:{knots}")
+    assert rc == 2 and "2004 parameters to fit (errors, knots and coefficients), more than 2000" in err
