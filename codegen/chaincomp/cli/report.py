@@ -35,10 +35,10 @@ def run(args) -> int:
     fmt = args.format or ("latex" if (args.output or "").endswith(".tex") else "markdown")
     proto = None
     if args.protocol:
-        from ..protocol import build_protocol, to_text
+        from ..protocol import plan_text
         from .protocol import names
         zero = names(",".join(args.assume_zero), "--assume-zero")
-        proto = to_text(build_protocol(machine, assume_zero=zero))
+        proto = plan_text(machine, zero)
     text = (report.latex if fmt == "latex" else report.markdown)(d, proto, progress=True)
     if not args.output:
         sys.stdout.write(text)
