@@ -18,6 +18,13 @@ Each joint on the path base -> tip becomes, in the machine format (internal unit
                       phi = atan2(uy, ux), theta = atan2(sqrt(ux^2 + uy^2), uz): exact expressions
     prismatic         {translate: u·(q + q_zero)}
 
+Error symbols (--errors), per moving joint J (its name sanitised): joint-offsets gives
+J_zero (arcsec, or um for a prismatic joint) added to the joint's motion; origins gives
+J_dx, J_dy, J_dz (um), J_ex, J_ey, J_ez (arcsec), the block T(d)·Rx·Ry·Rz after the
+joint's origin and before its motion (a fixed joint gets none: its origin error is the next
+block's); all gives both (J_zero and the block's rotation about the joint's axis then have
+the same gain where the axis is x, y or z: only their sum can be identified).
+
 Numbers are folded into the chain as exact decimals (the parser makes them rationals), so
 the file holds exactly the values the URDF states. Axes: revolute in deg (limits rad -> deg),
 continuous in deg with limits [-360, 360] (it has none), revolute limits rounded to
@@ -54,7 +61,7 @@ class PathJoint:
     line: int
     xyz: tuple          # metres, as floats
     rpy: tuple          # rad, as floats
-    axis: tuple         # unit direction, as written (not normalised)
+    axis: tuple         # direction as written (normalised where the chain uses it)
     limits: tuple | None  # in the axis' unit (deg, mm)
 
 

@@ -452,3 +452,13 @@ def test_a_mimic_joint_off_the_path_does_not_matter(tmp_path):
     """Franka's URDF has one (panda_finger_joint2 mimics panda_finger_joint1): the arm imports."""
     assert "<mimic" in open(PANDA).read()
     assert load_machine(imported(tmp_path, "panda")).name == "panda"
+
+
+def test_a_cycle_of_joints_is_refused(tmp_path):
+    path = tmp_path / "cycle.urdf"
+    text = ('<robot name="r">\n  <link name="a"/>\n  <link name="b"/>\n  <link name="c"/>\n'
+            '  <joint name="ab" type="fixed"><parent link="a"/><child link="b"/></joint>\n'
+            '  <joint name="ba" type="fixed"><parent link="b"/><child link="a"/></joint>\n</robot>\n')
+    path.write_text(text)
+    err = refused(path, base="c", tip="a")
+    assert f"{path}:{named(text, 'ab')}: joint ab: the joints above link 'a' form a cycle through link 'a'" in err
