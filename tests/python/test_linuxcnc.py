@@ -6,6 +6,7 @@ the positions the drives got. One LinuxCNC at a time (cnc.py holds a lock), as a
 user; skipped with the reason when LinuxCNC is not installed (tools/setup-linuxcnc installs it)."""
 
 import os
+import shutil
 import subprocess
 import sys
 
@@ -61,14 +62,21 @@ def completed(run):
     assert np.all(np.diff(tags) == 1), "halsampler lost periods"
 
 
+def cleaned(run):
+    """The run, its work folder removed afterwards (set CHAINCOMP_KEEP_RUNS=1 to keep it)."""
+    yield run
+    if not os.environ.get("CHAINCOMP_KEEP_RUNS"):
+        shutil.rmtree(run.work, ignore_errors=True)
+
+
 @pytest.fixture(scope="module")
 def off_run():
-    return cnc.run("off")
+    yield from cleaned(cnc.run("off"))
 
 
 @pytest.fixture(scope="module")
 def rt_run(rt_module):
-    return cnc.run("rt")
+    yield from cleaned(cnc.run("rt"))
 
 
 def test_without_compensation_the_error_is_the_exact_models(off_run, machine, params):
@@ -150,12 +158,13 @@ KILL_AT_S = 2.0  # into the program: during the second move
 
 @pytest.fixture(scope="module")
 def bridge_run():
-    return cnc.run("bridge", stale_ms=STALE_MS)
+    yield from cleaned(cnc.run("bridge", stale_ms=STALE_MS))
 
 
 @pytest.fixture(scope="module")
 def bridge_kill_run():
-    return cnc.run("bridge", stale_ms=STALE_MS, env={"CHAINCOMP_AT_S": f"{KILL_AT_S}:kill $(cat chaincompd.pid)"})
+    yield from cleaned(cnc.run("bridge", stale_ms=STALE_MS,
+                               env={"CHAINCOMP_AT_S": f"{KILL_AT_S}:kill $(cat chaincompd.pid)"}))
 
 
 def daemon_counts(run):
@@ -237,6 +246,8 @@ def test_trunnion_model_equals_linuxcncs_xyzac_trt_kins():
     for x, y, z, a, c in poses:
         lines += [f"G1 X{x:.4f} Y{y:.4f} Z{z:.4f} A{a:.4f} C{c:.4f} F12000", "G4 P0.15"]
     run = cnc.run("off", config="trunnion_ac", program="\n".join(lines + ["M2", ""]))
+    if not os.environ.get("CHAINCOMP_KEEP_RUNS"):
+        shutil.rmtree(run.work, ignore_errors=True)  # everything is in `run`
     completed(run)
     found = cnc.dwells(run.commands, min_rows=120, skip=10, tail=10)
     cart = run.samples[:, cnc.COL_OBS:cnc.COL_OBS + 5] * 1e-6  # axis.L.pos-cmd (trunnion's recorder)
@@ -252,3 +263,81 @@ def test_trunnion_model_equals_linuxcncs_xyzac_trt_kins():
     # every pose of the program was reached and checked
     assert len(got) == len(poses)
     np.testing.assert_allclose(np.array(got), np.array(poses)[:, :3], atol=1e-9)
+
+
+HALRUN_SCRIPT = """loadrt threads name1=t period1=1000000
+loadrt chaincomp_rt
+loadrt scale count=5
+loadrt sampler depth=8000 cfg=fffffffb
+addf chaincomp-rt.update t
+addf scale.0 t
+addf scale.1 t
+addf scale.2 t
+addf scale.3 t
+addf scale.4 t
+addf sampler.0 t
+{nets}
+net ramp chaincomp-rt.ramp => sampler.0.pin.5
+net cost chaincomp-rt.residual-point => sampler.0.pin.6
+net fault chaincomp-rt.fault => sampler.0.pin.7
+{cmds}
+start
+loadusr -w sleep 0.2
+setp chaincomp-rt.enable 1
+loadusr -w sleep 1.0
+setp chaincomp-rt.joint.0.pos-cmd {jump}
+loadusr -w sleep 0.2
+setp chaincomp-rt.joint.0.pos-cmd {x}
+loadusr -w sleep 0.2
+setp chaincomp-rt.enable 0
+loadusr -w sleep 0.8
+loadusr -w {record}
+"""
+COMMAND = [100.0, -50.0, -200.0, 30.0, -45.0]
+
+
+def test_realtime_component_enables_bumplessly_and_holds_on_a_refused_command(rt_module, machine, params):
+    """chaincomp_rt alone in halrun: enable ramps the correction in over chaincompd's ramp time
+    (0.5 s) and out again, never more than 0.001 (mm or deg) a period; a command that jumps
+    by more than max_step (10 mm) is refused: fault, the correction held."""
+    import pathlib
+    import tempfile
+
+    tmp_path = pathlib.Path(tempfile.mkdtemp(prefix="chaincomp-rt-halrun-"))  # the user halrun runs as reads it
+    os.chmod(tmp_path, 0o777)
+    out = tmp_path / "rows.txt"
+    nets = "\n".join(f"net c{i} chaincomp-rt.joint.{i}.correction => scale.{i}.in\nsetp scale.{i}.gain 1e6\n"
+                     f"net c{i}e6 scale.{i}.out => sampler.0.pin.{i}" for i in range(5))
+    cmds = "\n".join(f"setp chaincomp-rt.joint.{i}.pos-cmd {v}" for i, v in enumerate(COMMAND))
+    script = tmp_path / "rt.hal"
+    record = tmp_path / "record.sh"  # halcmd passes quotes on, so no sh -c "..." in the HAL file
+    record.write_text(f"#!/bin/sh\nexec halsampler -n 2300 > {out}\n")
+    os.chmod(record, 0o755)
+    script.write_text(HALRUN_SCRIPT.format(nets=nets, cmds=cmds, jump=COMMAND[0] + 20, x=COMMAND[0], record=record))
+    os.chmod(script, 0o644)
+    cmd = ["halrun", "-f", str(script)]
+    if os.geteuid() == 0:
+        cmd = ["runuser", "-u", cnc.USER, "--", *cmd]
+    with open(cnc.LOCK, "w") as lock:
+        import fcntl
+        fcntl.flock(lock, fcntl.LOCK_EX)  # halrun takes LinuxCNC's shared memory too
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    rows = np.loadtxt(out)
+    shutil.rmtree(tmp_path, ignore_errors=True)
+    corr, ramp, fault = rows[:, 0:5] * 1e-6, rows[:, 5], rows[:, 7]
+    on = np.argmax(ramp > 0)
+    assert 100 < on < 400 and np.all(corr[:on] == 0)           # off until enabled
+    full = int(np.argmax(ramp >= 1.0))
+    assert 480 <= full - on <= 520                             # 0.5 s of servo periods
+    assert np.all(np.abs(np.diff(corr, axis=0)) <= 0.001 + 2e-12)
+    # fully on: the true machine at command + correction puts the tool on the nominal point
+    q = np.array(COMMAND)
+    point, _ = cnc.tool_errors(machine, params, q[None, :], q[None, :] + corr[full + 50][None, :])
+    assert np.linalg.norm(point) < 1e-6
+    # the jump: refused (fault), the correction held, then followed again
+    refused = np.where(fault > 0)[0]
+    assert len(refused) >= 1 and np.all(corr[refused] == corr[refused[0] - 1])
+    assert fault[-1] == 0
+    # disabled: ramped out to zero, bumplessly
+    assert np.all(corr[-100:] == 0) and ramp[-1] == 0
