@@ -242,8 +242,15 @@ def build_linuxcnc(machine_path: str, params_path: str | None) -> tuple[str, boo
     tc = toolchain()
     hal = os.path.join(_runtime_dir(), "hal")
     sources = b"".join(open(os.path.join(hal, n), "rb").read() for n in _HAL_SOURCES)
-    with open(os.path.join(_runtime_dir(), "src", "compensator.cpp"), "rb") as f:
-        sources += f.read()
+    # and what the module's code comes from: the runtime headers, the compensator, the emitter
+    here = os.path.dirname(os.path.abspath(__file__))
+    inputs = [os.path.join(_runtime_dir(), "src", "compensator.cpp"), os.path.join(here, "emit.py"),
+              os.path.join(here, "jets.py")]
+    include_dir = os.path.join(_runtime_dir(), "include", "chaincomp")
+    inputs += sorted(os.path.join(include_dir, n) for n in os.listdir(include_dir) if n.endswith(".hpp"))
+    for name in inputs:
+        with open(name, "rb") as f:
+            sources += f.read()
     key = fnv1a64(source + b"\0" + params_source + b"\0" + sources + tc.key().encode())
     root = os.path.join(cache_root(), "linuxcnc")
     folder = os.path.join(root, f"{machine.name}-{key:016x}")
@@ -252,6 +259,22 @@ def build_linuxcnc(machine_path: str, params_path: str | None) -> tuple[str, boo
         return path, True
     try:
         os.makedirs(root, exist_ok=True)
+        lock = open(folder + ".lock", "w")
+    except OSError as exc:
+        raise ChaincompError(f"cannot write the model cache {root}: {exc.strerror}") from None
+    with lock:  # concurrent builds of one module: one compiles, the others wait for it
+        if not _try_lock(lock):
+            _say(f"{machine.name}: another build of {RT_MODULE} is running; waiting for it")
+            fcntl.flock(lock, fcntl.LOCK_EX)
+        if os.path.exists(path):
+            return path, True
+        _compile_rt(machine, values, params_path, tc, root, folder)
+    return path, False
+
+
+def _compile_rt(machine, values: dict, params_path: str | None, tc: Toolchain, root: str, folder: str) -> None:
+    hal = os.path.join(_runtime_dir(), "hal")
+    try:
         tmp = tempfile.mkdtemp(dir=root, prefix="." + os.path.basename(folder) + "-")
     except OSError as exc:
         raise ChaincompError(f"cannot write the model cache {root}: {exc.strerror}") from None
@@ -277,14 +300,13 @@ def build_linuxcnc(machine_path: str, params_path: str | None) -> tuple[str, boo
             lines = (proc.stderr or proc.stdout).splitlines()
             first = next((ln for ln in lines if "error" in ln), lines[-1] if lines else "no message")
             raise ChaincompError(f"building {RT_MODULE} for {machine.name} failed: {first}")
-        shutil.rmtree(folder, ignore_errors=True)
-        os.rename(tmp, folder)
+        shutil.rmtree(folder, ignore_errors=True)  # a folder whose module was deleted by hand
+        os.rename(tmp, folder)  # atomic: the folder appears complete
         _say(f"{machine.name}: {RT_MODULE}.so built in {time.monotonic() - start:.1f} s")
     except OSError as exc:
         raise ChaincompError(f"cannot write the model cache {root}: {exc.strerror}") from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return path, False
 
 
 def linuxcnc_module_dir() -> str:
