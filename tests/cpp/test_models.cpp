@@ -254,8 +254,12 @@ TEST_CASE("a stream with a kept workspace corrects every command as a cold start
       ok += sw == static_cast<int>(chaincomp::Status::kOk);
       if (sw == static_cast<int>(chaincomp::Status::kOk)) {
         // both within tolerance (checked below) of the same solution: a warm start may stop
-        // anywhere inside the tolerance (0.1 nm, 1e-9 rad), so the axes agree to about that
-        for (int i = 0; i < na; ++i) CHECK(std::abs(warm[i] - cold[i]) < 1e-6);
+        // anywhere inside the tolerance (0.1 nm, 1e-9 rad), so the axes agree to about that.
+        // One solution only where the axes are no more than the pose's conditions (3, or 5 with
+        // the direction): an arm's extra joints leave a set of equally good corrections, and a
+        // warm start may stop elsewhere on it; there the poses agree (checked below), not the axes.
+        if (na <= (info.corrects_direction ? 5 : 3))
+          for (int i = 0; i < na; ++i) CHECK(std::abs(warm[i] - cold[i]) < 1e-6);
       } else {  // fewer DOF than the pose: the least-squares optimum may be flat along the axes
         CHECK(std::abs(rw[0] - rc[0]) < 1e-9);
         CHECK(std::abs(rw[1] - rc[1]) < 1e-11);
