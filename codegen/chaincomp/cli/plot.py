@@ -309,7 +309,8 @@ def volume_data(args, over_text: str | None, grid: int) -> VolumeData:
     v = dict(values)
     for n, g in zip(over, grids):
         v[n] = machine.symbol(n).to_internal(g.ravel())
-    nominal = {k: (0.0 * x if machine.symbol(k).role == "error" else x) for k, x in v.items()}
+    # errors at zero: the nominal pose (an error given as a table is an object, not a number)
+    nominal = {k: (0.0 if machine.symbol(k).role == "error" else x) for k, x in v.items()}
     shape = grids[0].ravel().shape
     point, _ = ExactModel(machine).pose(nominal)
     dp, _ = model_error(machine, v, args.model)
