@@ -37,6 +37,7 @@ ROUTES = ("off", "rt", "bridge")
 N_JOINTS = 5
 COL_CMD, COL_OBS, COL_AGE, COL_STALE, COL_FAULT = 1, 6, 11, 12, 13
 COL_COST = COL_AGE
+COL_MC_CLOCKS, COL_RT_CLOCKS = 14, 15  # five_axis_ac's rt route: motion-controller.time, chaincomp-rt.update.time
 
 
 def unavailable() -> str | None:
@@ -132,7 +133,7 @@ def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeo
         pass
     samples_path = os.path.join(work, "samples.txt")
     rows = np.loadtxt(samples_path, ndmin=2) if os.path.exists(samples_path) and os.path.getsize(samples_path) \
-        else np.zeros((0, COL_FAULT + 1))
+        else np.zeros((0, COL_RT_CLOCKS + 1))
     events = []
     if os.path.exists(os.path.join(work, "events.txt")):
         with open(os.path.join(work, "events.txt")) as f:

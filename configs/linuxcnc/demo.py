@@ -91,6 +91,12 @@ def main(argv=None) -> int:
             summary["lag_ms"] = dict(zip(("p50", "p99", "max"), map(float, np.percentile(extra, [50, 99, 100]))))
         if r == "rt":
             summary["cost_ns"] = dict(zip(("p50", "p99", "max"), map(float, np.percentile(extra, [50, 99, 100]))))
+            # the baseline in the same periods: LinuxCNC's motion controller (HAL's .time, CPU clocks)
+            start = cnc.dwells(run.commands)[1].start
+            ours, motion = run.samples[start:, cnc.COL_RT_CLOCKS], run.samples[start:, cnc.COL_MC_CLOCKS]
+            summary["clocks"] = {"chaincomp_rt_p50": float(np.median(ours)), "motion_controller_p50": float(np.median(motion)),
+                                 "ratio_p50": float(np.median(ours) / np.median(motion)),
+                                 "ratio_p99": float(np.percentile(ours, 99) / np.percentile(motion, 99))}
         results[r] = summary
     hardware = f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, {platform.release()}"
     try:
@@ -118,6 +124,10 @@ def main(argv=None) -> int:
             c = results["rt"]["cost_ns"]
             print(f"chaincomp_rt cost per servo period: p50 {c['p50']:.0f} ns, p99 {c['p99']:.0f} ns, "
                   f"max {c['max']:.0f} ns")
+            k = results["rt"]["clocks"]
+            print(f"  against LinuxCNC's motion-controller in the same periods (CPU clocks): p50 "
+                  f"{k['chaincomp_rt_p50']:.0f} / {k['motion_controller_p50']:.0f} = {k['ratio_p50']:.2f}, "
+                  f"p99 ratio {k['ratio_p99']:.2f}")
     import matplotlib
 
     matplotlib.use("Agg")
