@@ -20,7 +20,8 @@ API (``kind`` is a unit kind of ``chaincomp.units``: "length", "angle" or "ratio
   the estimate rounded to the same decimal place (half away from zero, on the shortest decimal
   text of each float, so 0.0041 is 0.0041 and not its binary neighbour). Outside 1e-4..1e6 a
   shared exponent: ``"(4.60 ± 0.21)e-07"``. An uncertainty of 0 gives 6 significant digits;
-  an infinite or undefined one ``"4.6 ± inf"``; a negative one is a ValueError.
+  an infinite or undefined one ``"4.6 ± inf"``; a negative one is a ValueError; one below the
+  17th significant digit of the estimate (finer than a double holds) ``"5.0 ± 1.0e-20"``.
 - ``uncertain(value, u, kind=None, units="people")``: the same with both converted from
   internal units and the unit appended: ``"4.60 ± 0.21 µm"``.
 """
@@ -36,6 +37,7 @@ UNIT_SYSTEMS = ("people", "internal")
 DEFAULT_UNITS = "people"
 
 _PEOPLE = {"length": UNITS["µm"], "angle": UNITS["arcsec"], "ratio": Unit("µm/m", "ratio", 1e-6)}
+_DOUBLE_DIGITS = 17   # significant decimal digits that tell any two doubles apart
 DECIMALS = {"µm": 3, "arcsec": 3, "µm/m": 3, "mm": 9, "rad": 12, "1": 12}
 
 
@@ -83,6 +85,10 @@ def plus_minus(value: float, u: float) -> str:
         return f"{_no_negative_zero(f'{value:.6g}')} ± 0"
     du = Decimal(repr(u))
     place = du.adjusted() - 1                       # the decimal exponent of u's 2nd significant digit
+    if value and Decimal(repr(float(value))).adjusted() - place > _DOUBLE_DIGITS:
+        # u is below the estimate's last digit a double holds: no digits to round it to
+        # (and more than the 28 digits of decimal's default context)
+        return f"{float(value)!r} ± {u:.1e}"
     ur = du.quantize(Decimal(1).scaleb(place), rounding=ROUND_HALF_UP)
     if ur.adjusted() > du.adjusted():               # 0.0996 -> 0.10: still 2 significant digits
         place += 1

@@ -48,3 +48,18 @@ def test_volume_view_of_an_error_table(tmp_path):
     assert np.allclose(d.error[:, 1:], 0, atol=1e-9)
     assert main(["plot", VMC, "--params", str(p), "--view", "volume", "--grid", "3",
                  "-o", str(tmp_path / "v.png"), "--html", str(tmp_path / "v.html")]) == 0
+
+
+# ----------------------------------------------------------------------------- display
+
+@pytest.mark.parametrize("value,u,text", [
+    # more digits than decimal's 28-digit context: InvalidOperation (identify's exit 3) before
+    (1e300, 1.0, "1e+300 ± 1.0e+00"),
+    (5.0, 1e-320, "5.0 ± 1.0e-320"),
+    (-3e-7, 1e-25, "-3e-07 ± 1.0e-25"),
+    # 17 significant digits still round as always
+    (1.2345678901234567, 1e-16, "1.23456789012345670 ± 0.00000000000000010"),
+    (0.0, 1e-300, "(0.0 ± 1.0)e-300"),
+])
+def test_plus_minus_of_an_uncertainty_finer_than_a_double(value, u, text):
+    assert display.plus_minus(value, u) == text
