@@ -1,0 +1,183 @@
+"""tools/demo-arm (issue #17, done-when: the UR5 calibrated and compensated from simulated
+tracker data), run as a user runs it, its figures recomputed here with an independent numpy
+model of the UR5: Universal Robots' published standard-DH table written out below, with the
+configs/machines/ur5.yaml error layout (four DH errors per joint, none for d3 and d4, Hayati
+tilts about y after joints 2 and 3) and the tracker target 40 mm off the flange axis,
+100 mm out. Params files are read here by their "VALUE UNIT" text, not by chaincomp.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import re
+import subprocess
+
+import numpy as np
+import pytest
+import yaml
+
+from conftest import ROOT
+
+DEMO = os.path.join(ROOT, "tools", "demo-arm")
+PARAMS = os.path.join(ROOT, "configs", "params", "ur5-demo.yaml")
+# UR5 (CB3) DH: theta offset 0 for every joint; d, a in mm; alpha in rad
+UR5_D = [89.159, 0, 0, 109.15, 94.65, 82.3]
+UR5_A = [0, -425, -392.25, 0, 0, 0]
+UR5_ALPHA = [math.pi / 2, 0, 0, math.pi / 2, -math.pi / 2, 0]
+TOOL = np.array([40.0, 0.0, 100.0, 1.0])
+UNITS = {"um": 1e-3, "arcsec": math.pi / (180 * 3600)}   # to mm and rad
+NOISE = 0.020   # mm: the demo's --noise 20um
+
+
+def read_values(path):
+    """Error values of a params file in mm and rad, read from their text."""
+    with open(path) as f:
+        values = yaml.safe_load(f)["values"]
+    out = {}
+    for name, text in values.items():
+        number, unit = str(text).split()
+        out[name] = float(number) * UNITS[unit]
+    return out
+
+
+def rot(axis, angle):
+    c, s = np.cos(angle), np.sin(angle)
+    m = np.zeros(np.shape(angle) + (4, 4))
+    m[..., 3, 3] = 1
+    i, j = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}[axis]
+    k = 3 - i - j
+    m[..., k, k] = 1
+    m[..., i, i], m[..., i, j], m[..., j, i], m[..., j, j] = c, -s, s, c
+    return m
+
+
+def trans(axis, length):
+    m = np.broadcast_to(np.eye(4), np.shape(length) + (4, 4)).copy()
+    m[..., "xyz".index(axis), 3] = length
+    return m
+
+
+def ur5_point(q, e=None):
+    """Tool point (N x 3, mm) at joint angles q (N x 6, rad) with errors e (name -> mm | rad)."""
+    e = e or {}
+    g = lambda name: e.get(name, 0.0)
+    t = np.broadcast_to(np.eye(4), (len(q), 4, 4))
+    for j in range(6):
+        n = j + 1
+        t = t @ rot("z", q[:, j] + g(f"dtheta{n}")) @ trans("z", UR5_D[j] + g(f"dd{n}")) \
+            @ trans("x", UR5_A[j] + g(f"da{n}")) @ rot("x", UR5_ALPHA[j] + g(f"dalpha{n}"))
+        if n in (2, 3):
+            t = t @ rot("y", g(f"dbeta{n}"))
+    return (t @ TOOL)[:, :3]
+
+
+def read_csv(path):
+    with open(path) as f:
+        return list(csv.DictReader(line for line in f if not line.startswith("#")))
+
+
+def joints(rows, fmt="q{}"):
+    return np.radians([[float(r[fmt.format(n)]) for n in range(1, 7)] for r in rows])
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    if not os.path.isfile(os.path.join(ROOT, "build", "bin", "chaincomp_replay")):
+        pytest.skip("no C++ build (tools/setup)")
+    work = tmp_path_factory.mktemp("demo-arm")
+    done = subprocess.run([DEMO, "--no-setup", "--work", str(work)], cwd=ROOT, capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    return work, done.stdout + done.stderr
+
+
+def test_the_numpy_model_is_the_bundled_ur5(demo):
+    """The simulated tracker readings are the true tool points plus 20 um of noise: the
+    model here agrees with chaincomp's to 1e-9 mm at the held-out poses (no noise), and
+    the readings scatter about it as 20 um noise does."""
+    work, _ = demo
+    true = read_values(PARAMS)
+    held = read_csv(work / "held-out.csv")
+    measured = np.array([[float(r[c]) for c in "xyz"] for r in held])
+    assert np.abs(ur5_point(joints(held), true) - measured).max() < 1e-9
+    tracker = read_csv(work / "tracker.csv")
+    noise = np.array([[float(r[c]) for c in "xyz"] for r in tracker]) - ur5_point(joints(tracker), true)
+    assert len(tracker) == 50 and 0.8 * NOISE < noise.std() < 1.2 * NOISE
+
+
+def test_the_urdf_import_step(demo):
+    work, out = demo
+    with open(work / "ur5-urdf.yaml") as f:
+        machine = yaml.safe_load(f)
+    assert sum(s["role"] == "axis" for s in machine["symbols"]) == 6
+    assert sum(s["role"] == "error" for s in machine["symbols"]) == 6   # --errors joint-offsets
+    assert "ur5: no findings" in out
+
+
+def test_calibration_makes_the_held_out_error_20_times_smaller(demo):
+    work, out = demo
+    true = read_values(PARAMS)
+    identified = read_values(work / "ur5-identified.yaml")
+    held = read_csv(work / "held-out.csv")
+    assert len(held) == 50
+    q = joints(held)
+    truth = ur5_point(q, true)
+    before = np.linalg.norm(ur5_point(q) - truth, axis=1)
+    after_xyz = ur5_point(q, identified) - truth
+    after = np.linalg.norm(after_xyz, axis=1)
+    rms = lambda v: math.sqrt(np.mean(v ** 2))
+    assert 0.2 < before.max() < 5   # the nominal model misses by tenths of a mm to mm
+    assert rms(before) >= 20 * rms(after) and before.max() >= 20 * after.max()
+    assert np.abs(after_xyz).max() < 3 * NOISE   # predictions within 3 sigma of the noise
+    # the rank the demo's identify reports is that of the numpy model's Jacobian (central
+    # differences, columns scaled to unit norm) at the designed poses
+    poses = joints(read_csv(work / "poses.csv"))
+    names = list(true)
+    h = 1e-6
+    jac = np.stack([(ur5_point(poses, {n: h}) - ur5_point(poses, {n: -h})).ravel() / (2 * h) for n in names], 1)
+    sv = np.linalg.svd(jac / np.linalg.norm(jac, axis=0), compute_uv=False)
+    rank = int((sv > 1e-6 * sv[0]).sum())
+    assert sv[rank - 1] > 1e3 * sv[rank:].max()   # a clear gap, not a threshold's accident
+    assert re.search(rf"the data see {rank} independent combinations", out), out
+    assert rank == len(names) - 1
+    # and the figures the demo printed are these
+    with open(work / "held-out.json") as f:
+        fig = json.load(f)
+    assert np.allclose([fig["before_max_mm"], fig["before_rms_mm"], fig["after_max_mm"], fig["after_rms_mm"]],
+                       [before.max(), rms(before), after.max(), rms(after)], rtol=1e-6, atol=1e-9)
+
+
+def test_compensation_with_the_identified_values(demo):
+    """Through replay (the daemon's compensator and default config), against the true errors:
+    every command replay reports corrected puts the identified model's tool point on the
+    nominal one (1e-6 mm), so the true arm is off only by what calibration left (within 3
+    sigma of the noise, 20x smaller than without); every other command carries the residual
+    the identified model leaves."""
+    work, _ = demo
+    true = read_values(PARAMS)
+    identified = read_values(work / "ur5-identified.yaml")
+    with open(work / "replay.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 10000
+    cmd, cor = joints(rows, "commanded_q{}_deg"), joints(rows, "corrected_q{}_deg")
+    nominal = ur5_point(cmd)
+    ok = np.array([r["status"] == "0" for r in rows])
+    assert {r["status"] for r in rows} <= {"0", "1"} and ok.mean() > 0.8
+    model_miss = np.linalg.norm(ur5_point(cor, identified) - nominal, axis=1)
+    assert model_miss[ok].max() < 1e-6
+    reported = np.array([float(r["residual_point_mm"]) for r in rows])
+    assert np.allclose(model_miss[~ok], reported[~ok], rtol=1e-6, atol=1e-9)
+    without = np.linalg.norm(ur5_point(cmd, true) - nominal, axis=1)
+    with_ = np.linalg.norm(ur5_point(cor, true) - nominal, axis=1)
+    assert with_[ok].max() < 3 * NOISE
+    assert without[ok].max() >= 20 * with_[ok].max()
+    with open(work / "compensation.json") as f:
+        fig = json.load(f)
+    assert fig["corrected"] == ok.sum()
+    for key, sel in (("ok", ok), ("residual", ~ok), ("all", np.ones(len(rows), bool))):
+        for name, e in (("without", without), ("with", with_)):
+            assert np.isclose(fig[f"{key}_{name}_max_mm"], e[sel].max(), rtol=1e-6, atol=1e-9)
+            assert np.isclose(fig[f"{key}_{name}_rms_mm"], math.sqrt(np.mean(e[sel] ** 2)), rtol=1e-6, atol=1e-9)
