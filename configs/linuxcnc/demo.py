@@ -55,8 +55,8 @@ def summarize(run, machine, params) -> dict:
     at_dwell = np.zeros(len(err_um), bool)
     for s in found[1:]:
         at_dwell[s] = True
-    out = {"periods": int(program.sum()), "dwells": stats(err_um[at_dwell]),
-           "motion": stats(err_um[program & ~at_dwell]), "t": (np.arange(len(err_um)) - found[0].stop) * 1e-3,
+    out = {"periods": int(program.sum()), "dwells_um": stats(err_um[at_dwell]),
+           "motion_um": stats(err_um[program & ~at_dwell]), "t": (np.arange(len(err_um)) - found[0].stop) * 1e-3,
            "error_um": err_um}
     extra = (run.lag_ms if run.route == "bridge" else run.samples[:, cnc.COL_COST])[program]
     return out, extra
@@ -114,8 +114,8 @@ def main(argv=None) -> int:
               "dwell on (the move there leaves the singular pose A = 0):")
         print(f"  {'route':36s} {'dwells max':>11s} {'RMS':>9s} {'motion max':>11s} {'RMS':>9s}")
         for r, s in results.items():
-            print(f"  {LABELS[r]:36s} {s['dwells']['max']:11.4f} {s['dwells']['rms']:9.4f} "
-                  f"{s['motion']['max']:11.4f} {s['motion']['rms']:9.4f}")
+            print(f"  {LABELS[r]:36s} {s['dwells_um']['max']:11.4f} {s['dwells_um']['rms']:9.4f} "
+                  f"{s['motion_um']['max']:11.4f} {s['motion_um']['rms']:9.4f}")
         if "bridge" in results:
             lag = results["bridge"]["lag_ms"]
             print(f"bridge lag (age of the applied correction): p50 {lag['p50']:.2f} ms, p99 {lag['p99']:.2f} ms, "
