@@ -171,15 +171,17 @@ def daemon_counts(run):
     import re
     with open(os.path.join(run.work, "chaincompd.log")) as f:
         log = f.read()
-    found = re.findall(r"chaincompd: stopped: received (\d+), published (\d+)", log)
+    found = re.findall(r"chaincompd: stopped: received (\d+), published (\d+); seq gaps (\d+) \((\d+) missing\)",
+                       log)
     assert found, log[-3000:]
     return tuple(int(v) for v in found[-1])
 
 
 def test_bridge_puts_the_tool_on_the_programmed_point(bridge_run, machine, params):
     completed(bridge_run)
-    received, published = daemon_counts(bridge_run)
-    assert received == published > 3000  # every command the bridge sent was compensated
+    received, published, gaps, missing = daemon_counts(bridge_run)
+    # every command the bridge sent reached the daemon (no seq gap) and was compensated
+    assert received == published > 3000 and gaps == missing == 0
     first, dwells = program_dwells(bridge_run)
     point, _ = cnc.tool_errors(machine, params, bridge_run.commands, bridge_run.drives)
     err_um = np.linalg.norm(point, axis=1) * 1e3
