@@ -216,8 +216,9 @@ def test_bridge_goes_stale_and_ramps_out_when_the_daemon_dies(bridge_kill_run, m
     first = int(np.argmax(stale))
     assert stale[first:].all()  # it stays stale: no daemon any more
     age = run.samples[:, cnc.COL_AGE]
-    # stale within the configured age (plus one userspace loop, which may stall for a few ms)
-    assert STALE_MS < age[first] < STALE_MS + 20.0, age[first]
+    # stale within the configured age, at the bridge's first loop past it (a userspace loop
+    # that may stall: a few ms here, tens of ms on a loaded machine)
+    assert STALE_MS < age[first] < STALE_MS + 50.0, age[first]
     assert run.samples[first:, cnc.COL_FAULT].min() == 1
     # the correction held before stale, then ramped out without a step beyond 0.001 per period
     steps = np.abs(np.diff(run.corrections, axis=0))
