@@ -330,7 +330,7 @@ def test_realtime_component_enables_bumplessly_and_holds_on_a_refused_command(rt
     shutil.rmtree(tmp_path, ignore_errors=True)
     corr, ramp, fault = rows[:, 0:5] * 1e-6, rows[:, 5], rows[:, 7]
     on = np.argmax(ramp > 0)
-    assert 100 < on < 400 and np.all(corr[:on] == 0)           # off until enabled
+    assert 20 < on < 1000 and np.all(corr[:on] == 0)           # off until enabled (0.2 s of wall time)
     full = int(np.argmax(ramp >= 1.0))
     assert 480 <= full - on <= 520                             # 0.5 s of servo periods
     assert np.all(np.abs(np.diff(corr, axis=0)) <= 0.001 + 2e-12)
