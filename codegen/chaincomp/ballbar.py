@@ -59,6 +59,7 @@ MIN_POINTS, MAX_POINTS = 8, 36_000     # per direction: the model is evaluated a
 MAX_ROWS = 2 * MAX_POINTS
 _TOL = 1e-9                            # mm: the nominal tool point on the circle, and in the plane
 UM = 1e-3                              # one µm in mm
+SMALL = 0.1                            # a ballbar reading is below this fraction of R
 
 
 @dataclass
@@ -80,6 +81,7 @@ class Trace:
     deviation: np.ndarray                 # ballbar length minus R, mm
     file: str = ""
     lines: list[int] = field(default_factory=list)
+    where: dict[str, int] = field(default_factory=dict)   # set-up key -> its '# key:' line in the file
 
     def of(self, direction: str) -> tuple[np.ndarray, np.ndarray]:
         k = self.direction == direction
@@ -87,6 +89,14 @@ class Trace:
 
 
 # ----------------------------------------------------------------------------- geometry
+
+def _refuse(source: Trace | None, key: str, message: str, option: str | None = None):
+    """A set-up that cannot be: read from a trace (its file and the line of ``key``), or given
+    as options (``option`` names the one at fault)."""
+    if source is not None:
+        raise ChaincompError(message, source.file, source.where.get(key), key)
+    raise ChaincompError(f"{option}: {message}" if option else message)
+
 
 def _travel(machine: Machine, model: ExactModel, values: dict) -> dict[str, np.ndarray]:
     """Nominal tool-point motion per unit (internal) of each linear axis at ``values``."""
@@ -103,9 +113,10 @@ def _travel(machine: Machine, model: ExactModel, values: dict) -> dict[str, np.n
 
 
 def plane_axes(machine: Machine, plane: str, values: dict, given: list[str] | None = None,
-               model: ExactModel | None = None, what: str = "--axes") -> tuple[str, str]:
+               model: ExactModel | None = None, source: Trace | None = None) -> tuple[str, str]:
     """The linear axes that move the tool (relative to the workpiece) along the plane's two
-    directions at ``values``, found from the nominal model, not from their names."""
+    directions at ``values``, found from the nominal model, not from their names. source: the
+    trace whose header gives plane and axes (refusals name its lines), else they are options."""
     model = model or ExactModel(machine)
     travel = _travel(machine, model, nominal(machine, values))
     picked = []
@@ -115,26 +126,28 @@ def plane_axes(machine: Machine, plane: str, values: dict, given: list[str] | No
         if given:
             name = given[i]
             if name not in [s.name for s in machine.axes]:
-                raise ChaincompError(f"{what}: {name!r} is not an axis of {machine.name} "
-                                     f"(axes: {', '.join(s.name for s in machine.axes)})")
+                _refuse(source, "axes", f"{name!r} is not an axis of {machine.name} "
+                        f"(axes: {', '.join(s.name for s in machine.axes)})", "--axes")
             if name not in along:
-                raise ChaincompError(f"{what}: {name} does not move the tool along {coord} here"
-                                     + (f" (it is not a linear axis)" if name not in travel else
-                                        f" (it moves it by {np.round(travel[name], 6).tolist()} per mm)"))
+                _refuse(source, "axes", f"{name} does not move the tool along {coord} here"
+                        + (" (it is not a linear axis)" if name not in travel else
+                           f" (it moves it by {np.round(travel[name], 6).tolist()} per mm)"), "--axes")
             picked.append(name)
             continue
         if not along:
             rotary = [s.name for s in machine.axes if s.unit.kind == "angle"]
-            raise ChaincompError(f"plane {plane}: no linear axis of {machine.name} moves the tool along {coord} "
-                                 f"here (linear axes: {', '.join(travel) or 'none'}"
-                                 + (f"; rotary axes {', '.join(rotary)} may be set with --set)" if rotary and travel
-                                    else ")"))
+            _refuse(source, "plane", f"no linear axis of {machine.name} moves the tool along {coord} "
+                    f"here (linear axes: {', '.join(travel) or 'none'}"
+                    + (f"; rotary axes {', '.join(rotary)} may be "
+                       + ("held elsewhere in a '# held:' line)" if source else "set with --set)")
+                       if rotary and travel else ")"), f"plane {plane}")
         if len(along) > 1:
-            raise ChaincompError(f"plane {plane}: axes {', '.join(along)} all move the tool along {coord}: "
-                                 "choose with --axes")
+            _refuse(source, "plane", f"axes {', '.join(along)} all move the tool along {coord}: "
+                    + ("name two in a '# axes: A, B' line" if source else "choose with --axes"), f"plane {plane}")
         picked.append(along[0])
     if picked[0] == picked[1]:
-        raise ChaincompError(f"plane {plane}: {picked[0]} cannot drive both directions of the circle")
+        _refuse(source, "axes" if given else "plane",
+                f"{picked[0]} cannot drive both directions of the circle", "--axes" if given else f"plane {plane}")
     return picked[0], picked[1]
 
 
@@ -161,9 +174,11 @@ def circle_points(setup: Setup, angle: np.ndarray) -> np.ndarray:
     return out
 
 
-def commanded(machine: Machine, model: ExactModel, setup: Setup, values: dict, angle: np.ndarray) -> dict:
+def commanded(machine: Machine, model: ExactModel, setup: Setup, values: dict, angle: np.ndarray,
+              source: Trace | None = None) -> dict:
     """The axis values (internal) that put the nominal tool point on the circle at ``angle``:
-    Newton on the nominal exact model, the two plane axes moving, the others held."""
+    Newton on the nominal exact model, the two plane axes moving, the others held. source: the
+    trace the set-up was read from (refusals name its lines)."""
     i, j, n = PLANES[setup.plane]
     a, b = setup.axes
     base = nominal(machine, values)
@@ -176,9 +191,9 @@ def commanded(machine: Machine, model: ExactModel, setup: Setup, values: dict, a
         c = "xyz"[n]
         held = ", ".join(f"{k} = {machine.symbol(k).from_internal(v):g} {machine.symbol(k).unit.name}"
                          for k, v in setup.held.items()) or "the other axes where they are"
-        raise ChaincompError(f"the centre's {c} ({setup.centre[n]:g} mm) is not the tool's {c} with {held} "
-                             f"({at[n]:g} mm): the circle must lie in the plane the tool moves in (move the "
-                             "other axes, or the centre)")
+        _refuse(source, "centre", f"the centre's {c} ({setup.centre[n]:g} mm) is not the tool's {c} with {held} "
+                f"({at[n]:g} mm): the circle must lie in the plane the tool moves in (move the other axes, or "
+                "the centre)")
     q = {a: np.full(len(angle), base[a]), b: np.full(len(angle), base[b])}
     for _ in range(8):
         p = tool_point(model, {**base, **q})
@@ -198,8 +213,9 @@ def commanded(machine: Machine, model: ExactModel, setup: Setup, values: dict, a
         lo, hi = s.limits
         vals = s.from_internal(q[name])
         if vals.min() < lo - 1e-9 or vals.max() > hi + 1e-9:
-            raise ChaincompError(f"the circle takes {name} from {vals.min():g} to {vals.max():g} {s.unit.name}, "
-                                 f"beyond its limits [{lo:g}, {hi:g}]: a smaller --radius or another --centre")
+            _refuse(source, "radius", f"the circle takes {name} from {vals.min():g} to {vals.max():g} "
+                    f"{s.unit.name}, beyond its limits [{lo:g}, {hi:g}]: "
+                    + ("not a circle this machine can run" if source else "a smaller --radius or another --centre"))
     return {**{k: v for k, v in base.items() if machine.symbol(k).role == "axis"}, **q}
 
 
@@ -228,6 +244,11 @@ def predict(machine: Machine, values: dict, setup: Setup, points: int, model: Ex
     th = angles(points)
     axes = commanded(machine, model, setup, values, th)
     d = deviation(machine, model, setup, values, axes)
+    worst = float(np.abs(d).max())
+    if not worst < SMALL * setup.radius:   # what read_trace refuses too
+        raise ChaincompError(f"the trace reaches {worst / UM:.4g} µm, not small against the radius "
+                             f"({_num(setup.radius)} mm): a ballbar of that length would not read it (a larger "
+                             "--radius)")
     back = np.r_[0, np.arange(points - 1, 0, -1)]     # cw: 0, 359, 358, ... degrees
     return Trace(setup, np.r_[th, th[back]], np.array([CCW] * points + [CW] * points),
                  np.r_[d, d[back]])
@@ -424,6 +445,8 @@ def read_trace(path: str, machine: Machine) -> Trace:
             if not sep or sym is None or sym.role != "axis":
                 fail(f"expected AXIS=VALUE items of the axes of {machine.name} "
                      f"({', '.join(s.name for s in machine.axes)}), got {item!r}")
+            if name in held:
+                fail(f"{name} given twice")
             try:
                 held[name] = parse_value(sym, value.strip())
             except ValueError as exc:
@@ -438,6 +461,8 @@ def read_trace(path: str, machine: Machine) -> Trace:
     if "feed" in meta:
         feed_text, line = meta["feed"]
         feed = _number(feed_text.removesuffix("mm/min").strip(), failer(line, "feed"))
+        if not feed > 0:
+            raise ChaincompError(f"the feed must be above 0 mm/min, got {feed_text!r}", path, line, "feed")
 
     # the columns
     hline, cells = header
@@ -468,7 +493,11 @@ def read_trace(path: str, machine: Machine) -> Trace:
                                  hline, f)
         units[f] = u
     ang, dirs, devs, lines = [], [], [], []
+    seen: dict[tuple[str, float], int] = {}
     for lineno, row in rows:
+        if any(c.strip() for c in row[len(cells):]):   # e.g. '5,ccw,2,406': a decimal comma
+            raise ChaincompError(f"{len(row)} cells, the header has {len(cells)} (a decimal comma? write "
+                                 f"decimals with a point): {','.join(row)!r}", path, lineno)
         def cell(f: str) -> str:
             k = col[f]
             if k >= len(row) or not row[k].strip():
@@ -482,10 +511,14 @@ def read_trace(path: str, machine: Machine) -> Trace:
             raise ChaincompError(f"expected ccw or cw, got {cell('direction').strip()!r}", path, lineno,
                                  "direction")
         v = _number(cell("deviation"), failer(lineno, "deviation")) * units["deviation"].to_internal
-        if not abs(v) < 0.1 * radius:
+        if not abs(v) < SMALL * radius:
             raise ChaincompError(f"a deviation of {cell('deviation').strip()} {units['deviation'].name} is not "
                                  f"small against the radius ({_num(radius)} mm): not a ballbar reading", path,
                                  lineno, "deviation")
+        first = seen.setdefault((d, round(a, 9)), lineno)
+        if first != lineno:
+            raise ChaincompError(f"the {d} point at {cell('angle').strip()} {units['angle'].name} is given twice "
+                                 f"(first on line {first})", path, lineno, "angle")
         ang.append(a)
         dirs.append(d)
         devs.append(v)
@@ -500,7 +533,8 @@ def read_trace(path: str, machine: Machine) -> Trace:
                                  f"{MIN_POINTS} around the circle", path, lines[dirs.index(d)], "direction")
     # the plane axes, when the header names them, are checked against the machine by the caller
     setup = Setup(plane, tuple(axes_given) if axes_given else None, radius, centre, held, feed)
-    return Trace(setup, np.array(ang), dirs_arr, np.array(devs), path, lines)
+    return Trace(setup, np.array(ang), dirs_arr, np.array(devs), path, lines,
+                 {key: line for key, (_, line) in meta.items()})
 
 
 # ----------------------------------------------------------------------------- the fit

@@ -63,3 +63,81 @@ def test_volume_view_of_an_error_table(tmp_path):
 ])
 def test_plus_minus_of_an_uncertainty_finer_than_a_double(value, u, text):
     assert display.plus_minus(value, u) == text
+
+
+# ----------------------------------------------------------------------------- ballbar
+
+# vmc_xyz: X and Y move the tool along x and y; Z = 0 puts the tool at z = 400 mm
+HEAD = ("# plane: XY\n# axes: X, Y\n# radius: 100 mm\n# centre: 0, 0, 400 mm\n# held: Z=0 mm\n"
+        "angle [deg],direction,deviation [um]\n")                   # the header is line 6
+ROWS = "".join(f"{a},ccw,{0.5 * np.cos(np.radians(a)):.6f}\n" for a in range(0, 360, 10))   # lines 7..42
+
+
+def _trace(tmp_path, text: str) -> str:
+    path = tmp_path / "trace.csv"
+    path.write_text(text)
+    return str(path)
+
+
+@pytest.mark.parametrize("text,where", [
+    # a decimal comma in a comma-separated file read '2,406424' as 2 (the rest a cell past the header)
+    (HEAD + ROWS + "5,ccw,2,406424\n", ":43: 4 cells, the header has 3 (a decimal comma?"),
+    (HEAD + ROWS + "5,ccw,0.1,junk\n", ":43: 4 cells, the header has 3"),
+    # the same point twice: its residual counted twice, the uncertainties too small
+    (HEAD + ROWS + "10,ccw,0.2\n", ":43: angle: the ccw point at 10 deg is given twice (first on line 8)"),
+    (HEAD + ROWS + ROWS, ":43: angle: the ccw point at 0 deg is given twice (first on line 7)"),
+    # an axis held twice took the last value
+    (HEAD.replace("Z=0 mm", "Z=0 mm, Z=5 mm") + ROWS, ":5: held: Z given twice"),
+    # --feed must be above 0; the header took any number
+    (HEAD.replace("angle", "# feed: -5 mm/min\nangle") + ROWS,
+     ":6: feed: the feed must be above 0 mm/min, got '-5 mm/min'"),
+    (HEAD.replace("# held", "# feed: 0\n# held") + ROWS, ":5: feed: the feed must be above 0"),
+    # refusals of the set-up named the file only (or nothing): now its line and field
+    (HEAD.replace("X, Y", "Y, X") + ROWS, ":2: axes: Y does not move the tool along x here"),
+    (HEAD.replace("Z=0 mm", "X=0 mm") + ROWS, ":5: held: X drives the circle; it cannot be held"),
+    (HEAD.replace("0, 0, 400 mm", "0, 0, 500 mm") + ROWS,
+     ":4: centre: the centre's z (500 mm) is not the tool's z with Z = 0 mm (400 mm)"),
+    (HEAD.replace("100 mm", "300 mm") + ROWS,
+     ":3: radius: the circle takes Y from -300 to 300 mm, beyond its limits [-250, 250]: not a circle this "
+     "machine can run"),
+])
+def test_trace_faults_name_file_line_and_field(capsys, tmp_path, text, where):
+    path = _trace(tmp_path, text)
+    err = _refused(capsys, "ballbar", VMC, "--fit", path, match=path + where)
+    assert err.count("\n") == 1
+
+
+def test_trailing_empty_cells_are_no_fault(capsys, tmp_path):
+    """A spreadsheet's trailing comma leaves an empty cell: nothing is lost, nothing refused."""
+    lines = (HEAD + ROWS).splitlines()
+    path = _trace(tmp_path, "\n".join(lines[:6] + [r + "," for r in lines[6:]]) + "\n")
+    code, err = _run(capsys, "ballbar", VMC, "--fit", path)
+    assert code == 0, err
+
+
+def test_a_prediction_the_ballbar_could_not_read_is_refused(capsys, tmp_path):
+    """R = 0.01 mm with µm-sized errors: the 'trace' is the tool's offset, not a deviation from R
+    (G was 0, F the offset); read_trace refuses such a file, so predict refuses to make it."""
+    demo = machine_path("vmc_xyz").replace("machines/vmc_xyz.yaml", "params/vmc_xyz-demo.yaml")
+    _refused(capsys, "ballbar", VMC, "--params", demo, "--plane", "XY", "--radius", "0.01",
+             "-o", tmp_path / "t.csv", match="not small against the radius (0.01 mm)")
+    assert not (tmp_path / "t.csv").exists()
+
+
+@pytest.mark.parametrize("options,match", [
+    # an empty value was taken as the default
+    (["--plane", "XY", "--radius", "10", "--centre", ""], "--centre: an empty value"),
+    (["--plane", "XY", "--radius", "10", "--axes", " "], "--axes: an empty value"),
+    (["--plane", "XY", "--radius", "10", "--plot", "x.png", "-o", "x.png"], "--plot x.png: is also the -o output"),
+])
+def test_ballbar_option_faults(capsys, tmp_path, monkeypatch, options, match):
+    monkeypatch.chdir(tmp_path)
+    _refused(capsys, "ballbar", VMC, *options, match=match)
+
+
+def test_fit_option_faults(capsys, tmp_path):
+    path = _trace(tmp_path, HEAD + ROWS)
+    _refused(capsys, "ballbar", VMC, "--fit", path, "--prefer", "", match="--prefer: an empty value")
+    # preferred and held at the start value at once: the preference was silently dropped
+    _refused(capsys, "ballbar", VMC, "--fit", path, "--prefer", "EC0Y", "--assume-zero", "ECX,EC0Y",
+             match="--prefer EC0Y: it is also in --assume-zero")

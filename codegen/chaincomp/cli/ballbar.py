@@ -12,12 +12,13 @@ import numpy as np
 
 from .. import ballbar as bb
 from ..calibration import _write_loadable
+from ..display import fixed
 from ..errors import ChaincompError
 from ..jets import JetModel
 from ..numeric import ExactModel
 from ..varying import Varying
 from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, add_values_arguments,
-                     check_image, check_output, integer, load, number, to_json, values_for)
+                     _same_file, check_image, check_output, integer, load, number, to_json, values_for)
 from ..protocol import check_errors
 from .laser_to_params import _one_line, merge
 from .protocol import names
@@ -138,7 +139,7 @@ def _figures_text(fig: dict) -> list[str]:
     out = [f"  {'':22} {'G':>8} {'F_max':>8} {'F_min':>8}   {'LSQ centre offset':>20} {'radius − R':>11}  (µm)"]
     names = {"ccw": "ccw (counterclockwise)", "cw": "cw (clockwise)", "bidirectional": "bidirectional G(b)"}
     for d, f in fig.items():
-        fmax = f"{f['F_max']:8.3f} {f['F_min']:8.3f}" if "F_max" in f else f"{'':8} {'':8}"
+        fmax = f"{fixed(f['F_max'], 3, 8)} {fixed(f['F_min'], 3, 8)}" if "F_max" in f else f"{'':8} {'':8}"
         cx, cy = f["centre_offset"]
         out.append(f"  {names[d]:22} {f['G']:8.3f} {fmax}   {_z(cx):+9.3f}, {_z(cy):+9.3f} "
                    f"{_z(f['radius_minus_R']):+11.3f}")
@@ -321,7 +322,18 @@ def _sigma_text(machine, error, axis, k, sd) -> str:
         (f"^{k}" if k > 1 else "")
 
 
+def _no_empty_values(args) -> None:
+    """An empty option value is a typo, not a request for the default (as protocol --angles '')."""
+    given = [("--centre", args.centre), ("--axes", args.axes), ("--fit", args.fit), ("--plot", args.plot),
+             ("-o", args.output)] + [("--prefer", v) for v in args.prefer] + \
+        [("--assume-zero", v) for v in args.assume_zero]
+    for opt, v in given:
+        if v is not None and not v.strip():
+            raise ChaincompError(f"{opt}: an empty value (leave the option out for its default)")
+
+
 def run(args) -> int:
+    _no_empty_values(args)
     if args.fit:
         return run_fit(args)
     for opt, v in (("--plane", args.plane), ("--radius", args.radius)):
@@ -331,7 +343,8 @@ def run(args) -> int:
         if v:
             raise ChaincompError(f"{opt} applies to --fit only")
     check_output(args.output, args.machine, args.params)
-    check_image(args.plot, args.machine, args.params, args.output, option="--plot")
+    _two_outputs(args)
+    check_image(args.plot, args.machine, args.params, option="--plot")
     machine = load(args.machine)
     values, has_errors = values_for(machine, args.params, args.sets)
     model = ExactModel(machine)
@@ -370,16 +383,25 @@ def run(args) -> int:
     return 0
 
 
+def _two_outputs(args) -> None:
+    if args.plot and args.output and _same_file(args.plot, args.output):
+        raise ChaincompError(f"--plot {args.plot}: is also the -o output; give the plot a name of its own")
+
+
 def run_fit(args) -> int:
     for opt, v in (("--plane", args.plane), ("--radius", args.radius), ("--centre", args.centre),
                    ("--set", args.sets), ("--feed", args.feed), ("--axes", args.axes)):
         if v:
             raise ChaincompError(f"{opt}: with --fit the test's set-up comes from the trace's header")
     check_output(args.output, args.machine, args.params, args.fit)
-    check_image(args.plot, args.machine, args.params, args.fit, args.output, option="--plot")
+    _two_outputs(args)
+    check_image(args.plot, args.machine, args.params, args.fit, option="--plot")
     machine = load(args.machine)
     assume = check_errors(machine, names(",".join(args.assume_zero), "--assume-zero"), "--assume-zero")
     prefer = check_errors(machine, names(",".join(args.prefer), "--prefer"), "--prefer")
+    both = [e for e in prefer if e in assume]
+    if both:
+        raise ChaincompError(f"--prefer {both[0]}: it is also in --assume-zero (held at its start value, not fitted)")
     trace = bb.read_trace(args.fit, machine)
     for d in (bb.CCW, bb.CW):
         th = trace.of(d)[0]
@@ -391,11 +413,11 @@ def run_fit(args) -> int:
     values.update(setup.held)
     model = ExactModel(machine)
     setup.axes = bb.plane_axes(machine, setup.plane, values, list(setup.axes) if setup.axes else None, model,
-                               what=f"{args.fit}: axes")
+                               source=trace)
     for n in setup.held:
         if n in setup.axes:
-            raise ChaincompError(f"{n} drives the circle; it cannot be held", args.fit)
-    axes = bb.commanded(machine, model, setup, values, trace.angle)
+            raise ChaincompError(f"{n} drives the circle; it cannot be held", args.fit, trace.where["held"], "held")
+    axes = bb.commanded(machine, model, setup, values, trace.angle, source=trace)
     start = bb.deviation(machine, model, setup, values, axes)
     fit = bb.fit(machine, trace, values, axes, start, assume, args.degree, JetModel(machine, 1), prefer)
     ev = bb.evaluate(trace)
