@@ -292,8 +292,11 @@ def _declare(machine: Machine, ops: int, inputs: list[str], trig: bool) -> list[
     lines += [f"const double {n} = {src};" for n, src in sines]
     if trig and not sines:
         lines.append("static_cast<void>(t);  // no sin or cos of an axis here")
-    if trig and not any(f"q_{a.name}" in used for a in axes):
-        lines.append("static_cast<void>(q);  // the axes enter through t alone")
+    if not any(f"q_{a.name}" in used for a in axes):
+        lines.append("static_cast<void>(q);  // the axes enter through t alone" if trig and sines
+                     else "static_cast<void>(q);  // no axis moves these outputs")
+    if not any(n.startswith(("p_", "k")) for n in used):
+        lines.append("static_cast<void>(m);  // every parameter here folded into constants")
     return lines
 
 

@@ -136,3 +136,17 @@ def test_generated_source_size_and_operations(ur5c):
     ops = dict(re.findall(r"void (\w+)\(const Model& m[^{]*\{\n  // (\d+) operations", text))
     assert int(ops["pose_jacobian_gain"]) < 1500 and int(ops["error_order2"]) < 2000, ops
     assert "new " not in text.split("namespace {")[0] and "noexcept" in text
+
+
+def test_straight_line_code_compiles_without_warnings(tmp_path):
+    """The bundled UR5's numbers fold whole functions into constants (pose_nominal reads no
+    parameter): the model flags' -Wall -Wextra stay quiet all the same."""
+    import json
+    from chaincomp import load_machine as load
+    flags = json.load(open(os.path.join(ROOT, "build", "model_build.json")))
+    for name, text in generate(load(os.path.join(ROOT, "configs", "machines", "ur5.yaml")), 2).items():
+        (tmp_path / name).write_text(text)
+    proc = subprocess.run([flags["compiler"], *flags["flags"], "-fsyntax-only", "-Werror",
+                           *[f"-I{d}" for d in flags["include_dirs"]], f"-I{tmp_path}", str(tmp_path / "ur5.cpp")],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
