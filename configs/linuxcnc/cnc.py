@@ -116,6 +116,13 @@ def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeo
            os.path.join(work, f"{config}.ini")]
     if os.geteuid() == 0:
         pw = pwd.getpwnam(USER)
+        # the HAL components run from this checkout as that user
+        probe = subprocess.run(["runuser", "-u", USER, "--", "test", "-x", os.path.join(ROOT, ".venv", "bin", "python"),
+                                "-a", "-r", os.path.join(HERE, "drive.py")], capture_output=True)
+        if probe.returncode != 0:
+            raise RuntimeError(f"user {USER!r} cannot read this checkout ({ROOT}) and its .venv: LinuxCNC's HAL "
+                               "components run from it as that user; give others read and search access along "
+                               "the path (chmod o+rx)")
         for dirpath, _, files in os.walk(work):
             os.chown(dirpath, pw.pw_uid, pw.pw_gid)
             for name in files:
