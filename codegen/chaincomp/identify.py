@@ -43,8 +43,8 @@ _CSTEP = 1e-20    # complex step, internal units (mm, rad): any tiny value gives
 _STEP = 1e-6      # central-difference step, where the chain cannot take complex values
 _RANK_TOL = 1e-9  # singular values below this, relative to the largest, are zero
 MAX_ROWS = 20_000  # set-ups in a file or a --setups spec: bounds the fit's memory (rows x errors)
-MAX_JACOBIAN = 10_000_000   # measured coordinates x parameters (80 MB a copy): bounds the fit's memory
-MAX_PARAMETERS = 2000       # the rank analysis holds parameters x parameters (32 MB)
+MAX_JACOBIAN = 5_000_000    # measured coordinates x parameters (40 MB a copy): bounds the fit's memory and time
+MAX_PARAMETERS = 1000       # the rank analysis holds parameters x parameters (8 MB)
 _CHUNK = 1_000_000          # parameter sets x rows evaluated in one broadcast call of the chain
 _TIE = 1e-9       # pivoted QR: columns this close (relative) to the largest remaining norm tie
 DIRECTIONS = ("kx", "ky", "kz")       # measured tool direction (unit vector components)
@@ -421,7 +421,7 @@ class Fit:
 
 def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_iterations: int = 50,
              model: ExactModel | None = None, vary=(), smooth: float = 0.0, minimal: bool = False,
-             prefer=()) -> Fit:
+             prefer=(), progress=None) -> Fit:
     """Fit the errors of ``machine`` (all but ``assume_zero``) to the measured tool points and
     directions.
 
@@ -430,7 +430,8 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     kx, ky, kz). ``vary``: ``Vary`` specs of errors fitted as tables or polynomials along an
     axis; ``smooth``: the weight of their tables' second differences (declared unit). ``minimal``:
     fit a minimal identifiable set, every other parameter held at zero; ``prefer``: errors to take
-    into that set (and keep out of the suggested assume-zero set) first. ``model``: the machine's
+    into that set (and keep out of the suggested assume-zero set) first; ``progress``: called with
+    a line of text after each stage of a large fit (parameters x coordinates above 1e6). ``model``: the machine's
     ExactModel, to reuse its compiled functions across fits. Raises ChaincompError when the data
     identify nothing, leave no redundancy to estimate the uncertainty (without ``sigma``), or
     give non-finite values."""
@@ -489,9 +490,15 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     def residual(p: np.ndarray) -> np.ndarray:
         return np.concatenate([w * (y - predict(p[None])[0]), -penalty @ p])
 
+    def report(text):
+        if progress is not None and n * m > 1_000_000:
+            progress(text)
+
+    report(f"{n} parameters, {data}: the Jacobian and its rank")
     p = np.zeros(n)
     j0 = jacobian(p)                                      # first-order gains at these set-ups
     rank, basis, unidentifiable, redundant, carried, suggested = _analyse(j0, params, measured, prefer, minimal)
+    report(f"rank {rank}; Gauss-Newton on the exact model")
     if rank == 0:
         raise ChaincompError(f"none of the {n} parameters fitted moves the {data}: nothing to identify",
                              table.file)
@@ -508,12 +515,14 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
 
     iterations, converged = 0, False
     yw = np.linalg.norm(w * y)
+    z = np.zeros(rank)                                    # p = basis @ z throughout (p starts at 0)
     for iterations in range(1, max_iterations + 1):
         r = residual(p)
         jz = jacobian(p) @ basis
         dz = np.linalg.lstsq(jz, r, rcond=None)[0]
-        p = p + basis @ dz
-        z = np.linalg.lstsq(basis, p, rcond=None)[0]
+        z = z + dz
+        p = basis @ z
+        report(f"iteration {iterations}: weighted rms residual {np.linalg.norm(r) / math.sqrt(len(r)):.4g}")
         # done when the step is negligible against the estimates or below the coordinates' precision
         if np.linalg.norm(dz) <= 1e-10 * np.linalg.norm(z) or np.linalg.norm(jz @ dz) <= 1e-14 * yw:
             converged = True
@@ -521,14 +530,14 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     r = residual(p)[:m]
     jz = jacobian(p) @ basis
     rss = float(r @ r)
-    inv = np.linalg.pinv(jz.T @ jz)
+    _, sv, vz = np.linalg.svd(jz, full_matrices=False)
+    inv = (vz.T / sv ** 2) @ vz                           # (jz' jz)^-1: jz has full column rank
     if len(penalty):          # effective number of parameters: the trace of the data's hat matrix
         jd = jz[:m]
         dof = float(m - np.trace(jd @ inv @ jd.T))
     else:
         dof = m - rank
     var = 1.0 if sig else rss / dof
-    sv = np.linalg.svd(jz, compute_uv=False)
     cov = var * basis @ inv @ basis.T
     std = np.sqrt(np.abs(np.diag(cov)))
     corr = []
@@ -583,19 +592,26 @@ def _analyse(j0: np.ndarray, params: list[Param], measured: list[str], prefer, m
     if rank == 0:
         return rank, basis, unidentifiable, {}, {}, []
     first = [k for name in prefer for k, j in enumerate(cols) if params[j].error == name]
-    kept = [int(cols[k]) for k in _spanning(scaled, rank, first)]
+    # s vt has the columns' lengths and angles of ``scaled`` in (at most) n rows: cheaper to pivot
+    kept = [int(cols[k]) for k in _spanning(s[:, None] * vt[:len(s)], rank, first)]
+    members: dict[str, list[int]] = {}
+    for i, q in enumerate(params):
+        members.setdefault(q.error, []).append(i)
     redundant, carried = {}, {}
     if minimal:
-        for j in cols:
-            if j not in kept:
-                redundant[names[j]], carried[names[j]] = _carried(params, j0, kept, j)
+        others = [int(j) for j in cols if j not in kept]
+        if others:
+            c = np.linalg.lstsq(j0[:, kept], j0[:, others], rcond=None)[0]   # one solve for all of them
+            norms = np.linalg.norm(j0[:, kept], axis=0)
+            for col, j in enumerate(others):
+                redundant[names[j]], carried[names[j]] = _carried(params, members, kept, j, c[:, col], norms)
         basis[sorted(kept), np.arange(rank)] = d[sorted(kept)]      # the minimal set, scaled
         return rank, basis, unidentifiable, redundant, carried, []
     null = vt[rank:]
     proj = null.T @ null        # projector on the null space: its blocks do not depend on the basis
     for k, j in enumerate(cols):
         if proj[k, k] > 1e-12:
-            unidentifiable[names[j]] = _inseparable_reason(params, cols, proj, k, d)
+            unidentifiable[names[j]] = _inseparable_reason(params, members, cols, proj, k, d)
     basis[cols] = d[cols, None] * vt[:rank].T                      # the combinations the data see
     return rank, basis, unidentifiable, redundant, carried, [names[j] for j in cols if j not in kept]
 
@@ -626,16 +642,17 @@ def _spanning(a: np.ndarray, rank: int, first=()) -> list[int]:
     return picked
 
 
-def _grouped(params: list[Param], pairs) -> list[tuple[str, float, str, str]]:
+def _grouped(params: list[Param], members: dict[str, list[int]], pairs) -> list[tuple[str, float, str, str]]:
     """(name, coefficient, unit, short name) per term; a table whose knots all take part alike
-    is one term, 'every knot of EXX' ("EXX's knots"): a constant the table carries."""
+    is one term, 'every knot of EXX' ("EXX's knots"): a constant the table carries.
+    ``members``: each error's parameter indices."""
     out, done = [], set()
     coeff = dict(pairs)
     for i, x in pairs:
         if i in done:
             continue
         p = params[i]
-        knots = [k for k, q in enumerate(params) if q.error == p.error] if p.knot else [i]
+        knots = members[p.error] if p.knot else [i]
         if len(knots) > 1 and all(k in coeff and abs(coeff[k] - x) <= 1e-6 * abs(x) for k in knots):
             out.append((f"every knot of {p.error}", x, p.unit, f"{p.error}'s knots"))
             done.update(knots)
@@ -645,33 +662,41 @@ def _grouped(params: list[Param], pairs) -> list[tuple[str, float, str, str]]:
     return out
 
 
+_SHOWN = 8   # terms of a combination written out in a reason (JSON has them all)
+
+
+def _listed(items: list[str]) -> str:
+    more = len(items) - _SHOWN
+    return ", ".join(items[:_SHOWN]) + (f" and {more} more" if more > 0 else "")
+
+
 def _terms(terms) -> str:
-    return ", ".join(f"{x:+.4g} {unit} in {name}" for name, x, unit, _ in terms)
+    return _listed([f"{x:+.4g} {unit} in {name}" for name, x, unit, _ in terms])
 
 
-def _carried(params: list[Param], j0: np.ndarray, kept: list[int], j: int):
-    """Parameter j, outside the minimal set: the change of the kept ones that moves the
-    measurements as a unit change of j does (first order), in declared units."""
-    c = np.linalg.lstsq(j0[:, kept], j0[:, j], rcond=None)[0]
-    size = np.abs(c * np.linalg.norm(j0[:, kept], axis=0))
+def _carried(params: list[Param], members, kept: list[int], j: int, c: np.ndarray, norms: np.ndarray):
+    """Parameter j, outside the minimal set: c, the change of the kept ones (internal units) that
+    moves the measurements as a unit change of j does (first order), as text in declared units
+    and as internal coefficients. ``norms``: the kept columns' lengths."""
+    size = np.abs(c * norms)
     pairs = [(i, c[k] * params[j].to_internal / params[i].to_internal)
              for k, i in enumerate(kept) if size[k] > 1e-6 * size.max()]
     me = params[j]
-    terms = _grouped(params, pairs)
-    names = ", ".join(short for *_, short in terms)
+    terms = _grouped(params, members, pairs)
     text = (f"to first order a change of 1 {me.unit} in {me.name} moves the measured coordinates as "
-            f"{_terms(terms)} {'does' if len(pairs) == 1 else 'do'}: carried by {names}")
+            f"{_terms(terms)} {'does' if len(pairs) == 1 else 'do'}: carried by "
+            f"{_listed([short for *_, short in terms])}")
     return text, {params[i].name: float(x * params[i].to_internal / params[j].to_internal) for i, x in pairs}
 
 
-def _inseparable_reason(params: list[Param], cols, proj, k, d) -> str:
+def _inseparable_reason(params: list[Param], members, cols, proj, k, d) -> str:
     """'a change of 1 arcsec in A with -0.64 arcsec in B moves no measured coordinate'."""
     v = proj[:, k] * d[cols]          # a null vector through parameter k, unscaled internal units
     me = params[cols[k]]
     pairs = [(int(j), v[i] / v[k] * me.to_internal / params[j].to_internal) for i, j in enumerate(cols)
              if i != k and abs(proj[i, k]) > 1e-6 * proj[k, k]]
-    terms = _grouped(params, pairs)
-    return (f"cannot be told apart from {', '.join(short for *_, short in terms)} at these set-ups: "
+    terms = _grouped(params, members, pairs)
+    return (f"cannot be told apart from {_listed([short for *_, short in terms])} at these set-ups: "
             f"a change of 1 {me.unit} in {me.name} with {_terms(terms)} moves no measured "
             f"coordinate (to first order)")
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import sys
 
 from ..calibration import _write_loadable, find_slides
 from ..display import add_units_argument
@@ -178,7 +179,7 @@ def run(args) -> int:
     vary = [vary_spec(machine, v) for v in args.vary]
     table = read_table(args.measurements, machine)
     fit = identify(machine, table, assume, sigma, vary=vary, smooth=args.smooth, minimal=args.minimal,
-                   prefer=prefer)
+                   prefer=prefer, progress=lambda text: print(f"chaincomp identify: {text}", file=sys.stderr))
     if not fit.converged:
         raise ChaincompError(f"the fit did not converge in {fit.iterations} Gauss-Newton iterations "
                              f"(rms residual {fit.rms / UNITS[machine.length_unit].to_internal:.4g} "
