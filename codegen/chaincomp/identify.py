@@ -46,6 +46,7 @@ MAX_ROWS = 20_000  # set-ups in a file or a --setups spec: bounds the fit's memo
 MAX_JACOBIAN = 5_000_000    # measured coordinates x parameters (40 MB a copy): bounds the fit's memory and time
 MAX_PARAMETERS = 1000       # the rank analysis holds parameters x parameters (8 MB)
 _CHUNK = 1_000_000          # parameter sets x rows evaluated in one broadcast call of the chain
+PROGRESS_SIZE = 1_000_000   # parameters x coordinates above which a fit reports its stages (seconds)
 _TIE = 1e-9       # pivoted QR: columns this close (relative) to the largest remaining norm tie
 DIRECTIONS = ("kx", "ky", "kz")       # measured tool direction (unit vector components)
 COLUMNS = COMPONENTS + DIRECTIONS     # every measured column, in the order of Table.observations
@@ -431,7 +432,7 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     axis; ``smooth``: the weight of their tables' second differences (declared unit). ``minimal``:
     fit a minimal identifiable set, every other parameter held at zero; ``prefer``: errors to take
     into that set (and keep out of the suggested assume-zero set) first; ``progress``: called with
-    a line of text after each stage of a large fit (parameters x coordinates above 1e6). ``model``: the machine's
+    a line of text at each stage of a large fit (parameters x coordinates above PROGRESS_SIZE). ``model``: the machine's
     ExactModel, to reuse its compiled functions across fits. Raises ChaincompError when the data
     identify nothing, leave no redundancy to estimate the uncertainty (without ``sigma``), or
     give non-finite values."""
@@ -491,7 +492,7 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
         return np.concatenate([w * (y - predict(p[None])[0]), -penalty @ p])
 
     def report(text):
-        if progress is not None and n * m > 1_000_000:
+        if progress is not None and n * m > PROGRESS_SIZE:
             progress(text)
 
     report(f"{n} parameters, {data}: the Jacobian and its rank")

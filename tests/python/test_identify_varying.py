@@ -294,3 +294,16 @@ def test_the_number_of_parameters_is_bounded(machine, tmp_path, capsys):
     rc, _, err = cli(capsys, "identify", path, tmp_path / "meas.csv", "--vary", f"EXX=table:{knots}",
                      "--vary", f"EYX=table:{knots}")
     assert rc == 2 and "1004 parameters to fit (errors, knots and coefficients), more than 1000" in err
+
+
+def test_a_large_fit_reports_its_stages_on_stderr(machine, tmp_path, capsys, monkeypatch):
+    import chaincomp.identify as identify_module
+    monkeypatch.setattr(identify_module, "PROGRESS_SIZE", 0)
+    path, m, _ = machine
+    X, Y = setups()
+    write_csv(tmp_path / "meas.csv", X, Y, points(X, Y, 0 * X, 0 * X, 0 * X))
+    rc, out, err = cli(capsys, "identify", path, tmp_path / "meas.csv", "--assume-zero", "EC0Y", "--sigma", "1um")
+    lines = err.strip().splitlines()
+    assert rc == 0 and lines[0].startswith("chaincomp identify: 3 parameters, 64 coordinates (x, y) at 32 set-ups")
+    assert "rank 3; Gauss-Newton on the exact model" in lines[1] and "iteration 1: " in lines[2]
+    assert "chaincomp identify:" not in out
