@@ -141,3 +141,27 @@ def test_fit_option_faults(capsys, tmp_path):
     # preferred and held at the start value at once: the preference was silently dropped
     _refused(capsys, "ballbar", VMC, "--fit", path, "--prefer", "EC0Y", "--assume-zero", "ECX,EC0Y",
              match="--prefer EC0Y: it is also in --assume-zero")
+
+
+@pytest.mark.parametrize("options,match", [
+    # '' was taken as the default (-o '': no file written at all, exit 0)
+    (["--view", "volume", "--over", ""], "--over: an empty value"),
+    (["-o", ""], "-o: an empty value"),
+    (["--html", ""], "--html: an empty value"),
+    # 1e308 reached the model (a 'not finite' error naming no option); the bound of every value
+    (["--view", "volume", "--range", "-1e308:1e308"], "--range: values are at most 1e+15 in magnitude"),
+    (["--range2", "0:1e16"], "--range2: values are at most 1e+15 in magnitude"),
+])
+def test_plot_option_faults(capsys, tmp_path, monkeypatch, options, match):
+    monkeypatch.chdir(tmp_path)
+    _refused(capsys, "plot", VMC, "--set", "EXX=1", "--grid", "3", *options, match=match)
+    assert not list(tmp_path.iterdir())
+
+
+def test_plot_range_beyond_the_limits_warns(capsys, tmp_path):
+    """vmc_xyz's X travels -400..400 mm: a map out to -500 shows where the machine cannot go."""
+    code, err = _run(capsys, "plot", VMC, "--set", "EXX=1", "--grid", "3", "--over", "X,Y", "--range", "-500:100",
+                     "--range2", "-10:10", "-o", tmp_path / "m.png")
+    assert code == 0 and (tmp_path / "m.png").exists()
+    assert "warning: --range -500:100: beyond the limits of X [-400, 400] mm" in err
+    assert "--range2" not in err

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..display import add_units_argument, display_unit
 from ..errors import ChaincompError
+from ..expressions import MAX_LITERAL
 from ..jets import JetModel
 from ..numeric import ExactModel
 from ..units import UNITS
@@ -79,7 +80,8 @@ def add_parser(sub) -> None:
     p.set_defaults(run=run)
 
 
-def _range(text: str, what: str) -> tuple[float, float]:
+def _range(text: str, what: str, axis=None) -> tuple[float, float]:
+    """LO:HI in the axis' declared unit; beyond its limits a warning (the machine cannot go there)."""
     parts = text.split(":")
     if len(parts) != 2:
         raise ChaincompError(f"{what} expects LO:HI, got {text!r}")
@@ -89,6 +91,11 @@ def _range(text: str, what: str) -> tuple[float, float]:
         raise ChaincompError(f"{what} expects LO:HI: {exc}") from None
     if not lo < hi:
         raise ChaincompError(f"{what}: LO must be below HI, got {text!r}")
+    if max(abs(lo), abs(hi)) > MAX_LITERAL:   # the bound of every value given (and 1e308 overflows)
+        raise ChaincompError(f"{what}: values are at most {MAX_LITERAL:g} in magnitude, got {text!r}")
+    if axis is not None and (lo < axis.limits[0] or hi > axis.limits[1]):
+        F.warn(f"{what} {text}: beyond the limits of {axis.name} [{axis.limits[0]:g}, {axis.limits[1]:g}] "
+               f"{axis.unit.name}")
     return lo, hi
 
 
@@ -151,6 +158,10 @@ def run(args) -> int:
     import matplotlib
     matplotlib.use("Agg")
     _normalise(args)
+    for opt, v in (("--over", args.over), ("--range", args.range1), ("--range2", args.range2), ("-o", args.output),
+                   ("--html", args.html)):
+        if v is not None and not v.strip():
+            raise ChaincompError(f"{opt}: an empty value (leave the option out for its default)")
     inputs = (args.machine, args.params, args.replay, args.table)
     check_image(args.output, *inputs)
     if args.html:
@@ -219,9 +230,10 @@ def map_data(args, over_text: str | None, grid: int) -> MapData:
     if len(over) != 2 or over[0] == over[1] or any(n not in names for n in over):
         raise ChaincompError(f"--over expects two different axes of {machine.name} ({', '.join(names)}), "
                              f"got {over_text!r}")
-    r1 = _range(args.range1, "--range") if args.range1 else machine.symbol(over[0]).limits
-    r2 = _range(args.range2, "--range2") if args.range2 else (
-        _range(args.range1, "--range") if args.range1 else machine.symbol(over[1]).limits)
+    a1, a2 = (machine.symbol(n) for n in over)
+    r1 = _range(args.range1, "--range", a1) if args.range1 else a1.limits
+    r2 = _range(args.range2, "--range2", a2) if args.range2 else (
+        _range(args.range1, "--range", a2) if args.range1 else a2.limits)
     g1, g2, z = error_grid(machine, values, over, (r1, r2), grid, args.component, args.model)
     bad = np.argwhere(~np.isfinite(z))
     if len(bad):
@@ -302,9 +314,9 @@ def volume_data(args, over_text: str | None, grid: int) -> VolumeData:
     over = _volume_axes(machine, over_text)
     ranges = [machine.symbol(n).limits for n in over]
     if args.view == "volume" and args.range1:   # otherwise the ranges are the map's
-        ranges[0] = _range(args.range1, "--range")
+        ranges[0] = _range(args.range1, "--range", machine.symbol(over[0]))
     if args.view == "volume" and args.range2 and len(over) > 1:
-        ranges[1] = _range(args.range2, "--range2")
+        ranges[1] = _range(args.range2, "--range2", machine.symbol(over[1]))
     grids = np.meshgrid(*(_points(machine.symbol(n), r, grid) for n, r in zip(over, ranges)), indexing="ij")
     v = dict(values)
     for n, g in zip(over, grids):
