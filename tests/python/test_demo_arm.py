@@ -151,33 +151,39 @@ def test_calibration_makes_the_held_out_error_20_times_smaller(demo):
 
 
 def test_compensation_with_the_identified_values(demo):
-    """Through replay (the daemon's compensator and default config), against the true errors:
-    every command replay reports corrected puts the identified model's tool point on the
-    nominal one (1e-6 mm), so the true arm is off only by what calibration left (within 3
-    sigma of the noise, 20x smaller than without); every other command carries the residual
-    the identified model leaves."""
+    """Through replay (the daemon's compensator), against the true errors. With the default
+    config, every command replay reports corrected puts the identified model's tool point on
+    the nominal one (1e-6 mm), so the true arm is off only by what calibration left (within
+    3 sigma of the noise, 20x less than without); every other command carries the residual
+    the identified model leaves. Without the ramp and the rate limit, that holds for every
+    command's point."""
     work, _ = demo
     true = read_values(PARAMS)
     identified = read_values(work / "ur5-identified.yaml")
-    with open(work / "replay.csv") as f:
-        rows = list(csv.DictReader(f))
-    assert len(rows) == 10000
-    cmd, cor = joints(rows, "commanded_q{}_deg"), joints(rows, "corrected_q{}_deg")
-    nominal = ur5_point(cmd)
-    ok = np.array([r["status"] == "0" for r in rows])
-    assert {r["status"] for r in rows} <= {"0", "1"} and ok.mean() > 0.8
-    model_miss = np.linalg.norm(ur5_point(cor, identified) - nominal, axis=1)
-    assert model_miss[ok].max() < 1e-6
-    reported = np.array([float(r["residual_point_mm"]) for r in rows])
-    assert np.allclose(model_miss[~ok], reported[~ok], rtol=1e-6, atol=1e-9)
-    without = np.linalg.norm(ur5_point(cmd, true) - nominal, axis=1)
-    with_ = np.linalg.norm(ur5_point(cor, true) - nominal, axis=1)
-    assert with_[ok].max() < 3 * NOISE
-    assert without[ok].max() >= 20 * with_[ok].max()
     with open(work / "compensation.json") as f:
         fig = json.load(f)
+    rms = lambda v: math.sqrt(np.mean(v ** 2))
+    miss = {}
+    for name in ("replay.csv", "replay-no-rate-limit.csv"):
+        with open(work / name) as f:
+            rows = list(csv.DictReader(f))
+        assert len(rows) == 10000
+        cmd, cor = joints(rows, "commanded_q{}_deg"), joints(rows, "corrected_q{}_deg")
+        nominal = ur5_point(cmd)
+        ok = np.array([r["status"] == "0" for r in rows])
+        assert {r["status"] for r in rows} <= {"0", "1"} and ok.mean() > 0.8
+        model_miss = np.linalg.norm(ur5_point(cor, identified) - nominal, axis=1)
+        assert model_miss[ok].max() < 1e-6
+        reported = np.array([float(r["residual_point_mm"]) for r in rows])
+        assert np.allclose(model_miss[~ok], reported[~ok], rtol=1e-6, atol=1e-9)
+        miss[name] = np.linalg.norm(ur5_point(cor, true) - nominal, axis=1), ok
+    without = np.linalg.norm(ur5_point(cmd, true) - nominal, axis=1)
+    with_, ok = miss["replay.csv"]
+    assert with_[ok].max() < 3 * NOISE and without.max() >= 20 * with_[ok].max()
+    free, _ = miss["replay-no-rate-limit.csv"]
+    assert free.max() < 3 * NOISE
     assert fig["corrected"] == ok.sum()
-    for key, sel in (("ok", ok), ("residual", ~ok), ("all", np.ones(len(rows), bool))):
-        for name, e in (("without", without), ("with", with_)):
-            assert np.isclose(fig[f"{key}_{name}_max_mm"], e[sel].max(), rtol=1e-6, atol=1e-9)
-            assert np.isclose(fig[f"{key}_{name}_rms_mm"], math.sqrt(np.mean(e[sel] ** 2)), rtol=1e-6, atol=1e-9)
+    for key, e in (("without", without), ("default_ok", with_[ok]), ("default_residual", with_[~ok]),
+                   ("default_all", with_), ("no_rate_limit_all", free)):
+        assert np.isclose(fig[f"{key}_max_mm"], e.max(), rtol=1e-6, atol=1e-9), key
+        assert np.isclose(fig[f"{key}_rms_mm"], rms(e), rtol=1e-6, atol=1e-9), key
