@@ -350,7 +350,7 @@ def _weights(sigma, measured: list[str], mask: np.ndarray, smooth: float):
     if any(c in DIRECTIONS for c in sig) and not ang:
         raise ChaincompError("--sigma gives an angle, the standard uncertainty of the measured tool direction, "
                              "but the measurements have no kx, ky, kz column")
-    if any(c in COMPONENTS for c in sig) and not pos and not all(c in DIRECTIONS for c in sig):
+    if any(c in COMPONENTS for c in sig) and not pos:
         raise ChaincompError("--sigma gives a length, the standard uncertainty of the measured tool point, but "
                              "the measurements have no x, y, z column")
     sig = {c: v for c, v in sig.items() if c in measured}
