@@ -89,7 +89,7 @@ _chaincomp() {
           esac;;
         build)
           case "$prev" in
-            *) words='-h --help -o --output --linuxcnc --params --install'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help -o --output --linuxcnc --params --name --install'; [[ $cur == -* ]] || return 0;;
           esac;;
         lint)
           case "$prev" in
