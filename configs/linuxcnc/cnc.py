@@ -38,6 +38,7 @@ N_JOINTS = 5
 COL_CMD, COL_OBS, COL_AGE, COL_STALE, COL_FAULT = 1, 6, 11, 12, 13
 COL_COST = COL_AGE
 COL_MC_CLOCKS, COL_RT_CLOCKS = 14, 15  # five_axis_ac's rt route: motion-controller.time, chaincomp-rt.update.time
+COL_CART = 14  # trunnion_ac: axis.L.pos-cmd * 1e6, L = x y z a c
 
 
 def unavailable() -> str | None:
@@ -140,7 +141,7 @@ def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeo
         pass
     samples_path = os.path.join(work, "samples.txt")
     rows = np.loadtxt(samples_path, ndmin=2) if os.path.exists(samples_path) and os.path.getsize(samples_path) \
-        else np.zeros((0, COL_RT_CLOCKS + 1))
+        else np.zeros((0, COL_CART + 5))
     events = []
     if os.path.exists(os.path.join(work, "events.txt")):
         with open(os.path.join(work, "events.txt")) as f:

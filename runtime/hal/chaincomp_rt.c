@@ -3,7 +3,8 @@
  * its params and chaincompd's ramp and limits are in the C++ core (chaincomp_rt_core.cpp),
  * set up at module load; the thread function allocates nothing.
  *
- * Pins (N = joint, in the machine file's axis order; LinuxCNC units: mm, deg):
+ * Pins (N = joint, in the machine file's axis order; LinuxCNC units: mm, deg; the prefix is
+ * chaincomp-rt, or the module's name with - for _ when built with --name):
  *   chaincomp-rt.joint.N.pos-cmd     float in   commanded joint position (joint.N.motor-pos-cmd)
  *   chaincomp-rt.joint.N.correction  float out  correction to add to it (offset.N.offset)
  *   chaincomp-rt.enable              bit in     compensate; the correction ramps in and out
@@ -25,6 +26,7 @@
 #include "hal.h"
 
 #include "chaincomp_rt.h"
+#include "chaincomp_rt_name.h" /* generated: CCRT_MODULE (loadrt name) and CCRT_PREFIX (pins) */
 
 MODULE_AUTHOR("chaincomp");
 MODULE_DESCRIPTION("chaincomp geometric error compensation in the servo thread");
@@ -80,10 +82,10 @@ static void update(void *arg, long period) {
 int rtapi_app_main(void) {
   char error[256];
   int i;
-  comp_id = hal_init("chaincomp_rt");
+  comp_id = hal_init(CCRT_MODULE);
   if (comp_id < 0) return comp_id;
   if (ccrt_init(error, sizeof error) != 0) {
-    rtapi_print_msg(RTAPI_MSG_ERR, "chaincomp_rt: %s\n", error);
+    rtapi_print_msg(RTAPI_MSG_ERR, CCRT_MODULE ": %s\n", error);
     hal_exit(comp_id);
     return -EINVAL;
   }
@@ -91,29 +93,29 @@ int rtapi_app_main(void) {
   pins = hal_malloc(sizeof *pins);
   if (pins == 0 || num_axes > CCRT_MAX_AXES) goto fail;
   for (i = 0; i < num_axes; ++i) {
-    PIN(float, HAL_IN, &pins->pos_cmd[i], "chaincomp-rt.joint.%d.pos-cmd", i);
-    PIN(float, HAL_OUT, &pins->correction[i], "chaincomp-rt.joint.%d.correction", i);
+    PIN(float, HAL_IN, &pins->pos_cmd[i], CCRT_PREFIX ".joint.%d.pos-cmd", i);
+    PIN(float, HAL_OUT, &pins->correction[i], CCRT_PREFIX ".joint.%d.correction", i);
     *pins->correction[i] = 0.0;
   }
-  PIN(bit, HAL_IN, &pins->enable, "chaincomp-rt.enable");
-  PIN(bit, HAL_OUT, &pins->compensating, "chaincomp-rt.compensating");
-  PIN(bit, HAL_OUT, &pins->clamped, "chaincomp-rt.clamped");
-  PIN(bit, HAL_OUT, &pins->fault, "chaincomp-rt.fault");
-  PIN(float, HAL_OUT, &pins->ramp, "chaincomp-rt.ramp");
-  PIN(float, HAL_OUT, &pins->residual_point, "chaincomp-rt.residual-point");
-  PIN(s32, HAL_OUT, &pins->reject_reason, "chaincomp-rt.reject-reason");
-  PIN(s32, HAL_OUT, &pins->rejected, "chaincomp-rt.rejected");
-  PIN(s32, HAL_OUT, &pins->status, "chaincomp-rt.status");
-  PIN(s32, HAL_OUT, &pins->cost_ns, "chaincomp-rt.cost-ns");
-  PIN(s32, HAL_IO, &pins->cost_max_ns, "chaincomp-rt.cost-max-ns");
+  PIN(bit, HAL_IN, &pins->enable, CCRT_PREFIX ".enable");
+  PIN(bit, HAL_OUT, &pins->compensating, CCRT_PREFIX ".compensating");
+  PIN(bit, HAL_OUT, &pins->clamped, CCRT_PREFIX ".clamped");
+  PIN(bit, HAL_OUT, &pins->fault, CCRT_PREFIX ".fault");
+  PIN(float, HAL_OUT, &pins->ramp, CCRT_PREFIX ".ramp");
+  PIN(float, HAL_OUT, &pins->residual_point, CCRT_PREFIX ".residual-point");
+  PIN(s32, HAL_OUT, &pins->reject_reason, CCRT_PREFIX ".reject-reason");
+  PIN(s32, HAL_OUT, &pins->rejected, CCRT_PREFIX ".rejected");
+  PIN(s32, HAL_OUT, &pins->status, CCRT_PREFIX ".status");
+  PIN(s32, HAL_OUT, &pins->cost_ns, CCRT_PREFIX ".cost-ns");
+  PIN(s32, HAL_IO, &pins->cost_max_ns, CCRT_PREFIX ".cost-max-ns");
   *pins->reject_reason = -1;
-  if (hal_export_funct("chaincomp-rt.update", update, 0, 1, 0, comp_id) != 0) goto fail;
-  rtapi_print_msg(RTAPI_MSG_INFO, "chaincomp_rt: machine %s, %d joints, params %s\n", ccrt_machine(), num_axes,
+  if (hal_export_funct(CCRT_PREFIX ".update", update, 0, 1, 0, comp_id) != 0) goto fail;
+  rtapi_print_msg(RTAPI_MSG_INFO, CCRT_MODULE ": machine %s, %d joints, params %s\n", ccrt_machine(), num_axes,
                   ccrt_params_file());
   hal_ready(comp_id);
   return 0;
 fail:
-  rtapi_print_msg(RTAPI_MSG_ERR, "chaincomp_rt: cannot export its pins or function\n");
+  rtapi_print_msg(RTAPI_MSG_ERR, CCRT_MODULE ": cannot export its pins or function\n");
   ccrt_fini();
   hal_exit(comp_id);
   return -EINVAL;

@@ -307,6 +307,11 @@ def test_linuxcnc_options_are_checked_before_any_work(tmp_path):
     assert proc.returncode == 2 and "--params goes with --linuxcnc" in proc.stderr, proc.stderr
     proc = chaincomp(env, "build", FIVE, "--install")
     assert proc.returncode == 2 and "--install goes with --linuxcnc" in proc.stderr, proc.stderr
+    proc = chaincomp(env, "build", FIVE, "--name", "cc")
+    assert proc.returncode == 2 and "--name goes with --linuxcnc" in proc.stderr, proc.stderr
+    for bad in ("Chaincomp", "1cc", "cc-rt", "a" * 41, "cc rt", ""):
+        proc = chaincomp(env, "build", "--linuxcnc", FIVE, "--name", bad)
+        assert proc.returncode == 2 and "--name" in proc.stderr and "Traceback" not in proc.stderr, (bad, proc.stderr)
     # tables and polynomials: not in the realtime component (yet), refused naming the file and error
     laser = os.path.join(ROOT, "configs", "params", "five_axis_ac-laser.yaml")
     proc = chaincomp(env, "build", "--linuxcnc", FIVE, "--params", laser)

@@ -28,6 +28,10 @@ def add_parser(sub) -> None:
     p.add_argument("--params", metavar="P.yaml",
                    help="with --linuxcnc: the error values the component compensates (default: every error "
                         "zero); constant values only, no tables")
+    p.add_argument("--name", default=RT_MODULE, metavar="MODULE",
+                   help=f"with --linuxcnc: the module's name for loadrt (default {RT_MODULE}; its pins are "
+                        "named MODULE with - for _, e.g. chaincomp-rt.joint.0.correction): one per machine "
+                        "when a controller holds several")
     p.add_argument("--install", action="store_true",
                    help=f"with --linuxcnc: also copy {RT_MODULE}.so into LinuxCNC's module folder "
                         "(/usr/lib/linuxcnc/modules; root), where loadrt finds it")
@@ -41,10 +45,11 @@ def run(args) -> int:
             raise ChaincompError(f"-o {args.output}: is a file, expected a folder")
         if not os.path.isdir(parent):
             raise ChaincompError(f"-o {args.output}: folder {parent} does not exist")
-    if (args.params or args.install) and not args.linuxcnc:
-        raise ChaincompError(f"{'--params' if args.params else '--install'} goes with --linuxcnc")
+    for given, option in ((args.params, "--params"), (args.install, "--install"), (args.name != RT_MODULE, "--name")):
+        if given and not args.linuxcnc:
+            raise ChaincompError(f"{option} goes with --linuxcnc")
     if args.linuxcnc:
-        path, cached = build_linuxcnc(args.machine, args.params)
+        path, cached = build_linuxcnc(args.machine, args.params, args.name)
     else:
         path, cached = build(args.machine)
     if cached:
