@@ -60,7 +60,7 @@ def trans(axis, length):
     return m
 
 
-def ur5_point(q, e=None):
+def ur5_point(q, e=None, tool=TOOL):
     """Tool point (N x 3, mm) at joint angles q (N x 6, rad) with errors e (name -> mm | rad)."""
     e = e or {}
     g = lambda name: e.get(name, 0.0)
@@ -71,7 +71,7 @@ def ur5_point(q, e=None):
             @ trans("x", UR5_A[j] + g(f"da{n}")) @ rot("x", UR5_ALPHA[j] + g(f"dalpha{n}"))
         if n in (2, 3):
             t = t @ rot("y", g(f"dbeta{n}"))
-    return (t @ TOOL)[:, :3]
+    return (t @ tool)[:, :3]
 
 
 def read_csv(path):
@@ -109,12 +109,26 @@ def test_the_numpy_model_is_the_bundled_ur5(demo):
 
 
 def test_the_urdf_import_step(demo):
+    """The demo's import of UR's URDF is the DH model turned by 180 deg about z (UR's
+    base_link; tests/python/test_arms.py), ee_link's origin on flange frame 6's, and each
+    joint's zero offset adds to its angle. The URDF writes pi/2 as 1.57079632679: 2e-8 mm."""
+    from chaincomp import load_machine
+    from chaincomp.numeric import ExactModel
     work, out = demo
-    with open(work / "ur5-urdf.yaml") as f:
-        machine = yaml.safe_load(f)
-    assert sum(s["role"] == "axis" for s in machine["symbols"]) == 6
-    assert sum(s["role"] == "error" for s in machine["symbols"]) == 6   # --errors joint-offsets
     assert "ur5: no findings" in out
+    machine = load_machine(str(work / "ur5-urdf.yaml"))
+    assert len(machine.axes) == 6
+    zeros = [f"{a.name}_zero" for a in machine.axes]
+    assert sorted(s.name for s in machine.symbols if s.role == "error") == sorted(zeros)
+    rng = np.random.default_rng(5)
+    q = rng.uniform(-math.pi, math.pi, (200, 6))
+    offsets = rng.uniform(-1e-3, 1e-3, 6)
+    values = {a.name: q[:, i] for i, a in enumerate(machine.axes)}
+    values.update(zip(zeros, offsets))
+    point, _ = ExactModel(machine).pose(values)
+    flange = ur5_point(q + offsets, {}, tool=np.array([0.0, 0.0, 0.0, 1.0]))
+    rz_pi = np.diag([-1.0, -1.0, 1.0])
+    assert np.abs(np.array(point, float).T - flange @ rz_pi.T).max() < 2e-8
 
 
 def test_calibration_makes_the_held_out_error_20_times_smaller(demo):
