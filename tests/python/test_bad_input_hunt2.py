@@ -165,3 +165,28 @@ def test_plot_range_beyond_the_limits_warns(capsys, tmp_path):
     assert code == 0 and (tmp_path / "m.png").exists()
     assert "warning: --range -500:100: beyond the limits of X [-400, 400] mm" in err
     assert "--range2" not in err
+
+
+INCH_MACHINE = """\
+name: inch_xy
+length_unit: in
+rotation_sense: right_hand
+symbols:
+  - {name: X, role: axis, unit: in, limits: [-10, 10]}
+  - {name: Y, role: axis, unit: in, limits: [-10, 10]}
+  - {name: SX, role: error, unit: ppm}
+chain:
+  - {translate: ["X*(1 + SX)", Y, 0]}
+tool: {point: [0, 0, 0]}
+"""
+
+
+@pytest.mark.parametrize("options,match", [
+    # 1e308 in is inf mm: Newton 'missed by nan mm' before
+    (["--radius", "1e308"], "--radius: 1e+308 in is larger than 1e+15 mm in magnitude"),
+    (["--radius", "1", "--centre", "x=1e308"], "--centre x: 1e+308 in is larger than 1e+15 mm in magnitude"),
+])
+def test_ballbar_lengths_beyond_the_bound_after_conversion(capsys, tmp_path, options, match):
+    m = tmp_path / "inch_xy.yaml"
+    m.write_text(INCH_MACHINE)
+    _refused(capsys, "ballbar", m, "--set", "SX=10", "--plane", "XY", *options, match=match)

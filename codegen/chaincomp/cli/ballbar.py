@@ -14,6 +14,7 @@ from .. import ballbar as bb
 from ..calibration import _write_loadable
 from ..display import fixed
 from ..errors import ChaincompError
+from ..expressions import MAX_LITERAL
 from ..jets import JetModel
 from ..numeric import ExactModel
 from ..varying import Varying
@@ -92,10 +93,20 @@ def _centre(text: str | None, machine, default: np.ndarray) -> np.ndarray:
             raise ChaincompError(f"--centre: {c} given twice")
         seen.add(c)
         try:
-            out["xyz".index(c)] = number()(value) * k
+            v = number()(value)
         except Exception as exc:   # argparse.ArgumentTypeError: its text is the reason
             raise ChaincompError(f"--centre {c}: {exc}") from None
+        out["xyz".index(c)] = _to_mm(f"--centre {c}", v, machine)
     return out
+
+
+def _to_mm(option: str, value: float, machine) -> float:
+    """A length option in the machine's length unit, in mm: within the bound of every value (1e308
+    in would be inf mm)."""
+    unit = bb.U.UNITS[machine.length_unit]
+    if not abs(value * unit.to_internal) <= MAX_LITERAL:
+        raise ChaincompError(f"{option}: {value:g} {unit.name} is larger than {MAX_LITERAL:g} mm in magnitude")
+    return value * unit.to_internal
 
 
 def _setup(args, machine, model, values) -> bb.Setup:
@@ -107,8 +118,7 @@ def _setup(args, machine, model, values) -> bb.Setup:
     axes = bb.plane_axes(machine, args.plane, values, axes_given, model)
     centre = _centre(args.centre, machine, bb.tool_point(model, bb.nominal(machine, values)))
     held = {s.name: values[s.name] for s in machine.axes if s.name not in axes}
-    return bb.Setup(args.plane, axes, args.radius * bb.U.UNITS[machine.length_unit].to_internal, centre, held,
-                    args.feed)
+    return bb.Setup(args.plane, axes, _to_mm("--radius", args.radius, machine), centre, held, args.feed)
 
 
 def _where(machine, setup: bb.Setup) -> str:
