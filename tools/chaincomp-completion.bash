@@ -78,8 +78,9 @@ _chaincomp() {
           case "$prev" in
             --order) words='1 2 exact';;
             --format) words='text json';;
+            --units) words='people internal';;
             --component) words='dx dy dz dkx dky dkz';;
-            *) words='-h --help --params --set --tolerances --over --grid --order --samples --seed --format --json --top --plot --map --component'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --params --set --tolerances --over --grid --order --samples --seed --format --json --units --top --plot --map --component'; [[ $cur == -* ]] || return 0;;
           esac;;
         simulate-calibration)
           case "$prev" in

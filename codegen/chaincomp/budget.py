@@ -33,16 +33,20 @@ import numpy as np
 import sympy as sp
 
 from .derive import EXPANDED_TERMS_LIMIT, Derivation, derive
+from .display import display_unit
 from .errors import ChaincompError
 from .jets import JetModel
 from .machine import Machine, Symbol
 from .numeric import ExactModel, TruncatedModel
+from .orientation import ROWS as ORIENTATION_ROWS, rotation_vector
 from .tolerances import Tolerance, Tolerances
 from .units import UNITS
 from .varying import Table, Varying, varying_errors
 
 POSITION = ("dx", "dy", "dz")
 DIRECTION = ("dkx", "dky", "dkz")
+ORIENTATION = ORIENTATION_ROWS  # a tool frame's rotation vector ω (rad, chaincomp.orientation)
+ANGULAR = DIRECTION + ORIENTATION
 ORDERS = ("1", "2", "exact")
 MAX_POINTS = 2_000_000
 # The exact model holds every error's gain at every point: 1.9 M points x 29 errors took 2 GB
@@ -113,7 +117,22 @@ def make_grid(machine: Machine, over: list[str] | None, points: int, fixed_value
 # ----------------------------------------------------------------------------- gains
 
 def components(machine: Machine) -> tuple[str, ...]:
-    return POSITION + (DIRECTION if machine.tool_direction else ())
+    return POSITION + (DIRECTION if machine.tool_direction else ()) + (ORIENTATION if machine.tool_reference else ())
+
+
+def _exact_parts(model: ExactModel, values: dict, ref) -> list:
+    """The components of the exact pose at ``values``; with a frame ω against the frame
+    ``ref`` ((z, x) axes: the reference pose of the caller)."""
+    p, d, x = model.frame(values)
+    out = list(p) + (list(d) if d is not None else [])
+    if x is not None:
+        out += rotation_vector((d, x), ref)
+    return out
+
+
+def _exact_frame(model: ExactModel, values: dict):
+    _, d, x = model.frame(values)
+    return (d, x) if x is not None else None
 
 
 class _Series:
@@ -124,7 +143,8 @@ class _Series:
         self.d = d
         self.syms = [s.sym for s in machine.symbols]
         self.n = len(machine.errors)
-        vecs = list(self.d.point) + (list(self.d.direction) if self.d.direction else [])
+        vecs = (list(self.d.point) + (list(self.d.direction) if self.d.direction else [])
+                + (list(self.d.orientation) if self.d.orientation else []))
         self.series = dict(zip(components(machine), vecs))
         self._fns: dict = {}
         self._truncated: TruncatedModel | None = None
@@ -154,7 +174,8 @@ class _Series:
         if self._truncated is None:
             self._truncated = TruncatedModel(self.d)
         dp, dd = self._truncated.error(args, self.order, "numpy")
-        return dict(zip(components(self.machine), list(dp) + (list(dd) if dd is not None else [])))
+        w = self._truncated.orientation_error(args, self.order, "numpy")
+        return dict(zip(components(self.machine), list(dp) + (list(dd) if dd is not None else []) + (w or [])))
 
 
 def _second_order(g: list, quad, eps: list, bounds: np.ndarray):
@@ -191,9 +212,9 @@ class _Jets:
         eps = [centre.get(s.name, 0.0) for s in self.machine.errors]
 
         def block(values):
-            p, d = self.jets.jets(values)
+            p, d, w = self.jets.pose_jets(values)
             out = []
-            for jet in p + (d or []):
+            for jet in p + (d or []) + (w or []):
                 quad = sorted((m, v) for m, v in jet.items() if len(m) == 2)
                 g, qb = _second_order([jet.get((i,), 0.0) for i in range(self.n)], quad, eps, bounds)
                 out += g + [qb]
@@ -205,8 +226,8 @@ class _Jets:
 
     def systematic(self, args: dict) -> dict:
         def block(values):
-            dp, dd = self.jets.error(values, self.order)
-            return list(dp) + (list(dd) if dd is not None else [])
+            dp, dd, w = self.jets.all_errors(values, self.order)
+            return list(dp) + (list(dd) if dd is not None else []) + (w or [])
 
         return dict(zip(components(self.machine), _by_slices(args, block)))
 
@@ -235,14 +256,14 @@ class _Exact:
         component, so all are computed first."""
         comps = components(self.machine)
         g: dict[str, list] = {c: [] for c in comps}
+        ref = _exact_frame(self.model, {**args, **centre})
         for i, s in enumerate(self.machine.errors):
             h = bounds[i] if bounds[i] > 0 else EXACT_STEP
             poses = []
             for sign in (1.0, -1.0):
                 v = dict(args)
                 v[s.name] = centre.get(s.name, 0.0) + sign * h
-                p, d = self.model.pose(v)
-                poses.append(list(p) + (list(d) if d is not None else []))
+                poses.append(_exact_parts(self.model, v, ref))
             for c, hi, lo in zip(comps, *poses):
                 g[c].append((hi - lo) / (2.0 * h))
         for c in comps:
@@ -250,7 +271,8 @@ class _Exact:
 
     def systematic(self, args: dict) -> dict:
         dp, dd = self.model.error(args)
-        return dict(zip(components(self.machine), list(dp) + (list(dd) if dd is not None else [])))
+        w = self.model.orientation_error(args)
+        return dict(zip(components(self.machine), list(dp) + (list(dd) if dd is not None else []) + (w or [])))
 
 
 def gain_model(machine: Machine, order: str):
@@ -457,8 +479,8 @@ def monte_carlo(b: Budget, n: int, seed: int) -> None:
             base[a.name] = a.to_internal(axes[a.name])
         for s in machine.errors:
             base[s.name] = b.centre.get(s.name, 0.0)
-        p0, d0 = exact.pose(base)
-        ref = [float(v) for v in list(p0) + (list(d0) if d0 is not None else [])]
+        frame = _exact_frame(exact, base)
+        ref = [float(v) for v in _exact_parts(exact, base, frame)]
         rng = np.random.default_rng(seed)   # the same draws at every point
         devs = {c: [] for c in comps}
         done = 0
@@ -467,8 +489,7 @@ def monte_carlo(b: Budget, n: int, seed: int) -> None:
             v = dict(base)
             for name, dev in draw(b.tolerances, machine, m, rng).items():
                 v[name] = base[name] + dev
-            pp, dd = exact.pose(v)
-            vals = list(pp) + (list(dd) if dd is not None else [])
+            vals = _exact_parts(exact, v, frame)
             for c, val, r in zip(components(machine), vals, ref):
                 devs[c].append(np.broadcast_to(np.asarray(val, float) - r, (m,)))
             done += m
@@ -529,19 +550,23 @@ def contributors(b: Budget, comp: str) -> list[dict]:
     return rows
 
 
-def _display(b: Budget, comp: str) -> tuple[float, str]:
-    """Scale from internal units and unit name for text output: µm for mm machines, µrad
-    for direction components."""
-    if comp in DIRECTION:
-        return 1e6, "µrad"
+def _display(b: Budget, comp: str, units: str = "people") -> tuple[float, str]:
+    """Scale from internal units and unit name for text output (display.py's units): for people
+    µm on mm machines (a machine in other units keeps its own) and arcsec for the direction
+    components (a change of the unit tool axis: its tilt); internal mm and rad."""
+    if comp in ANGULAR:
+        u = display_unit("angle", units)
+        return 1.0 / u.to_internal, u.name
     unit = b.machine.length_unit
+    if units == "internal":
+        return 1.0, "mm"
     if unit == "mm":
         return 1e3, "µm"
     return 1.0 / UNITS[unit].to_internal, unit
 
 
 def _json_scale(b: Budget, comp: str) -> tuple[float, str]:
-    if comp in DIRECTION:
+    if comp in ANGULAR:
         return 1.0, "1"
     unit = b.machine.length_unit
     return 1.0 / UNITS[unit].to_internal, unit
@@ -643,7 +668,7 @@ def _bracketed(flag: bool | None) -> str:
     return "zero" if flag is None else "yes" if flag else "NO"
 
 
-def to_text(b: Budget, top: int = 5) -> str:
+def to_text(b: Budget, top: int = 5, units: str = "people") -> str:
     m, tol = b.machine, b.tolerances
     order = {"1": "first-order gains", "2": "second-order model (gradient at the centre + a bound of "
              "its quadratic terms)", "exact": "exact model (secant gains across each tolerance)"}[b.order]
@@ -679,11 +704,11 @@ def to_text(b: Budget, top: int = 5) -> str:
         lines.append("Fixed: " + ", ".join(f"{n} = {v:g} {m.symbol(n).unit.name}" for n, v in b.grid.fixed.items()))
     names = [a.name for a in m.axes]
     lines.append("")
-    lines.append(f"Tool error over the grid (position in {_display(b, 'dx')[1]}, direction in µrad)")
+    lines.append(f"Tool error over the grid (position in {_display(b, 'dx', units)[1]}, direction in {_display(b, 'dkx', units)[1]})")
     lines.append(f"  {'comp':<5} {'worst max':>10} {'worst min':>10} {'rss max':>10} {'sigma max':>10} "
                  f"{'systematic':>22}   worst at ({', '.join(names)})")
     for comp, cb in b.components.items():
-        k, _ = _display(b, comp)
+        k, _ = _display(b, comp, units)
         lo, hi = float(cb.systematic.min()) * k, float(cb.systematic.max()) * k
         sysx = f"{lo:+.3f} everywhere" if abs(hi - lo) <= 1e-9 * max(1.0, abs(hi)) else f"{lo:+.3f}..{hi:+.3f}"
         at = ", ".join(f"{v:g}" for v in _axes_at(b, cb.worst_index).values())
@@ -702,7 +727,7 @@ def to_text(b: Budget, top: int = 5) -> str:
         lines.append(f"  {'comp':<5} {'rss':>9} {'MC ' + q:>18} {'worst':>9}  {'bracketed':<9} {'sigma':>9} "
                      f"{'MC sigma':>17} {'MC mean':>9} {'MC max':>9}")
         for comp, cb in b.components.items():
-            k, _ = _display(b, comp)
+            k, _ = _display(b, comp, units)
             mc, i = cb.monte_carlo, cb.worst_index
             lines.append(f"  {comp:<5} {_fmt(float(cb.rss[i]) * k):>9} "
                          f"{_fmt(mc['quantile'] * k) + ' ± ' + _fmt(mc['quantile_se'] * k):>18} "
@@ -713,13 +738,13 @@ def to_text(b: Budget, top: int = 5) -> str:
         for comp, cb in b.components.items():
             if identically_zero(cb):
                 lines.append(f"  {comp}: zero in this model, so nothing to bracket; the Monte Carlo's "
-                             f"{_fmt(cb.monte_carlo['max'] * _display(b, comp)[0])} {_display(b, comp)[1]} at most is "
+                             f"{_fmt(cb.monte_carlo['max'] * _display(b, comp, units)[0])} {_display(b, comp, units)[1]} at most is "
                              f"the exact model's part of higher order")
     for comp, cb in b.components.items():
         rows = contributors(b, comp)
         if not rows or float(cb.worst[cb.worst_index]) == 0.0:
             continue
-        k, unit = _display(b, comp)
+        k, unit = _display(b, comp, units)
         at = ", ".join(f"{n} = {v:g}" for n, v in _axes_at(b, cb.worst_index).items())
         lines.append("")
         shown = rows if top <= 0 else rows[:top]
@@ -742,17 +767,17 @@ def to_text(b: Budget, top: int = 5) -> str:
     lines.append("")
     comps = list(b.components)
     lines.append("Sensitivity: max |gain| over the grid, per declared unit of the error (position in "
-                 f"{_display(b, 'dx')[1]}, direction in µrad)")
+                 f"{_display(b, 'dx', units)[1]}, direction in {_display(b, 'dkx', units)[1]})")
     lines.append("  arm: the largest |gain| in position of an angular error, in mm per rad = its lever arm "
                  "(a length error: its factor); at bound: that times the bound")
-    kpos, upos = _display(b, "dx")
+    kpos, upos = _display(b, "dx", units)
     lines.append(f"  {'error':<10} {'unit':<7} " + " ".join(f"{c:>10}" for c in comps)
                  + f" {'arm':>12} {'at bound':>12}")
     tmap = tol.by_name()
     for i, s in enumerate(m.errors):
         cells = []
         for c in comps:
-            k, _ = _display(b, c)
+            k, _ = _display(b, c, units)
             cells.append(f"{float(b.components[c].max_gain[i]) * s.unit.to_internal * k:>10.4g}")
         g = max(float(b.components[c].max_gain[i]) for c in POSITION)
         arm = f"{g:.4g} mm" if s.unit.kind == "angle" else f"x{g:.4g}"

@@ -31,7 +31,7 @@ NO_MACHINE_FIRST = {
     "import-urdf": "reads a URDF and writes the machine file",
 }
 UNITS_CHOICES, UNITS_DEFAULT = ("people", "internal"), "people"   # µm/arcsec, or mm/rad
-UNITS_VERBS = {"eval", "plot", "identify"}   # verbs that print errors for people
+UNITS_VERBS = {"eval", "plot", "identify", "budget"}   # verbs that print errors for people
 
 
 def _verbs() -> dict[str, argparse.ArgumentParser]:

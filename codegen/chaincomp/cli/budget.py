@@ -8,6 +8,7 @@ import sys
 import numpy as np
 
 from .. import budget as B
+from ..display import add_units_argument
 from ..errors import ChaincompError
 from ..tolerances import from_params, load_tolerances
 from . import figures as F
@@ -43,6 +44,7 @@ def add_parser(sub) -> None:
                         f"at most {MAX_SAMPLES})")
     add_seed_argument(p, "Monte Carlo seed")
     add_format_argument(p)
+    add_units_argument(p)
     p.add_argument("--top", type=integer(0, 10**6), default=5, metavar="N",
                    help="contributors listed per component in text (default 5; 0: all)")
     p.add_argument("--plot", metavar="OUT.png", help="also write worst-case and RSS maps and a bar chart of "
@@ -83,7 +85,7 @@ def run(args) -> int:
                   centre_on_params=centred, tables=tables)
     doc = B.to_json(b)
     check_finite(doc)
-    print(to_json(doc) if args.format == "json" else B.to_text(b, args.top))
+    print(to_json(doc) if args.format == "json" else B.to_text(b, args.top, args.units))
     if args.plot:
         plot(b, args.plot, pick, args.component, args.params, args.sets, args.tolerances)
         print(f"budget: wrote {args.plot}", file=sys.stderr)
