@@ -190,3 +190,23 @@ def test_ballbar_lengths_beyond_the_bound_after_conversion(capsys, tmp_path, opt
     m = tmp_path / "inch_xy.yaml"
     m.write_text(INCH_MACHINE)
     _refused(capsys, "ballbar", m, "--set", "SX=10", "--plane", "XY", *options, match=match)
+
+
+@pytest.mark.parametrize("argv", [
+    ["plot", VMC, "--set", "EXX=1", "--component", "dx", "--grid", "3", "-o", "/dev/full"],
+    ["plot", VMC, "--set", "EXX=1", "--grid", "3", "--view", "volume", "-o", "/dev/full"],
+    ["ballbar", VMC, "--set", "EXX=1", "--plane", "XY", "--radius", "10", "--plot", "/dev/full"],
+])
+def test_a_failed_image_write_is_an_error_naming_the_file(capsys, argv):
+    """A full disk (/dev/full: ENOSPC on every write) was an internal error (exit 3), or an image
+    silently cut short; refused before the work where the folder is not writable."""
+    err = _refused(capsys, *argv, match="/dev/full")
+    assert err.count("\n") == 1
+
+
+def test_a_failed_html_write_is_an_error_naming_the_file(capsys):
+    """--html where no file can be made (/proc takes none, even from root): exit 2 naming the file,
+    not exit 3."""
+    err = _refused(capsys, "plot", VMC, "--set", "EXX=1", "--component", "dx", "--grid", "3",
+                   "--html", "/proc/chaincomp-test.html", match="/proc/chaincomp-test.html")
+    assert err.count("\n") == 1

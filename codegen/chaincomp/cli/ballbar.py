@@ -13,6 +13,7 @@ import numpy as np
 from .. import ballbar as bb
 from ..calibration import _write_loadable
 from ..display import fixed
+from .figures import save
 from ..errors import ChaincompError
 from ..expressions import MAX_LITERAL
 from ..jets import JetModel
@@ -209,7 +210,7 @@ def plot(trace: bb.Trace, ev: dict, fig_um: dict, title: str, output: str) -> No
                  fontsize=9, pad=18)
     ax.legend(loc="lower left", bbox_to_anchor=(-0.12, -0.12), fontsize=8)
     fig.subplots_adjust(top=0.8, bottom=0.1)
-    fig.savefig(output, dpi=110)
+    save(fig, output, dpi=110)
     plt.close(fig)
 
 

@@ -4,10 +4,12 @@ axis and colour bar names its quantity and one unit in brackets."""
 
 from __future__ import annotations
 
+import io
 import os
 import sys
 
 from ..display import DEFAULT_UNITS, display_unit
+from ..errors import ChaincompError
 from ..units import UNITS
 
 ORDER_TEXT = {"1": "first-order", "2": "second-order", "exact": "exact",
@@ -70,6 +72,25 @@ def component_unit(component: str, length_unit: str, units: str = DEFAULT_UNITS)
     shown = display_unit(kind, units)
     to_internal = UNITS[length_unit].to_internal if kind == "length" else 1.0
     return to_internal / shown.to_internal, shown.name
+
+
+def save(fig, path: str, **options) -> None:
+    """Write a matplotlib figure (its type from the file name, PNG without one). Drawn in memory
+    first, so that a failed write (a full disk, a folder that takes no files) is an error naming
+    the file, not a traceback or a silently short image."""
+    kind = os.path.splitext(path)[1].lstrip(".").lower() or "png"
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format=kind, **options)
+    write_file(path, buffer.getvalue())
+
+
+def write_file(path: str, data: bytes | str) -> None:
+    """Write data to path; an OSError (also on close: a full disk) becomes a ChaincompError."""
+    try:
+        with open(path, "wb") as f:
+            f.write(data.encode("utf-8") if isinstance(data, str) else data)
+    except OSError as exc:
+        raise ChaincompError(f"cannot write: {exc.strerror or exc}", path) from None
 
 
 def warn(message: str) -> None:

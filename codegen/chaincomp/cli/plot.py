@@ -176,7 +176,7 @@ def run(args) -> int:
     if args.output:
         import matplotlib.pyplot as plt
         fig = build_figure(args)
-        fig.savefig(args.output)
+        F.save(fig, args.output)
         plt.close(fig)
         print(f"plot: wrote {args.output}", file=sys.stderr)
     if args.html:
@@ -415,7 +415,7 @@ def write_html(args) -> None:
     fig.update_scenes(**{f"{c}axis_title": F.label(f"tool point {c}", v.length_unit) for c in "xyz"}, row=1, col=2)
     fig.update_layout(width=1500, height=750, showlegend=True, legend={"x": 0.55, "y": 0.0},
                       margin={"t": 110})
-    fig.write_html(args.html, include_plotlyjs=True, full_html=True)
+    F.write_file(args.html, fig.to_html(include_plotlyjs=True, full_html=True))
 
 
 def _replay_figure(args):
