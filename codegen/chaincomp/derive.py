@@ -16,6 +16,7 @@ import sympy as sp
 
 from . import series as S
 from .machine import ROT_PLANE, Machine, Rotation
+from .orientation import ROWS as ORIENTATION_ROWS, rotation_vector_series
 
 COMPONENTS = ("x", "y", "z")
 
@@ -61,6 +62,10 @@ class Derivation:
     direction: list[dict] | None       # 3 series, or None
     columns: list[list[dict]] | None   # the 4x4 HTM's columns, when asked for
     _restore: dict = field(repr=False, default_factory=dict)
+    # With a tool frame: its x axis (3 series) and the orientation error ω (3 series without a
+    # term of degree 0: chaincomp.orientation), else None.
+    reference: list[dict] | None = None
+    orientation: list[dict] | None = None
 
     # ---- conversion to sympy
     def expr(self, poly) -> sp.Expr:
@@ -94,6 +99,9 @@ class Derivation:
         if self.direction is not None:
             for i, c in enumerate(COMPONENTS):
                 out[f"dk{c}"] = self.gain(self.direction[i])
+        if self.orientation is not None:
+            for row, s in zip(ORIENTATION_ROWS, self.orientation):
+                out[row] = self.gain(s)
         return out
 
     def term_count(self, s: dict, degree: int) -> int:
@@ -132,6 +140,8 @@ def derive(machine: Machine, order: int = 1, htm: bool = False, progress: bool =
             steps.append(("trans", [taylor(v) for v in el.vector]))
     point0 = [taylor(v) for v in machine.tool_point]
     dir0 = [taylor(v) for v in machine.tool_direction] if machine.tool_direction else None
+    frame = machine.tool_frame
+    frame0 = [[taylor(v) for v in axis] for axis in frame[:2]] if frame else []   # its x and y axes
 
     # Pass 2: into the coefficient ring; apply the chain from the right.
     R = atoms.make_ring()
@@ -143,6 +153,9 @@ def derive(machine: Machine, order: int = 1, htm: bool = False, progress: bool =
     vectors: list[tuple[list[dict], int]] = [([to_ring(v) for v in point0], 1)]
     if dir0:
         vectors.append(([to_ring(v) for v in dir0], 0))
+    n_tool = len(vectors)   # point and direction: the terms max_terms counts
+    for axis in frame0:   # ω needs all three axes of the frame
+        vectors.append(([to_ring(v) for v in axis], 0))
     if htm:
         for i in range(3):
             vectors.append(([{(): one} if j == i else {} for j in range(3)], 0))
@@ -170,7 +183,7 @@ def derive(machine: Machine, order: int = 1, htm: bool = False, progress: bool =
                 if w:
                     for c in range(3):
                         vec[c] = S.add(vec[c], t[c])
-        if max_terms is not None and _terms(vectors[:2 if dir0 else 1]) > max_terms:
+        if max_terms is not None and _terms(vectors[:n_tool]) > max_terms:
             return None
         prog.step(f"element {n - idx}/{n}")
     prog.done()
@@ -178,4 +191,19 @@ def derive(machine: Machine, order: int = 1, htm: bool = False, progress: bool =
     point = vectors[0][0]
     direction = vectors[1][0] if dir0 else None
     columns = [v for v, _ in vectors[-4:]] if htm else None
-    return Derivation(machine, k, small, point, direction, columns, atoms.restore())
+    reference = orientation = None
+    if frame:
+        x, y = vectors[n_tool][0], vectors[n_tool + 1][0]
+        reference = x
+        orientation = rotation_vector_series(
+            [x, y, direction], k, lambda a, b: S.mul(a, b, k),
+            lambda a, ca, b, cb: S.add(_scale(a, ca), _scale(b, cb)), _scale)
+    return Derivation(machine, k, small, point, direction, columns, atoms.restore(), reference, orientation)
+
+
+def _scale(a: dict, c) -> dict:
+    """c·a for a ring series and a Fraction c."""
+    if c == 1:
+        return a
+    q = S.QQ(c.numerator, c.denominator)
+    return {m: v * q for m, v in a.items()}

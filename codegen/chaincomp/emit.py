@@ -71,21 +71,22 @@ def ccode(expr: sp.Expr) -> str:
 
 
 def exact_pose(machine: Machine, with_errors: bool = True) -> list[sp.Expr]:
-    """The tool point (and direction) by the chain, symbolic and untruncated."""
+    """The tool point (and direction, and with a frame its x axis) by the chain, symbolic and
+    untruncated: the Pose layout."""
     zero = {s.sym: 0 for s in machine.errors} if not with_errors else {}
     p = [v.xreplace(zero) for v in machine.tool_point]
-    d = list(machine.tool_direction) if machine.tool_direction else None
+    dirs = [list(axis) for axis in machine.tool_axes]
     for el in reversed(machine.chain):
         if isinstance(el, Rotation):
             angle = el.angle.xreplace(zero)
             c, s = sp.cos(angle), sp.sin(angle)
             i, j = ROT_PLANE[el.axis]
-            for v in (p, d) if d else (p,):
+            for v in [p] + dirs:
                 v[i], v[j] = c * v[i] - s * v[j], s * v[i] + c * v[j]
         else:
             for k in range(3):
                 p[k] = p[k] + el.vector[k].xreplace(zero)
-    return p + (d or [])
+    return p + [c for axis in dirs for c in axis]
 
 
 def corrects_direction(machine: Machine) -> bool:
@@ -214,7 +215,7 @@ def generate(machine: Machine, order: int = 2) -> dict[str, str]:
     n = len(axes)
     param_syms = [s for s in machine.symbols if s.role != "axis"]
     hoist = _Hoister({s.sym for s in param_syms})
-    pose_size = 6 if machine.tool_direction else 3
+    pose_size = 3 + 3 * len(machine.tool_axes)
     corr_dir = corrects_direction(machine)
 
     exact = exact_pose(machine, True)
@@ -236,11 +237,11 @@ def _expanded_functions(machine: Machine, order: int, hoist: "_Hoister", exact: 
     machine) use, and compile to the fewest operations."""
     axes = [a.sym for a in machine.axes]
     n = len(axes)
-    pose_size = 6 if machine.tool_direction else 3
+    pose_size = 3 + 3 * len(machine.tool_axes)
     nominal = exact_pose(machine, False)
     jac = [[sp.diff(e, a) for a in axes] for e in exact]
     n_err = len(machine.errors)
-    vecs = d.point + (d.direction or [])
+    vecs = d.point + (d.direction or []) + (d.reference or [])
     gain = [d.gain(v) for v in vecs]
     errors = {k: [d.error(v, k) for v in vecs] for k in range(1, order + 1)}
     functions = [
@@ -337,6 +338,11 @@ def _paths(exact: list[sp.Expr]) -> int:
 
 
 
+_POSE_LAYOUT = {3: "", 6: ", tool direction",
+                9: ", tool direction (the frame's z axis), the frame's x axis: compensation corrects the "
+                   "point and the rotation vector from them"}
+
+
 def _kind(unit) -> str:
     return {"length": "kLength", "angle": "kAngle", "ratio": "kRatio"}[unit.kind]
 
@@ -351,7 +357,7 @@ def _header(machine, banner, n, pose_size, corr_dir, order, n_pre, src_hash, src
          f"constexpr int kNumAxes = {n};",
          f"constexpr int kNumParams = {len(params)};",
          f"constexpr int kNumErrors = {len(machine.errors)};  // the error parameters, in kParams order",
-         f"constexpr int kPoseSize = {pose_size};  // tool point{', tool direction' if pose_size == 6 else ''}",
+         f"constexpr int kPoseSize = {pose_size};  // tool point{_POSE_LAYOUT[pose_size]}",
          f"constexpr bool kCorrectsDirection = {'true' if corr_dir else 'false'};",
          f"constexpr int kOrder = {order};",
          f"constexpr int kNumPrecomputed = {n_pre};", "",

@@ -19,6 +19,7 @@ import sympy as sp
 from . import series as S
 from .machine import ROT_PLANE, Machine, Rotation
 from .numeric import _lib, complete
+from .orientation import ROWS as ORIENTATION_ROWS, rotation_vector_series
 from .varying import resolve
 
 
@@ -78,6 +79,8 @@ class JetModel:
                 layout.append(("trans", None, [expand(v) for v in el.vector]))
         self._point = [expand(v) for v in machine.tool_point]
         self._direction = [expand(v) for v in machine.tool_direction] if machine.tool_direction else None
+        frame = machine.tool_frame   # its x and y axes ride along (the orientation error needs them)
+        self._frame = [[expand(v) for v in axis] for axis in frame[:2]] if frame else []
         self._layout = layout
         self._exprs = exprs
         self._fns: dict = {}
@@ -90,11 +93,30 @@ class JetModel:
 
     def jets(self, values: dict, backend: str = "numpy") -> tuple[list[dict], list[dict] | None]:
         """The jets of the tool point and direction (3 each) at the large values given."""
+        p, d, _ = self._all_jets(values, backend)
+        return p, d
+
+    def orientation_jets(self, values: dict, backend: str = "numpy") -> list[dict] | None:
+        """The jets of the orientation error ω (chaincomp.orientation) with a tool frame, else None."""
+        return self.pose_jets(values, backend)[2]
+
+    def pose_jets(self, values: dict, backend: str = "numpy"):
+        """(point, direction or None, ω or None): the jets of every pose component at once."""
+        p, d, frame = self._all_jets(values, backend)
+        if not frame:
+            return p, d, None
+        k = self.order
+        w = rotation_vector_series(frame + [d], k, lambda a, b: S.mul_all(a, b, k),
+                                   lambda a, ca, b, cb: _lin(a, float(ca), b, float(cb)),
+                                   lambda a, c: {m: float(c) * v for m, v in a.items()})
+        return p, d, w
+
+    def _all_jets(self, values: dict, backend: str):
         values = resolve(complete(self.machine, values))
         coeff = self._fn(backend)(*[values[n] for n in self._large])
         return self._propagate(coeff, _lib(backend))
 
-    def _propagate(self, coeff: list, lib) -> tuple[list[dict], list[dict] | None]:
+    def _propagate(self, coeff: list, lib) -> tuple[list[dict], list[dict] | None, list[list[dict]]]:
         k = self.order
 
         def jet(part):
@@ -102,6 +124,7 @@ class JetModel:
 
         p = [jet(part) for part in self._point]
         d = [jet(part) for part in self._direction] if self._direction else None
+        frame = [[jet(part) for part in axis] for axis in self._frame]
         for kind, axis, parts in self._layout:
             if kind == "trans":
                 for c, part in enumerate(parts):
@@ -118,7 +141,7 @@ class JetModel:
             else:
                 cos_t, sin_t = {(): c0}, {(): s0}
             i, j = ROT_PLANE[axis]
-            for vec in (p, d) if d else (p,):
+            for vec in [p] + ([d] if d else []) + frame:
                 vi, vj = vec[i], vec[j]
                 if set(cos_t) <= {()} and set(sin_t) <= {()}:  # by a large angle only: no jet products
                     c, s = cos_t.get((), 0), sin_t.get((), 0)
@@ -126,7 +149,7 @@ class JetModel:
                 else:
                     vec[i] = _lin(S.mul_all(cos_t, vi, k), 1, S.mul_all(sin_t, vj, k), -1)
                     vec[j] = _lin(S.mul_all(sin_t, vi, k), 1, S.mul_all(cos_t, vj, k), 1)
-        return p, d
+        return p, d, frame
 
     def _at_errors(self, jet: dict, eps: list, order: int):
         total = 0.0
@@ -150,10 +173,32 @@ class JetModel:
         dd = [self._at_errors(j, eps, order) for j in d] if d else None
         return dp, dd
 
+    def orientation_error(self, values: dict, order: int | None = None, backend: str = "numpy"):
+        """ω (rad, 3 components) to degree 1..order with a tool frame, else None."""
+        order = self.order if order is None else order
+        if not 1 <= order <= self.order:
+            raise ValueError(f"order {order}: this model has orders 1..{self.order}")
+        values = resolve(complete(self.machine, values))
+        w = self.orientation_jets(values, backend)
+        eps = [values[s.name] for s in self.machine.errors]
+        return [self._at_errors(j, eps, order) for j in w] if w else None
+
+    def all_errors(self, values: dict, order: int | None = None, backend: str = "numpy"):
+        """(point error, direction error or None, ω or None) of degree 1..order, one pass."""
+        order = self.order if order is None else order
+        if not 1 <= order <= self.order:
+            raise ValueError(f"order {order}: this model has orders 1..{self.order}")
+        values = resolve(complete(self.machine, values))
+        eps = [values[s.name] for s in self.machine.errors]
+        return tuple(None if v is None else [self._at_errors(j, eps, order) for j in v]
+                     for v in self.pose_jets(values, backend))
+
     def gains(self, values: dict, backend: str = "numpy") -> dict[str, list]:
         """The first-order error gain matrix at the large values: {dx: [gain per error], ...}."""
-        p, d = self.jets(values, backend)
+        p, d, w = self.pose_jets(values, backend)
         out = {f"d{c}": [j.get((i,), 0.0) for i in range(len(self.small))] for c, j in zip("xyz", p)}
         if d:
             out.update({f"dk{c}": [j.get((i,), 0.0) for i in range(len(self.small))] for c, j in zip("xyz", d)})
+        if w:
+            out.update({row: [j.get((i,), 0.0) for i in range(len(self.small))] for row, j in zip(ORIENTATION_ROWS, w)})
         return out

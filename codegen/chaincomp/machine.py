@@ -103,6 +103,25 @@ class Machine:
     source_text: str = field(repr=False, default="")
     # dh/mdh joints as written: (number, kind, nominal alpha, {parameter: error name}, line)
     joints: tuple = field(repr=False, default=())
+    # With a tool frame: its x axis (unit, orthogonal to the direction, which is its z axis);
+    # y = z × x. None: the tool has a point (and maybe a direction) only.
+    tool_reference: tuple[sp.Expr, sp.Expr, sp.Expr] | None = None
+
+    @property
+    def tool_axes(self) -> list[tuple]:
+        """The constant unit vectors the chain turns with the tool: the direction, and with a
+        frame its x axis (the pose layout of the generated code after the point)."""
+        return [v for v in (self.tool_direction, self.tool_reference) if v is not None]
+
+    @property
+    def tool_frame(self) -> tuple[tuple, tuple, tuple] | None:
+        """The tool frame's x, y, z axes (constant unit vectors) or None."""
+        if self.tool_reference is None:
+            return None
+        x, z = self.tool_reference, self.tool_direction
+        y = tuple(sp.nsimplify(sp.expand(z[(i + 1) % 3] * x[(i + 2) % 3] - z[(i + 2) % 3] * x[(i + 1) % 3]))
+                  for i in range(3))
+        return x, y, z
 
     def by_role(self, role: str) -> list[Symbol]:
         return [s for s in self.symbols if s.role == role]
@@ -570,25 +589,90 @@ def load_machine(path: str) -> Machine:
         work_chain = _parse_chain(ctx, loop["workpiece"], "loop.workpiece", line_of(loop, "workpiece"),
                                   table, sense, order)
 
-    tool = _require_map(ctx, doc["tool"], "tool", line_of(doc, "tool"), {"point", "direction"}, {"point"})
+    tool = _require_map(ctx, doc["tool"], "tool", line_of(doc, "tool"),
+                        {"point", "direction", "reference", "rotation"}, {"point"})
     point = _vector(ctx, tool["point"], table, "tool.point", line_of(tool, "point"))
-    direction = None
-    if "direction" in tool:
-        direction = _vector(ctx, tool["direction"], table, "tool.direction", line_of(tool, "direction"))
-        if any(d.free_symbols for d in direction):
-            raise ctx.fail("the tool direction must be a constant vector", line_of(tool, "direction"),
-                           "tool.direction")
-        norm = sp.sqrt(sum(d**2 for d in direction))
-        if norm == 0:
-            raise ctx.fail("the tool direction must not be zero", line_of(tool, "direction"), "tool.direction")
-        direction = tuple(sp.nsimplify(d / norm) for d in direction)
+    direction = reference = None
+    if "rotation" in tool:
+        direction, reference = _tool_rotation(ctx, tool, table)
+    elif "direction" in tool:
+        direction = _unit(ctx, tool, "direction", table)
+        if "reference" in tool:
+            reference = _orthogonal_part(ctx, tool, direction, table)
+    elif "reference" in tool:
+        raise ctx.fail("a tool reference needs a tool direction (the frame's z axis)", line_of(tool, "reference"),
+                       "tool.reference")
     if len(symbols) > MAX_SYMBOLS:
         raise ctx.fail(f"{len(symbols)} symbols with the errors dh/mdh/beta elements name (at most {MAX_SYMBOLS})",
                        line_of(doc, "chain") or line_of(doc, "loop"), "chain" if "chain" in doc else "loop")
     machine = Machine(name, str(doc.get("description", "")), path, length_unit, tuple(symbols),
-                      tool_chain, work_chain, point, direction, read_text(path), tuple(ctx.joints))
+                      tool_chain, work_chain, point, direction, read_text(path), tuple(ctx.joints),
+                      tool_reference=reference)
     _check_usage(ctx, machine)
     return machine
+
+
+def _constant_vector(ctx: _Ctx, tool, key: str, table) -> tuple[sp.Expr, sp.Expr, sp.Expr]:
+    v = _vector(ctx, tool[key], table, f"tool.{key}", line_of(tool, key))
+    if any(c.free_symbols for c in v):
+        raise ctx.fail(f"the tool {key} must be a constant vector", line_of(tool, key), f"tool.{key}")
+    return v
+
+
+def _normalised(ctx: _Ctx, v, what: str, line, fld: str):
+    norm = sp.sqrt(sum(c**2 for c in v))
+    if norm == 0 or float(norm) < 1e-12:
+        raise ctx.fail(f"the tool {what} must not be zero", line, fld)
+    return tuple(sp.nsimplify(c / norm) for c in v)
+
+
+def _unit(ctx: _Ctx, tool, key: str, table):
+    return _normalised(ctx, _constant_vector(ctx, tool, key, table), key, line_of(tool, key), f"tool.{key}")
+
+
+def _orthogonal_part(ctx: _Ctx, tool, direction, table):
+    """The tool frame's x axis: the part of tool.reference orthogonal to the direction, normalised."""
+    r = _constant_vector(ctx, tool, "reference", table)
+    norm_r = math.sqrt(sum(float(c)**2 for c in r))
+    along = sum(a * b for a, b in zip(r, direction))
+    x = tuple(sp.nsimplify(sp.expand(a - along * b)) for a, b in zip(r, direction))
+    if norm_r == 0 or math.sqrt(sum(float(c)**2 for c in x)) < 1e-6 * norm_r:
+        raise ctx.fail("the tool reference must not be (nearly) parallel to the tool direction "
+                       f"(its part orthogonal to the direction is the frame's x axis; got {[float(c) for c in r]})",
+                       line_of(tool, "reference"), "tool.reference")
+    return _normalised(ctx, x, "reference", line_of(tool, "reference"), "tool.reference")
+
+
+def _tool_rotation(ctx: _Ctx, tool, table):
+    """tool.rotation: the frame's axes as the columns of a rotation matrix (rows written as
+    lists): (direction = z column, reference = x column)."""
+    line = line_of(tool, "rotation")
+    for key in ("direction", "reference"):
+        if key in tool:
+            raise ctx.fail(f"give either tool.rotation or tool.direction/reference, not both", line_of(tool, key),
+                           f"tool.{key}")
+    rows = tool["rotation"]
+    if not isinstance(rows, list) or len(rows) != 3:
+        raise ctx.fail(f"expected three rows [[...], [...], [...]], got {describe(rows)}", line, "tool.rotation")
+    m = [_vector(ctx, row, table, f"tool.rotation[{i}]", line) for i, row in enumerate(rows)]
+    if any(c.free_symbols for row in m for c in row):
+        raise ctx.fail("the tool rotation must be constant", line, "tool.rotation")
+    f = [[float(c) for c in row] for row in m]
+    for i in range(3):
+        for j in range(3):
+            dot = sum(f[k][i] * f[k][j] for k in range(3))
+            if abs(dot - (i == j)) > 1e-9:
+                raise ctx.fail(f"the tool rotation is not orthonormal (columns {i} and {j}: dot product {dot!r}, "
+                               "want within 1e-9 of 0 or 1)", line, "tool.rotation")
+    det = (f[0][0] * (f[1][1] * f[2][2] - f[1][2] * f[2][1]) - f[0][1] * (f[1][0] * f[2][2] - f[1][2] * f[2][0])
+           + f[0][2] * (f[1][0] * f[2][1] - f[1][1] * f[2][0]))
+    if det < 0:
+        raise ctx.fail("the tool rotation is a reflection (determinant -1)", line, "tool.rotation")
+    z = _normalised(ctx, tuple(m[k][2] for k in range(3)), "rotation", line, "tool.rotation")
+    x = tuple(m[k][0] for k in range(3))
+    along = sum(a * b for a, b in zip(x, z))
+    return z, _normalised(ctx, tuple(sp.nsimplify(sp.expand(a - along * b)) for a, b in zip(x, z)),
+                          "rotation", line, "tool.rotation")
 
 
 def _check_usage(ctx: _Ctx, machine: Machine) -> None:

@@ -345,7 +345,7 @@ def pose_series(b: Builder, machine: Machine, k: int, scaled: bool) -> list[list
         return [b.expr(c) for c in eps_coefficients(e, errors, k)] if scaled else [b.expr(e)]
 
     p = [lift(v) for v in machine.tool_point]
-    d = [lift(v) for v in machine.tool_direction] if machine.tool_direction else None
+    dirs = [[lift(v) for v in axis] for axis in machine.tool_axes]
     for el in reversed(machine.chain):
         if not isinstance(el, Rotation):
             for c in range(3):
@@ -361,11 +361,11 @@ def pose_series(b: Builder, machine: Machine, k: int, scaled: bool) -> list[list
             s.append(g.mul(g.const(1.0 / n), ds))
             c.append(g.neg(g.mul(g.const(1.0 / n), dc)))
         i, j = ROT_PLANE[el.axis]
-        for vec in (p, d) if d else (p,):
+        for vec in [p] + dirs:
             vi, vj = vec[i], vec[j]
             vec[i] = [g.sub(x, y) for x, y in zip(_series_mul(g, c, vi), _series_mul(g, s, vj))]
             vec[j] = [g.add(x, y) for x, y in zip(_series_mul(g, s, vi), _series_mul(g, c, vj))]
-    return p + (d or [])
+    return p + [c for axis in dirs for c in axis]
 
 
 def pose_and_derivatives(b: Builder, machine: Machine, variables: list[sp.Symbol], at: dict
@@ -394,11 +394,11 @@ def pose_and_derivatives(b: Builder, machine: Machine, variables: list[sp.Symbol
             o = [g.add(o[r], g.dot(R[r], t)) for r in range(3)]
     tool = [b.expr(v.xreplace(at)) for v in machine.tool_point]
     P = [g.add(o[r], g.dot(R[r], tool)) for r in range(3)]
-    K = None
-    if machine.tool_direction:
-        k = [b.expr(v.xreplace(at)) for v in machine.tool_direction]
-        K = [g.dot(R[r], k) for r in range(3)]
-    pose = P + (K or [])
+    Ks = []   # the direction and, with a frame, its x axis
+    for axis in machine.tool_axes:
+        k = [b.expr(v.xreplace(at)) for v in axis]
+        Ks.append([g.dot(R[r], k) for r in range(3)])
+    pose = P + [c for K in Ks for c in K]
     derivatives = []
     lever = {}  # per rotation: u x (P - o) and u x K, shared by every variable it moves
     for v in variables:
@@ -411,7 +411,7 @@ def pose_and_derivatives(b: Builder, machine: Machine, variables: list[sp.Symbol
                 dt = b.expr(dtheta.xreplace(at))
                 if n not in lever:
                     arm = g.cross(frame, [g.sub(P[r], origin[r]) for r in range(3)])
-                    lever[n] = arm + (g.cross(frame, K) if K else [])
+                    lever[n] = arm + [c for K in Ks for c in g.cross(frame, K)]
                 col = [g.add(x, g.mul(dt, y)) for x, y in zip(col, lever[n])]
             else:
                 dvec = [sp.diff(c, v) for c in what]
@@ -425,12 +425,12 @@ def pose_and_derivatives(b: Builder, machine: Machine, variables: list[sp.Symbol
             dv = [b.expr(c.xreplace(at)) for c in dtool]
             for r in range(3):
                 col[r] = g.add(col[r], g.dot(R[r], dv))
-        if K:
-            dk = [sp.diff(c, v) for c in machine.tool_direction]
+        for n_axis, axis in enumerate(machine.tool_axes):
+            dk = [sp.diff(c, v) for c in axis]
             if any(c != 0 for c in dk):
                 dv = [b.expr(c.xreplace(at)) for c in dk]
                 for r in range(3):
-                    col[3 + r] = g.add(col[3 + r], g.dot(R[r], dv))
+                    col[3 + 3 * n_axis + r] = g.add(col[3 + 3 * n_axis + r], g.dot(R[r], dv))
         derivatives.append(col)
     return pose, derivatives
 

@@ -14,7 +14,9 @@ def add_parser(sub) -> None:
                        description="Derive, by multiplying truncated series in the error symbols, the "
                                    "nominal tool point and direction, the error model to the given order, "
                                    "the first-order error gain matrix and the Jacobian of the tool point "
-                                   "with respect to the axes.")
+                                   "with respect to the axes. With a tool frame also its orientation "
+                                   "error as a rotation vector (wx, wy, wz: rad about the base frame's "
+                                   "axes, R_actual = exp([w]x)·R_nominal) and its rows of the gain matrix.")
     add_machine_argument(p)
     add_order_argument(p, 1)
     add_format_argument(p, ("text", "latex", "json"))
@@ -42,8 +44,8 @@ def report(d: Derivation, progress: bool = False) -> dict:
     m = d.machine
     prog = Progress(f"derive {m.name}: formulas", progress)
     names = [s.name for s in m.errors]
-    out: dict = {"nominal": {}, "direction": {}, "error": {}, "direction_error": {}, "gain": {},
-                 "jacobian": {}}
+    out: dict = {"nominal": {}, "direction": {}, "reference": {}, "error": {}, "direction_error": {},
+                 "orientation_error": {}, "gain": {}, "jacobian": {}}
     for i, c in enumerate(COMPONENTS):
         prog.step(f"{c} ({i + 1}/{len(COMPONENTS)})")
         out["nominal"][c] = d.nominal(d.point[i])
@@ -55,6 +57,11 @@ def report(d: Derivation, progress: bool = False) -> dict:
             for k in range(1, d.order + 1):
                 out["direction_error"].setdefault(f"order{k}", {})[f"dk{c}"] = _collect(
                     d.degree_part(d.direction[i], k), d.small)
+        if d.orientation is not None:
+            out["reference"][f"x{c}"] = d.nominal(d.reference[i])
+            for k in range(1, d.order + 1):
+                out["orientation_error"].setdefault(f"order{k}", {})[f"w{c}"] = _collect(
+                    sp.trigsimp(d.degree_part(d.orientation[i], k)), d.small)
     prog.step("error gain matrix")
     for comp, row in d.gain_matrix().items():
         out["gain"][comp] = dict(zip(names, row))
@@ -88,8 +95,14 @@ def run(args) -> int:
 
 
 _TITLES = {"nominal": "Nominal tool point", "direction": "Nominal tool direction",
+           "reference": "Nominal x axis of the tool frame",
            "gain": "Error gain matrix (first order): coefficient of each error in each component",
            "jacobian": "Jacobian of the nominal tool point with respect to the axes"}
+
+
+_ERROR_TITLES = {"error": "Tool point error", "direction_error": "Tool direction error",
+                 "orientation_error": "Tool frame orientation error ω (rad; R_actual = exp([ω]×)·R_nominal, "
+                                      "about the base frame's axes)"}
 
 
 def _text(machine, d: Derivation, rep: dict) -> str:
@@ -98,10 +111,9 @@ def _text(machine, d: Derivation, rep: dict) -> str:
              "Formulas take every symbol in internal units (mm, rad).", "",
              "Chain (rotations right-handed, senses applied):", "  X = " + chain_text(machine) + " · X0", ""]
     for key, value in rep.items():
-        if key in ("error", "direction_error"):
+        if key in _ERROR_TITLES:
             for order, comps in value.items():
-                what = "tool point" if key == "error" else "tool direction"
-                lines.append(f"{what.capitalize()} error, terms of degree {order[5:]} in the errors")
+                lines.append(f"{_ERROR_TITLES[key]}, terms of degree {order[5:]} in the errors")
                 lines += [f"  {c} = {e}" for c, e in comps.items()] + [""]
             continue
         lines.append(_TITLES[key])

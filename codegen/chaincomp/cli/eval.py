@@ -21,7 +21,9 @@ def add_parser(sub) -> None:
                                    "table or polynomial over an axis takes its value at the axes given. "
                                    "Text shows the errors in µm and arcsec (--units internal: mm and "
                                    "rad); the direction error as the tilt of the tool axis towards x, y "
-                                   "and z and the angle between the actual and nominal axes. JSON is in "
+                                   "and z and the angle between the actual and nominal axes; with a tool "
+                                   "frame its orientation error as a rotation vector about the base "
+                                   "frame's axes (R_actual = exp([w]x)·R_nominal). JSON is in "
                                    "the machine's length unit and rad, named under 'units'.")
     add_machine_argument(p)
     add_values_arguments(p)
@@ -34,7 +36,7 @@ def evaluate(machine, values: dict, with_errors: bool) -> dict:
     scale = 1.0 / UNITS[machine.length_unit].to_internal
     exact = ExactModel(machine)
     nominal_values = {k: (0.0 if machine.symbol(k).role == "error" else v) for k, v in values.items()}
-    point, direction = exact.pose(nominal_values)
+    point, direction, reference = exact.frame(nominal_values)
     out = {
         "machine": machine.name,
         # direction: unit vectors and their differences (small ones are tilts in rad)
@@ -44,6 +46,8 @@ def evaluate(machine, values: dict, with_errors: bool) -> dict:
     }
     if direction is not None:
         out["direction"] = [float(v) for v in direction]
+    if reference is not None:
+        out["frame_x"] = [float(v) for v in reference]   # the tool frame's x axis
     varying = varying_errors(values)
     if varying:
         # errors that vary along an axis, at these axes, in their declared units
@@ -65,6 +69,11 @@ def evaluate(machine, values: dict, with_errors: bool) -> dict:
             n = np.asarray(direction, float)
             out["direction_angle"] = {name: float(angle_between(n, n + np.asarray(d, float)))
                                       for name, d in derr.items()}
+        if reference is not None:
+            # the rotation vector ω (rad): R_actual = exp([ω]×)·R_nominal, about the base frame's axes
+            out["orientation_error"] = {name: [float(v) for v in w] for name, w in (
+                ("first", model.orientation_error(values, 1)), ("second", model.orientation_error(values, 2)),
+                ("exact", exact.orientation_error(values)))}
     return out
 
 
@@ -93,6 +102,8 @@ def _text(out: dict, units: str = "people") -> str:
     lines = [f"{out['machine']} at {axes}", f"  tool point       {vec(out['position'], 14, 9)} {unit}"]
     if "direction" in out:
         lines.append(f"  tool direction   {vec(out['direction'], 14, 9)}")
+    if "frame_x" in out:
+        lines.append(f"  tool frame x     {vec(out['frame_x'], 14, 9)}")
     if "varying" in out:
         lines.append("  errors that vary along an axis, here: "
                      + ", ".join(f"{k} = {v['value']:.6g} {v['unit']}" for k, v in out["varying"].items()))
@@ -108,4 +119,11 @@ def _text(out: dict, units: str = "people") -> str:
             tilt = convert(np.asarray(v), "angle", units)[0]
             angle = convert(out["direction_angle"][name], "angle", units)[0]
             lines.append(f"    {name:<12} {vec(tilt, width, digits)}   angle {fixed(angle, digits, width)}")
+    if "orientation_error" in out:
+        lines.append(f"  tool frame orientation error ({display_unit('angle', units).name}): rotation vector "
+                     "wx, wy, wz about the base frame's axes; its angle")
+        for name, v in out["orientation_error"].items():
+            w = convert(np.asarray(v), "angle", units)[0]
+            angle = convert(float(np.linalg.norm(v)), "angle", units)[0]
+            lines.append(f"    {name:<12} {vec(w, width, digits)}   angle {fixed(angle, digits, width)}")
     return "\n".join(lines)
