@@ -27,6 +27,7 @@ from .eval import angle_between
 COMPONENTS = ("dx", "dy", "dz", "dkx", "dky", "dkz", "norm")
 # 1000 x 1000 points: 4-5 s for one model, 39 s for exact minus second (five_axis_ac, 2026-12)
 MAX_GRID = 1000
+MAX_UTIME = 2 ** 62    # µs, as simulate-log writes them: int64 with room for any duration
 # arrows in the volume view: 12^3 = 1728 still read as a field, more are a blur
 MAX_VOLUME_GRID = 12
 VIEWS = ("map", "surface", "volume")
@@ -514,9 +515,12 @@ def _read_replay_csv(path: str) -> tuple[int, dict[str, np.ndarray]]:
         raise ChaincompError(message, path, line, field)
 
     try:
-        with open(path, newline="", encoding="utf-8") as f:
+        with open(path, newline="", encoding="utf-8-sig") as f:   # -sig: a byte order mark is no column name
             reader = csv.DictReader(f)
             names = reader.fieldnames or []
+            twice = next((c for i, c in enumerate(names) if c in names[:i]), None)
+            if twice is not None:
+                fail(f"two columns named {twice!r}", 1)
             wanted = ["utime", "residual_point_mm"] + [c for c in names if c == "residual_direction_rad"
                                                         or c.startswith(("commanded_", "corrected_", "correction_"))]
             missing = [c for c in ("result", "utime", "residual_point_mm") if c not in names]
@@ -527,15 +531,26 @@ def _read_replay_csv(path: str) -> tuple[int, dict[str, np.ndarray]]:
                     fail(f"column {c}: an axis column ends in _mm or _deg (the units on the wire)", 1)
             out: dict[str, list[float]] = {c: [] for c in wanted}
             rows = 0
+            back = None
             for row in reader:
                 rows += 1
+                if None in row or None in row.values():   # cells past the header, or too few
+                    cells = len(names) + len(row.get(None) or ()) - sum(v is None for v in row.values())
+                    fail(f"a row of {cells} cells, the header has {len(names)}", reader.line_num)
                 if row.get("result") != "ok":
                     continue
                 for c in wanted:
                     try:
-                        out[c].append(parse_number(row.get(c) or ""))
+                        v = parse_number(row.get(c) or "")
                     except ValueError as exc:
                         fail(str(exc), reader.line_num, c)
+                    if c == "utime" and not (0 <= v <= MAX_UTIME and v == int(v)):
+                        fail(f"expected whole microseconds from 0 to 2^62, got {row[c]!r}", reader.line_num, c)
+                    elif c != "utime" and not abs(v) <= MAX_LITERAL:
+                        fail(f"{row[c]!r} is beyond {MAX_LITERAL:g} in magnitude", reader.line_num, c)
+                    out[c].append(v)
+                if back is None and len(out["utime"]) > 1 and out["utime"][-1] < out["utime"][-2]:
+                    back = reader.line_num
     except OSError as exc:
         fail(f"cannot read: {exc.strerror}")
     except UnicodeDecodeError as exc:
@@ -544,6 +559,8 @@ def _read_replay_csv(path: str) -> tuple[int, dict[str, np.ndarray]]:
         fail(f"not a CSV file: {exc}")
     if not out["utime"]:
         fail("no corrected records to plot (is it a 'chaincomp replay' CSV?)")
+    if back is not None:
+        F.warn(f"{path}:{back}: utime goes back: the records are drawn in the file's order, not sorted")
     cols = {c: np.array(v) for c, v in out.items()}
     cols["ok"] = len(out["utime"])
     return rows, cols
