@@ -268,3 +268,17 @@ def test_replay_csv_time_going_back_warns(capsys, tmp_path):
     path = _replay_csv(tmp_path, _replay_rows(lambda r: r[3].__setitem__(1, "1600000000000000")))
     code, err = _run(capsys, "plot", "--replay", path, "-o", tmp_path / "r.png")
     assert code == 0 and f"{path}:5: utime goes back" in err, err
+
+
+# ----------------------------------------------------------------------------- eval
+
+def test_eval_refuses_a_polynomial_beyond_the_value_bound(capsys, tmp_path):
+    """Each coefficient within bounds, the value not: 1 + 1e300 * 100 = 1e302 um at X = 100 mm was
+    printed as a 300-digit error."""
+    p = tmp_path / "p.yaml"
+    p.write_text("machine: vmc_xyz\nvalues:\n  EXX:\n    axis: X\n    units: [mm, um]\n"
+                 "    polynomial: [1, 1.0e+300]\n    range: [-400, 400]\n    outside: hold\n")
+    _refused(capsys, "eval", VMC, "--params", p, "--set", "X=100",
+             match=f"{p}:3: values.EXX: EXX = 1e+302 um at X = 100 mm: beyond 1e+15 (mm, rad) in magnitude")
+    code, err = _run(capsys, "eval", VMC, "--params", p, "--set", "X=0")   # 1 um there
+    assert code == 0, err

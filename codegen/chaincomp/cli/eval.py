@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..display import add_units_argument, convert, display_unit, fixed
+from ..errors import ChaincompError
+from ..expressions import MAX_LITERAL
 from ..jets import JetModel
 from ..numeric import ExactModel
 from ..units import UNITS
@@ -77,6 +79,18 @@ def evaluate(machine, values: dict, with_errors: bool) -> dict:
     return out
 
 
+def check_varying_bound(machine, values: dict) -> None:
+    """An error given as a table or polynomial, at these axes, within the bound of every value
+    (1e15 mm or rad): a polynomial's coefficients may each be in bounds and its value not."""
+    at = resolve(values)
+    for name, v in varying_errors(values).items():
+        if not abs(float(at[name])) <= MAX_LITERAL:
+            s, axis = machine.symbol(name), machine.symbol(v.axis)
+            raise ChaincompError(f"{name} = {s.from_internal(float(at[name])):.6g} {s.unit.name} at {v.axis} = "
+                                 f"{axis.from_internal(values[v.axis]):g} {axis.unit.name}: beyond "
+                                 f"{MAX_LITERAL:g} (mm, rad) in magnitude", v.file, v.line, v.key)
+
+
 def angle_between(a, b):
     """Angle (rad) between vectors a and b (along the last axis), stable for tiny angles."""
     a, b = np.asarray(a, float), np.asarray(b, float)
@@ -87,6 +101,7 @@ def run(args) -> int:
     machine = load(args.machine)
     values, with_errors = values_for(machine, args.params, args.sets)
     check_inside(values)
+    check_varying_bound(machine, values)
     out = evaluate(machine, values, with_errors)
     check_finite(out)   # the table too: a NaN tool point is no answer
     print(to_json(out) if args.format == "json" else _text(out, args.units))
