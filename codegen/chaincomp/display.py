@@ -75,6 +75,7 @@ def uncertain(value: float, u: float, kind: str | None = None, units: str = DEFA
 
 
 def plus_minus(value: float, u: float) -> str:
+    value, u = float(value), float(u)   # numpy's floats: repr() is 'np.float64(...)', no decimal text
     if u < 0:
         raise ValueError(f"an uncertainty is not negative, got {u!r}")
     if not math.isfinite(value):
@@ -85,10 +86,10 @@ def plus_minus(value: float, u: float) -> str:
         return f"{_no_negative_zero(f'{value:.6g}')} ± 0"
     du = Decimal(repr(u))
     place = du.adjusted() - 1                       # the decimal exponent of u's 2nd significant digit
-    if value and Decimal(repr(float(value))).adjusted() - place > _DOUBLE_DIGITS:
+    if value and Decimal(repr(value)).adjusted() - place > _DOUBLE_DIGITS:
         # u is below the estimate's last digit a double holds: no digits to round it to
         # (and more than the 28 digits of decimal's default context)
-        return f"{float(value)!r} ± {u:.1e}"
+        return f"{value!r} ± {u:.1e}"
     ur = du.quantize(Decimal(1).scaleb(place), rounding=ROUND_HALF_UP)
     if ur.adjusted() > du.adjusted():               # 0.0996 -> 0.10: still 2 significant digits
         place += 1

@@ -282,3 +282,37 @@ def test_eval_refuses_a_polynomial_beyond_the_value_bound(capsys, tmp_path):
              match=f"{p}:3: values.EXX: EXX = 1e+302 um at X = 100 mm: beyond 1e+15 (mm, rad) in magnitude")
     code, err = _run(capsys, "eval", VMC, "--params", p, "--set", "X=0")   # 1 um there
     assert code == 0, err
+
+
+def test_plus_minus_of_numpy_floats():
+    """repr(np.float64(2.4)) is 'np.float64(2.4)' in numpy 2: no decimal text (exit 3 before)."""
+    assert display.plus_minus(np.float64(4.6), np.float64(0.21)) == "4.60 ± 0.21"
+    assert display.uncertain(np.float64(4.6e-3), np.float64(2.1e-4), "length") == "4.60 ± 0.21 µm"
+
+
+def test_ballbar_fit_prints_estimates_as_people_read_them(capsys, tmp_path):
+    """The fit's table as identify's: 'estimate ± uncertainty' (two significant digits) in µm,
+    arcsec, µm/m. A trace of the squareness 9 arcsec and the scale errors 12 and -7 ppm of the
+    test's three-axis machine, where x = V (1 + SV) + U sin(SQ), y = U (1 + SU) cos(SQ)."""
+    import re
+    m = tmp_path / "m.yaml"
+    m.write_text("name: bb_hunt\nlength_unit: mm\nrotation_sense: right_hand\nsymbols:\n"
+                 "  - {name: U, role: axis, unit: mm, limits: [-300, 300]}\n"
+                 "  - {name: V, role: axis, unit: mm, limits: [-300, 300]}\n"
+                 "  - {name: SV, role: error, unit: ppm}\n  - {name: SU, role: error, unit: ppm}\n"
+                 "  - {name: SQ, role: error, unit: arcsec}\n"
+                 'chain:\n  - {translate: ["V*(1 + SV) + U*sin(SQ)", "U*(1 + SU)*cos(SQ)", 0]}\n'
+                 "tool: {point: [0, 0, 0]}\n")
+    trace = tmp_path / "t.csv"
+    assert main(["ballbar", str(m), "--set", "SV=12", "--set", "SU=-7", "--set", "SQ=9", "--plane", "XY",
+                 "--radius", "100", "-o", str(trace)]) == 0
+    capsys.readouterr()
+    assert main(["ballbar", str(m), "--fit", str(trace)]) == 0
+    out = capsys.readouterr().out
+    for name, unit, want in (("SQ", "arcsec", 9.0), ("SV", "ppm", 12.0), ("SU", "ppm", -7.0)):
+        found = re.search(rf"^  {name}\s+(\S+) ± (\S+) {unit}\s", out, re.M)
+        assert found, out
+        value, u = found.groups()
+        assert abs(float(value) - want) < 1e-3          # second-order terms the linear fit leaves
+        assert len(u.replace("0.", "").lstrip("0")) == 2   # two significant digits
+    assert "± " in re.search(r"^  centre x .*$", out, re.M).group(0) and " µm " in out

@@ -12,7 +12,7 @@ import numpy as np
 
 from .. import ballbar as bb
 from ..calibration import _write_loadable
-from ..display import fixed
+from ..display import fixed, plus_minus
 from .figures import save
 from ..errors import ChaincompError
 from ..expressions import MAX_LITERAL
@@ -238,15 +238,16 @@ def fit_doc(machine, fit: bb.Fit, axes) -> dict:
 def fit_text(machine, fit: bb.Fit, axes) -> list[str]:
     out = [f"fit: {fit.points} points, {len(fit.terms)} unknowns, {fit.dof} degrees of freedom; rms of the trace "
            f"against the start values {fit.rms_before / UM:.4g} µm, residual after the fit {fit.rms / UM:.4g} µm",
-           f"  {'term':<14} {'estimate':>14} {'std. uncertainty':>18}   stands also for"]
+           f"  {'term':<14} {'estimate ± standard uncertainty':>34}   stands also for"]
     for t, v, s in zip(fit.terms, fit.estimates, fit.uncertainties):
         unit, size = t.unit(machine)
-        out.append(f"  {t.name:<14} {v / size:>14.6g} {s / size:>11.3g} {unit:<6}   "
+        value = f"{plus_minus(v / size, s / size)} {_shown(unit)}"
+        out.append(f"  {t.name:<14} {value:>34}   "
                    f"{' '.join(f'{f:+.4g}·{o}' for o, f in _combination(machine, fit, t)) or '-'}")
     sm = fit.scale_mismatch(axes)
     if sm:
         out.append(f"scale mismatch {axes[0]} − {axes[1]} (the difference of their scale errors): "
-                   f"{sm[0] / (UM / 1000):.4g} ± {sm[1] / (UM / 1000):.2g} um/m")
+                   f"{plus_minus(sm[0] / (UM / 1000), sm[1] / (UM / 1000))} µm/m")
     out.append("'stands also for': terms that move the trace only as fitted ones do; each estimate is its "
                "term plus the factors times those (assume some zero with --assume-zero to choose others)")
     if fit.unseen:
@@ -254,6 +255,11 @@ def fit_text(machine, fit: bb.Fit, axes) -> list[str]:
     if fit.not_fitted:   # one reason today: a table or polynomial in the start values
         out.append(f"not fitted, given as tables or polynomials in the start values: {', '.join(fit.not_fitted)}")
     return out
+
+
+def _shown(unit: str) -> str:
+    """A unit as printed for people: 'um' and 'um/m' as µm and µm/m (files and JSON keep ASCII)."""
+    return "µ" + unit[1:] if unit.startswith("um") else unit
 
 
 def params_text(machine, fit: bb.Fit, start: dict, source: str, merge_from: str | None, command: str) -> str:
