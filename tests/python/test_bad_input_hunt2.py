@@ -316,3 +316,17 @@ def test_ballbar_fit_prints_estimates_as_people_read_them(capsys, tmp_path):
         assert abs(float(value) - want) < 1e-3          # second-order terms the linear fit leaves
         assert len(u.replace("0.", "").lstrip("0")) == 2   # two significant digits
     assert "± " in re.search(r"^  centre x .*$", out, re.M).group(0) and " µm " in out
+
+
+def test_plot_of_a_one_axis_machine(capsys, tmp_path):
+    """A map needs two axes: '--over expects two different axes ..., got None' before."""
+    m = tmp_path / "one.yaml"
+    m.write_text("name: one_axis\nlength_unit: mm\nsymbols:\n  - {name: X, role: axis, unit: mm, limits: [-300, 300]}\n"
+                 "  - {name: EXX, role: error, unit: um}\nchain:\n  - {translate: [X + EXX, 0, 0]}\n"
+                 "tool: {point: [0, 0, 0]}\n")
+    for view in (["-o", tmp_path / "m.png"], ["--view", "surface", "-o", tmp_path / "m.png"],
+                 ["--html", tmp_path / "m.html"]):
+        _refused(capsys, "plot", m, "--set", "EXX=1", *view,
+                 match="one_axis has one axis (X): a map, a surface and --html draw over two")
+    code, err = _run(capsys, "plot", m, "--set", "EXX=1", "--view", "volume", "-o", tmp_path / "v.png")
+    assert code == 0, err

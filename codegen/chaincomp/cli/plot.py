@@ -227,6 +227,9 @@ def map_data(args, over_text: str | None, grid: int) -> MapData:
     """The map of args.component over two axes (over_text 'A1,A2', default the first two)."""
     machine, values, has_errors = _machine_values(args)
     names = [a.name for a in machine.axes]
+    if len(names) < 2:
+        raise ChaincompError(f"{machine.name} has one axis ({', '.join(names)}): a map, a surface and --html draw "
+                             "over two; --view volume draws the error along one")
     over = tuple(n.strip() for n in over_text.split(",")) if over_text else tuple(names[:2])
     if len(over) != 2 or over[0] == over[1] or any(n not in names for n in over):
         raise ChaincompError(f"--over expects two different axes of {machine.name} ({', '.join(names)}), "
