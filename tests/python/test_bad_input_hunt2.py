@@ -330,3 +330,14 @@ def test_plot_of_a_one_axis_machine(capsys, tmp_path):
                  match="one_axis has one axis (X): a map, a surface and --html draw over two")
     code, err = _run(capsys, "plot", m, "--set", "EXX=1", "--view", "volume", "-o", tmp_path / "v.png")
     assert code == 0, err
+
+
+@pytest.mark.parametrize("verb,options", [
+    ("eval", []),
+    ("plot", ["-o", "x.png"]),
+    ("ballbar", ["--plane", "XY", "--radius", "10"]),
+])
+def test_an_empty_params_value_is_refused(capsys, tmp_path, monkeypatch, verb, options):
+    """--params '' ran with every error zero: eval printed the nominal pose alone, exit 0."""
+    monkeypatch.chdir(tmp_path)
+    _refused(capsys, verb, VMC, "--params", "", *options, match="--params: an empty value")

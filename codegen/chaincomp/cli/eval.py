@@ -98,6 +98,8 @@ def angle_between(a, b):
 
 
 def run(args) -> int:
+    if args.params is not None and not args.params.strip():
+        raise ChaincompError("--params: an empty value (leave the option out for no error values)")
     machine = load(args.machine)
     values, with_errors = values_for(machine, args.params, args.sets)
     check_inside(values)
