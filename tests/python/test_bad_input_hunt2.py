@@ -341,3 +341,12 @@ def test_an_empty_params_value_is_refused(capsys, tmp_path, monkeypatch, verb, o
     """--params '' ran with every error zero: eval printed the nominal pose alone, exit 0."""
     monkeypatch.chdir(tmp_path)
     _refused(capsys, verb, VMC, "--params", "", *options, match="--params: an empty value")
+
+
+def test_a_held_axis_beyond_its_limits_warns(capsys, tmp_path):
+    """vmc_xyz's Z travels -400..0 mm: a trace held at Z = 100 mm was fitted without a word (a
+    prediction with --set Z=100 warns)."""
+    path = _trace(tmp_path, HEAD.replace("Z=0 mm", "Z=100 mm").replace("0, 0, 400 mm", "0, 0, 500 mm") + ROWS)
+    code, err = _run(capsys, "ballbar", VMC, "--fit", path)
+    assert code == 0, err
+    assert f"warning: {path}:5: held: Z = 100 mm is outside its limits [-400, 0]" in err

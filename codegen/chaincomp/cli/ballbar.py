@@ -428,6 +428,11 @@ def run_fit(args) -> int:
     values, _ = values_for(machine, args.params, [])
     setup = trace.setup
     values.update(setup.held)
+    for n, v in setup.held.items():   # as --set warns in a prediction
+        s, (lo, hi) = machine.symbol(n), machine.symbol(n).limits
+        if not lo <= s.from_internal(v) <= hi:
+            print(f"chaincomp ballbar: warning: {args.fit}:{trace.where['held']}: held: {n} = {s.from_internal(v):g} "
+                  f"{s.unit.name} is outside its limits [{lo:g}, {hi:g}]", file=sys.stderr)
     model = ExactModel(machine)
     setup.axes = bb.plane_axes(machine, setup.plane, values, list(setup.axes) if setup.axes else None, model,
                                source=trace)
