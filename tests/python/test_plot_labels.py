@@ -59,8 +59,10 @@ def _parser():
 @pytest.fixture
 def figures(monkeypatch):
     """Run a verb in-process; the figures it would save, unsaved."""
+    from chaincomp.cli import figures as F
     caught = []
     monkeypatch.setattr(Figure, "savefig", lambda fig, *a, **k: caught.append(fig))
+    monkeypatch.setattr(F, "write_file", lambda path, data: None)   # F.save's write: no empty files left
 
     def run(*argv):
         caught.clear()
