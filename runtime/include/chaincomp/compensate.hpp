@@ -99,7 +99,7 @@ template <class K>
 struct Result {
   typename K::Axes corrected;
   double residual_point = 0;      // mm
-  double residual_direction = 0;  // rad (0 where the direction is not corrected)
+  double residual_direction = 0;  // rad: the direction (with a frame: orientation) residual; 0 where not corrected
 };
 
 // Kept by a caller across the commands of a stream (of one model): a command near the last
@@ -244,6 +244,30 @@ constexpr int kLinearAxes() noexcept {
   return count;
 }
 
+// With a tool frame (Pose: point, direction z, the frame's x axis) and at least three rotary
+// axes, the orientation is corrected in full: rows 3..5 are then the rotation-vector
+// residual, not the change of the direction.
+template <class K>
+constexpr bool kCorrectsOrientation() noexcept {
+  return K::Pose::RowsAtCompileTime == 9 && K::kCorrectsDirection && K::kNumAxes - kLinearAxes<K>() >= 3;
+}
+
+// The orientation residual of an actual frame (za, xa) against the target (zt, xt, yt = zt x
+// xt): zt x za (the rotation vector's part orthogonal to zt) + (yt . xa) zt (its part about
+// zt). It equals the rotation vector omega of R_actual R_target^T to first order and is zero
+// exactly where the frames agree; its Jacobian is [zt]x Jz + zt (yt^T Jx).
+// a x b (Eigen's cross needs the Geometry module).
+template <class A, class B>
+Eigen::Vector3d cross3(const A& a, const B& b) noexcept {
+  return Eigen::Vector3d(a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]);
+}
+
+template <class Z, class X>
+Eigen::Vector3d orientation_residual(const Eigen::Vector3d& zt, const Eigen::Vector3d& yt, const Z& za,
+                                     const X& xa) noexcept {
+  return cross3(zt, za) + yt.dot(xa) * zt;
+}
+
 // Whether every axis of q lies within `fraction` of its correction bound around `command`.
 template <class K>
 bool within_bounds(const typename K::Axes& q, const typename K::Axes& command, double fraction = 1.0) noexcept {
@@ -312,10 +336,23 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
   // within the trust region: the point alone is corrected then, by the linear axes where
   // the machine has three, and the direction error is reported.
   bool point_only = false;
+  // With a frame: the target's z and y axes, which the orientation rows are taken against.
+  Eigen::Vector3d target_z = Eigen::Vector3d::Zero(), target_y = Eigen::Vector3d::Zero();
+  if constexpr (kCorrectsOrientation<K>()) {
+    target_z = ws.target.template segment<3>(3);
+    target_y = cross3(target_z, ws.target.template segment<3>(6));
+  }
   auto factorise = [&]() {
     J.template topRows<3>() = ws.jacobian.template topRows<3>();
-    if constexpr (K::kCorrectsDirection) {
-      J.template bottomRows<3>() = kDirectionWeight * ws.jacobian.template bottomRows<3>();
+    if constexpr (kCorrectsOrientation<K>()) {
+      for (int i = 0; i < n; ++i) {
+        const Eigen::Vector3d jz = ws.jacobian.col(i).template segment<3>(3);
+        const Eigen::Vector3d jx = ws.jacobian.col(i).template segment<3>(6);
+        J.col(i).template tail<3>() = kDirectionWeight * orientation_residual(target_z, target_y, jz, jx);
+      }
+      if (point_only) J.template bottomRows<3>().setZero();
+    } else if constexpr (K::kCorrectsDirection) {
+      J.template bottomRows<3>() = kDirectionWeight * ws.jacobian.template middleRows<3>(3);
       if (point_only) J.template bottomRows<3>().setZero();
     }
     for (int i = 0; i < n; ++i) {
@@ -353,8 +390,11 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
   };
   auto set_residual = [&]() {
     r.template head<3>() = ws.pose.template head<3>() - ws.target.template head<3>();
-    if constexpr (K::kCorrectsDirection) {
-      r.template tail<3>() = kDirectionWeight * (ws.pose.template tail<3>() - ws.target.template tail<3>());
+    if constexpr (kCorrectsOrientation<K>()) {
+      r.template tail<3>() = kDirectionWeight * orientation_residual(target_z, target_y, ws.pose.template segment<3>(3),
+                                                                      ws.pose.template segment<3>(6));
+    } else if constexpr (K::kCorrectsDirection) {
+      r.template tail<3>() = kDirectionWeight * (ws.pose.template segment<3>(3) - ws.target.template segment<3>(3));
     }
   };
   int budget = kMaxSteps;
