@@ -39,7 +39,8 @@ def test_volume_view_of_an_error_table(tmp_path):
     from chaincomp.cli.main import build_parser
     p = tmp_path / "p.yaml"
     p.write_text("machine: vmc_xyz\nvalues:\n  EXX:\n    axis: X\n    units: [mm, um]\n"
-                 "    interpolation: linear\n    outside: hold\n    table:\n      - [-400, 0]\n      - [0, 2]\n      - [400, 4]\n")
+                 "    interpolation: linear\n    outside: hold\n"
+                 "    table:\n      - [-400, 0]\n      - [0, 2]\n      - [400, 4]\n")
     args = build_parser().parse_args(["plot", VMC, "--params", str(p), "--view", "volume", "--grid", "3"])
     plot._normalise(args)
     d = plot.volume_data(args, args.over, args.grid)

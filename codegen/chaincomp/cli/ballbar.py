@@ -341,7 +341,8 @@ def _sigma_text(machine, error, axis, k, sd) -> str:
 
 def _no_empty_values(args) -> None:
     """An empty option value is a typo, not a request for the default (as protocol --angles '')."""
-    given = [("--params", args.params), ("--centre", args.centre), ("--axes", args.axes), ("--fit", args.fit), ("--plot", args.plot),
+    given = [("--params", args.params), ("--centre", args.centre), ("--axes", args.axes), ("--fit", args.fit),
+             ("--plot", args.plot),
              ("-o", args.output)] + [("--prefer", v) for v in args.prefer] + \
         [("--assume-zero", v) for v in args.assume_zero]
     for opt, v in given:

@@ -159,8 +159,8 @@ def run(args) -> int:
     import matplotlib
     matplotlib.use("Agg")
     _normalise(args)
-    for opt, v in (("--params", args.params), ("--over", args.over), ("--range", args.range1), ("--range2", args.range2), ("-o", args.output),
-                   ("--html", args.html)):
+    for opt, v in (("--params", args.params), ("--over", args.over), ("--range", args.range1),
+                   ("--range2", args.range2), ("-o", args.output), ("--html", args.html)):
         if v is not None and not v.strip():
             raise ChaincompError(f"{opt}: an empty value (leave the option out for its default)")
     inputs = (args.machine, args.params, args.replay, args.table)
