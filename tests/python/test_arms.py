@@ -92,7 +92,7 @@ def test_panda_equals_frankas_urdf_frame_for_frame(tmp_path):
 
 @pytest.mark.parametrize("arm", ["panda", "ur5"])
 def test_compensation_of_an_arm_holds_point_and_direction_or_reports_the_residual(arm, tmp_path):
-    """What chaincompd / replay do on an arm today (full orientation is issue #17 item 4):
+    """What chaincompd / replay do on an arm without a tool frame (with one, the next test):
     the tool point and the tool direction are corrected (5 conditions; a six-joint arm has one
     joint combination left, a seven-joint arm two, and the least-squares step takes the
     smallest correction, leaving the turn about the tool axis free); every command is either
@@ -128,3 +128,44 @@ def test_compensation_of_an_arm_holds_point_and_direction_or_reports_the_residua
     assert miss[ok].max() < 1e-6 and tilt[ok].max() < 1e-9
     reported = np.array([float(r["residual_point_mm"]) for r in rows])
     assert np.allclose(miss[~ok], reported[~ok], rtol=1e-6, atol=1e-10)
+
+
+@pytest.mark.parametrize("arm", ["panda", "ur5"])
+def test_replay_of_an_arm_with_a_tool_frame_corrects_point_and_orientation(arm, tmp_path):
+    """The same through replay with the arm's tool given a frame (tests/python/
+    test_arm_compensation.py: the variants and numpy models): position and full orientation
+    (six conditions; the Panda's seventh joint takes the smallest correction). Every command
+    corrected (status 0: the numpy arm at the corrected joints within 1e-6 mm and 1e-9 rad of
+    the nominal frame) or reported (status 1, near the singular poses the simulated path
+    starts from) with each correction within its bound and the residual the numpy arm leaves."""
+    if not os.path.isfile(os.path.join(BUILD, "bin", "chaincomp_replay")):
+        pytest.skip("no C++ build (tools/setup)")
+    from scipy.spatial.transform import Rotation
+    from test_arm_compensation import ARMS as FRAME_ARMS
+    write, numpy_arm = FRAME_ARMS[arm]
+    path = write(tmp_path)
+    m = load_machine(str(path))
+    params = os.path.join(PARAMS, f"{arm}-demo.yaml")
+    log, out = tmp_path / "arm.lcmlog", tmp_path / "replay.csv"
+    code, _, err = run("simulate-log", path, "-o", log, "--seconds", "0.2")
+    assert code == 0, err
+    code, _, err = run("replay", log, "--machine", path, "--params", params, "--config", E2E_CONFIG, "--csv", out)
+    assert code == 0, err
+    with open(out) as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 200 and {r["status"] for r in rows} <= {"0", "1"}
+    deg = math.pi / 180
+    cmd = np.array([[float(r[f"commanded_{a.name}_deg"]) * deg for a in m.axes] for r in rows])
+    cor = np.array([[float(r[f"corrected_{a.name}_deg"]) * deg for a in m.axes] for r in rows])
+    assert np.abs(cor - cmd).max() <= 0.0175 + 1e-12   # kMaxAngularCorrection
+    values = load_params(params, m)
+    R1, p1 = numpy_arm(cor, {s.name: values.get(s.name, 0.0) for s in m.errors})
+    R0, p0 = numpy_arm(cmd)
+    miss = np.linalg.norm(p1 - p0, axis=1)
+    angle = np.linalg.norm(Rotation.from_matrix(R1 @ np.swapaxes(R0, -1, -2)).as_rotvec(), axis=1)
+    ok = np.array([r["status"] == "0" for r in rows])
+    assert ok.sum() >= 100, ok.sum()
+    assert miss[ok].max() < 1e-6 and angle[ok].max() < 1e-9
+    reported = np.array([[float(r["residual_point_mm"]), float(r["residual_direction_rad"])] for r in rows])
+    assert np.allclose(miss[~ok], reported[~ok, 0], rtol=1e-6, atol=1e-10)
+    assert np.allclose(angle[~ok], reported[~ok, 1], rtol=1e-2, atol=1e-10)
