@@ -46,6 +46,10 @@ MAX_ROWS = 20_000  # set-ups in a file or a --setups spec: bounds the fit's memo
 MAX_JACOBIAN = 5_000_000    # measured coordinates x parameters (40 MB a copy): bounds the fit's memory and time
 MAX_PARAMETERS = 1000       # the rank analysis holds parameters x parameters (8 MB)
 _CHUNK = 1_000_000          # parameter sets x rows evaluated in one broadcast call of the chain
+# The smoothing weight (per squared second difference in the error's declared unit): at 1e12 a
+# table is already a straight line to a millionth of a unit; larger weights only swamp the data's
+# rows in rounding (at 1e200 the fit saw one combination, at 1e306 none).
+MAX_SMOOTH = 1e12
 PROGRESS_SIZE = 1_000_000   # parameters x coordinates above which a fit reports its stages (seconds)
 _TIE = 1e-9       # pivoted QR: columns this close (relative) to the largest remaining norm tie
 DIRECTIONS = ("kx", "ky", "kz")       # measured tool direction (unit vector components)
@@ -438,6 +442,8 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     give non-finite values."""
     model = model or ExactModel(machine)
     varies = _check_vary(machine, vary, assume_zero)
+    if not 0 <= smooth <= MAX_SMOOTH:
+        raise ChaincompError(f"--smooth: must be at least 0 and at most {MAX_SMOOTH:g}, got {smooth!r}")
     if smooth and not any(v.kind == "table" and len(v.knots) > 2 for v in varies.values()):
         raise ChaincompError("--smooth: no error is fitted as a table of 3 or more knots (--vary NAME=table:...) "
                              "to smooth")

@@ -8,7 +8,7 @@ import sys
 from ..calibration import _write_loadable, find_slides
 from ..display import add_units_argument
 from ..errors import ChaincompError
-from ..identify import COMPONENTS, DIRECTIONS, Vary, identify, params_yaml, read_table, to_json, to_text
+from ..identify import COMPONENTS, DIRECTIONS, MAX_SMOOTH, Vary, identify, params_yaml, read_table, to_json, to_text
 from ..machine import Symbol
 from ..params import parse_value
 from ..protocol import check_errors
@@ -158,10 +158,11 @@ def add_parser(sub) -> None:
                    help="fit error NAME as a table on these knots (the axis' declared unit; linear between "
                         "them, held beyond) or a polynomial of this degree along its slide's axis "
                         "(NAME@AXIS=... names the axis); repeatable")
-    p.add_argument("--smooth", type=number(0.0), default=0.0, metavar="LAMBDA",
+    p.add_argument("--smooth", type=number(0.0, MAX_SMOOTH), default=0.0, metavar="LAMBDA",
                    help="add LAMBDA x the sum of squared second differences of each table's knot values (in "
-                        "the error's declared unit, e.g. um) to the weighted sum of squares; needs --sigma "
-                        "(default 0: none)")
+                        "the error's declared unit, e.g. um) to the weighted sum of squares; needs --sigma; "
+                        f"0 to {MAX_SMOOTH:g} (at {MAX_SMOOTH:g} a table is a straight line to a millionth "
+                        "of its unit: more only drowns the data in rounding) (default 0: none)")
     p.add_argument("-o", "--output", metavar="params.yaml",
                    help="write the identified values as a params file (for eval and chaincompd); "
                         "never one of the inputs")

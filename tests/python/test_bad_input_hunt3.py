@@ -1,0 +1,57 @@
+"""The third bad-input hunt: faults found by hand in verbs whose authors have finished, each with
+the message and exit code the contract asks for written here (exit 2 and one line naming the
+option, or the file, line and field; never exit 3, never a silent wrong value or a silent
+success)."""
+
+from __future__ import annotations
+
+import pytest
+
+from chaincomp.cli.main import main
+from conftest import machine_path
+
+VMC = machine_path("vmc_xyz")
+
+
+def _run(capsys, *argv) -> tuple[int, str, str]:
+    capsys.readouterr()
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _refused(capsys, *argv, match: str) -> str:
+    code, out, err = _run(capsys, *argv)
+    assert code == 2, err
+    assert match in err, err
+    assert "Traceback" not in err and "internal error" not in err
+    return err
+
+
+@pytest.fixture(scope="module")
+def measurements(tmp_path_factory) -> str:
+    """Tool points of vmc_xyz at 30 random set-ups, no errors, 1 um noise (input data only)."""
+    path = tmp_path_factory.mktemp("meas") / "meas.csv"
+    assert main(["simulate-measurements", VMC, "--setups", "random:30", "--noise", "1um", "-o", str(path)]) == 0
+    return str(path)
+
+
+# ----------------------------------------------------------------------------- identify
+
+
+
+@pytest.mark.parametrize("weight", ["1e13", "1e200", "1e306"])
+def test_identify_refuses_a_smoothing_weight_beyond_1e12(capsys, measurements, weight):
+    """At 1e200 the fit printed (0.0 ± 1.0)e-100 µm, at 1e306 'nothing to identify'."""
+    _refused(capsys, "identify", VMC, measurements, "--minimal", "--vary", "EXX=table:-400,0,400",
+             "--sigma", "1um", "--smooth", weight,
+             match=f"argument --smooth: must be at least 0 and at most 1e+12, got '{weight}'")
+
+
+def test_identify_api_refuses_a_smoothing_weight_beyond_1e12(measurements):
+    from chaincomp.errors import ChaincompError
+    from chaincomp.identify import identify, read_table
+    from chaincomp.machine import load_machine
+    m = load_machine(VMC)
+    with pytest.raises(ChaincompError, match="--smooth: must be at least 0 and at most 1e"):
+        identify(m, read_table(measurements, m), sigma=1e-3, smooth=1e13)
