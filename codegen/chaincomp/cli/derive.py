@@ -64,6 +64,8 @@ def report(d: Derivation, progress: bool = False) -> dict:
                     sp.trigsimp(d.degree_part(d.orientation[i], k)), d.small)
     prog.step("error gain matrix")
     for comp, row in d.gain_matrix().items():
+        if comp.startswith("w"):   # the rotation vector's rows carry cos² + sin² from R·R₀ᵀ
+            row = [sp.trigsimp(e) for e in row]
         out["gain"][comp] = dict(zip(names, row))
     prog.done()
     return {k: v for k, v in out.items() if v}
