@@ -55,3 +55,40 @@ def test_identify_api_refuses_a_smoothing_weight_beyond_1e12(measurements):
     m = load_machine(VMC)
     with pytest.raises(ChaincompError, match="--smooth: must be at least 0 and at most 1e"):
         identify(m, read_table(measurements, m), sigma=1e-3, smooth=1e13)
+
+
+# ----------------------------------------------------------------------------- empty -o and --params
+
+@pytest.mark.parametrize("argv", [
+    ["protocol", machine_path("panda"), "--poses", "30", "-o"],        # designed 30 poses, wrote nothing
+    ["identify", VMC, "MEAS", "-o"],
+    ["simulate-measurements", VMC, "-o"],
+    ["testvectors", VMC, "-o"],
+    ["report", VMC, "-o"],
+    ["budget", VMC, "--plot"],
+])
+@pytest.mark.parametrize("value", ["", "  "])
+def test_an_empty_output_is_refused_before_any_work(capsys, monkeypatch, tmp_path, measurements, argv, value):
+    import chaincomp.cli.protocol as protocol
+
+    def no_design(*args, **kwargs):
+        raise AssertionError("designed the poses before refusing -o")
+    monkeypatch.setattr(protocol, "design_poses", no_design)
+    monkeypatch.chdir(tmp_path)
+    argv = [measurements if a == "MEAS" else a for a in argv]
+    _refused(capsys, *argv, value, match=f"{argv[-1]}: an empty value (expected a file name)")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_build_refuses_an_empty_output_folder_before_compiling(capsys, monkeypatch, tmp_path):
+    """build --linuxcnc -o '' compiled (minutes) and exited 0 without saying where it put the library."""
+    import chaincomp.cli.build as verb
+
+    def no_compile(*args, **kwargs):
+        raise AssertionError("compiled before refusing the option")
+    monkeypatch.setattr(verb, "build", no_compile)
+    monkeypatch.setattr(verb, "build_linuxcnc", no_compile)
+    _refused(capsys, "build", VMC, "--linuxcnc", "-o", "", match="-o: an empty value (expected a folder)")
+    _refused(capsys, "build", VMC, "-o", " ", match="-o: an empty value (expected a folder)")
+    _refused(capsys, "build", VMC, "--linuxcnc", "--params", "",
+             match="--params: an empty value (leave the option out for every error zero)")

@@ -7,7 +7,7 @@ import sys
 
 from ..build import RT_MODULE, build, build_linuxcnc, copy_to, install_rt
 from ..errors import ChaincompError
-from .common import _same_file
+from .common import _same_file, refuse_empty
 
 
 def add_parser(sub) -> None:
@@ -39,6 +39,8 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    refuse_empty(("-o", args.output), hint="expected a folder")
+    refuse_empty(("--params", args.params), hint="leave the option out for every error zero")
     if args.output:  # before the build: a bad folder should not cost a compile
         parent = os.path.dirname(os.path.abspath(args.output))
         if os.path.exists(args.output) and not os.path.isdir(args.output):

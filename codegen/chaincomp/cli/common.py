@@ -86,6 +86,14 @@ def add_values_arguments(p) -> None:
                         "'VALUE UNIT'; repeatable, applied after --params")
 
 
+def refuse_empty(*given: tuple[str, str | None], hint: str = "leave the option out for its default") -> None:
+    """Refuse an option given an empty value (an unset shell variable, say): a typo, not a
+    request for the default. given: (option, value) pairs, value None when not given."""
+    for option, value in given:
+        if value is not None and not value.strip():
+            raise ChaincompError(f"{option}: an empty value ({hint})")
+
+
 def values_for(machine: Machine, params_path: str | None, sets: list[str]) -> tuple[dict, bool]:
     """Internal values of every symbol, and whether any error value was given.
 
@@ -131,8 +139,9 @@ def _same_file(a: str, b: str) -> bool:
 def check_output(output: str | None, *inputs: str | None, option: str = "-o") -> None:
     """Refuse, before anything is written, an output that is one of the inputs, or whose
     folder does not exist or cannot be written to."""
-    if not output:
+    if output is None:
         return
+    refuse_empty((option, output), hint="expected a file name")
     for path in inputs:
         if path and _same_file(output, path):
             raise ChaincompError(f"{option} {output}: is also an input ({path}); "
