@@ -92,3 +92,10 @@ def test_build_refuses_an_empty_output_folder_before_compiling(capsys, monkeypat
     _refused(capsys, "build", VMC, "-o", " ", match="-o: an empty value (expected a folder)")
     _refused(capsys, "build", VMC, "--linuxcnc", "--params", "",
              match="--params: an empty value (leave the option out for every error zero)")
+
+
+@pytest.mark.parametrize("argv", [["budget", VMC]])
+def test_an_empty_params_value_is_refused(capsys, argv):
+    """--params '' ran with every error zero (common.values_for read it as no params file)."""
+    _refused(capsys, *argv, "--params", "",
+             match="--params: an empty value (leave the option out for no error values)")

@@ -100,6 +100,7 @@ def values_for(machine: Machine, params_path: str | None, sets: list[str]) -> tu
     Axes default to 0 (or the middle of their range when 0 is outside it), constants to
     their nominal, errors to 0; then the params file, then --set.
     """
+    refuse_empty(("--params", params_path), hint="leave the option out for no error values")
     values = machine.nominal_values()
     for s in machine.axes:
         values[s.name] = s.to_internal(s.default_position)
