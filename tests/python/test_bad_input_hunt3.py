@@ -57,6 +57,14 @@ def test_identify_api_refuses_a_smoothing_weight_beyond_1e12(measurements):
         identify(m, read_table(measurements, m), sigma=1e-3, smooth=1e13)
 
 
+@pytest.mark.parametrize("option", ["--prefer", "--assume-zero", "--vary", "--sigma"])
+@pytest.mark.parametrize("value", ["", " "])
+def test_identify_refuses_an_empty_option_value(capsys, measurements, option, value):
+    """--prefer '' and --assume-zero '' were ignored (exit 0, the fit as without them)."""
+    _refused(capsys, "identify", VMC, measurements, "--minimal", option, value,
+             match=f"chaincomp identify: error: {option}: an empty value (leave the option out for its default)")
+
+
 # ----------------------------------------------------------------------------- empty -o and --params
 
 @pytest.mark.parametrize("argv", [

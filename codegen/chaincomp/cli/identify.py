@@ -15,7 +15,7 @@ from ..protocol import check_errors
 from ..units import UNITS
 from ..varying import MAX_POLYNOMIAL_COEFFICIENTS, MAX_TABLE_KNOTS
 from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, check_output, load,
-                     number, number_list, to_json as json_text)
+                     number, number_list, refuse_empty, to_json as json_text)
 from .protocol import names
 
 
@@ -172,6 +172,8 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    refuse_empty(("--sigma", args.sigma), *(("--prefer", v) for v in args.prefer),
+                 *(("--assume-zero", v) for v in args.assume_zero), *(("--vary", v) for v in args.vary))
     machine = load(args.machine)
     check_output(args.output, args.measurements, args.machine)
     assume = check_errors(machine, names(",".join(args.assume_zero)), "--assume-zero")
