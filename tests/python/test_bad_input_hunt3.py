@@ -107,3 +107,26 @@ def test_an_empty_params_value_is_refused(capsys, argv):
     """--params '' ran with every error zero (common.values_for read it as no params file)."""
     _refused(capsys, *argv, "--params", "",
              match="--params: an empty value (leave the option out for no error values)")
+
+
+# ----------------------------------------------------------------------------- figures on a full disk
+
+def _iso_runs(tmp_path) -> str:
+    path = tmp_path / "runs.csv"
+    rows = [f"{t},{j},{d},{0.1 * j + (0.5 if d == 'up' else -0.5)}"
+            for j in (1, 2, 3) for d in ("up", "down") for t in (0, 100, 200)]
+    path.write_text("target [mm],run,direction,deviation [um]\n" + "\n".join(rows) + "\n")
+    return str(path)
+
+
+@pytest.mark.parametrize("verb", ["budget", "iso230-2"])
+def test_a_figure_on_a_full_disk_is_an_error_naming_the_file(capsys, monkeypatch, tmp_path, verb):
+    """fig.savefig straight onto /dev/full raised OSError: exit 3. /dev/full takes the open and
+    refuses every write (ENOSPC) to anyone; the up-front check_image (which as root passes it
+    anyway) is skipped so that the write itself fails."""
+    import importlib
+    module = importlib.import_module(f"chaincomp.cli.{verb.replace('-', '_')}")
+    monkeypatch.setattr(module, "check_image", lambda *args, **kwargs: None)
+    argv = [verb, VMC, "--set", "EXX=1", "--grid", "2"] if verb == "budget" else [verb, _iso_runs(tmp_path)]
+    _refused(capsys, *argv, "--plot", "/dev/full",
+             match=f"chaincomp {verb}: error: /dev/full: cannot write: No space left on device")

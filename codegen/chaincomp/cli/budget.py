@@ -109,7 +109,7 @@ def plot(b: B.Budget, output: str, pick: list[str], component: str | None, param
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig = build_plot(b, pick, component, params, sets, tolerances)
-    fig.savefig(output)
+    F.save(fig, output)
     plt.close(fig)
 
 

@@ -6,6 +6,7 @@ import sys
 import unicodedata
 
 from .. import iso230_2 as iso
+from . import figures as F
 from .common import add_format_argument, check_image, to_json
 
 # name in the JSON, label in the text report (the standard's symbols)
@@ -112,7 +113,7 @@ def plot(runs: iso.Runs, ev: iso.Evaluation, output: str) -> None:
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(output)
+    F.save(fig, output)
     plt.close(fig)
 
 
