@@ -18,7 +18,8 @@ Each joint on the path base -> tip becomes, in the machine format (internal unit
                       phi = atan2(uy, ux), theta = atan2(sqrt(ux^2 + uy^2), uz): exact expressions
     prismatic         {translate: u·(q + q_zero)}
 
-Error symbols (--errors), per moving joint J (its name sanitised): joint-offsets gives
+Error symbols (--errors), per moving joint J (its name sanitised; x, y, z, kx, ky, kz, the
+measured coordinates' names, become x_ .. kz_ as reserved words do): joint-offsets gives
 J_zero (arcsec, or um for a prismatic joint) added to the joint's motion; origins gives
 J_dx, J_dy, J_dz (um), J_ex, J_ey, J_ez (arcsec), the block T(d)·Rx·Ry·Rz after the
 joint's origin and before its motion (a fixed joint gets none: its origin error is the next
@@ -177,6 +178,17 @@ def sanitise(name: str) -> str:
     return out + "_" if out in RESERVED else out
 
 
+# The measured coordinates' column names (chaincomp.identify.COLUMNS): an axis of one of these
+# names would make a measurements file's column mean both, which identify refuses.
+MEASURED_NAMES = ("x", "y", "z", "kx", "ky", "kz")
+
+
+def axis_name(joint: str) -> str:
+    """A moving joint's symbol: sanitised, and 'x' -> 'x_' as a reserved word is renamed."""
+    out = sanitise(joint)
+    return out + "_" if out in MEASURED_NAMES else out
+
+
 def kinematic_path(path: str, base: str, tip: str) -> tuple[str, list[PathJoint], str]:
     """The robot's name and the joints from link ``base`` down to link ``tip``, checked."""
     src = _Source(path, read_text(path))
@@ -234,7 +246,7 @@ def _path_joint(src: _Source, j, el) -> PathJoint:
         if math.sqrt(sum(a * a for a in axis)) < 1e-9:
             raise src.fail(f"joint {j.name!r}: its axis {list(axis)} is zero", aline, f"{fld}.axis")
         limits = _limits(src, j, el)
-    return PathJoint(j.name, sanitise(j.name) if j.type in MOVING else "", j.type, line, xyz, rpy, axis, limits)
+    return PathJoint(j.name, axis_name(j.name) if j.type in MOVING else "", j.type, line, xyz, rpy, axis, limits)
 
 
 def _limits(src: _Source, j, el) -> tuple:
@@ -396,6 +408,11 @@ def machine_text(urdf_path: str, base: str, tip: str, errors: str = "none", tool
         "# revolute limits converted from rad to deg, continuous joints limited to [-360, 360] deg.",
         "# The tool point and direction are in the frame of the tip link.",
     ]
+    renamed = [j for j in moving if j.axis_name != j.name]
+    if renamed:
+        header += ["# Joints renamed for the machine format (letters, digits and '_'; no reserved word; not x, y, z,",
+                   "# kx, ky, kz, the measured coordinates' names): "
+                   + ", ".join(f"{_comment(j.name)} -> {j.axis_name}" for j in renamed)]
     desc = f"{robot} from URDF, {base} -> {tip}"
     lines = header + [
         f"name: {machine_name}",

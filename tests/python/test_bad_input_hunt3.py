@@ -130,3 +130,58 @@ def test_a_figure_on_a_full_disk_is_an_error_naming_the_file(capsys, monkeypatch
     argv = [verb, VMC, "--set", "EXX=1", "--grid", "2"] if verb == "budget" else [verb, _iso_runs(tmp_path)]
     _refused(capsys, *argv, "--plot", "/dev/full",
              match=f"chaincomp {verb}: error: /dev/full: cannot write: No space left on device")
+
+
+# ----------------------------------------------------------------------------- import-urdf
+
+GANTRY = """<?xml version="1.0"?>
+<robot name="gantry">
+  <link name="base"/><link name="l1"/><link name="l2"/><link name="l3"/><link name="tool"/>
+  <joint name="x" type="prismatic">
+    <parent link="base"/><child link="l1"/><origin xyz="0.1 0 0"/><axis xyz="1 0 0"/>
+    <limit lower="-0.5" upper="0.5" effort="1" velocity="1"/>
+  </joint>
+  <joint name="y" type="prismatic">
+    <parent link="l1"/><child link="l2"/><origin xyz="0 0.2 0"/><axis xyz="0 1 0"/>
+    <limit lower="-0.5" upper="0.5" effort="1" velocity="1"/>
+  </joint>
+  <joint name="z" type="prismatic">
+    <parent link="l2"/><child link="l3"/><origin xyz="0 0 0.3"/><axis xyz="0 0 1"/>
+    <limit lower="-0.5" upper="0.5" effort="1" velocity="1"/>
+  </joint>
+  <joint name="kx" type="revolute">
+    <parent link="l3"/><child link="tool"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/>
+  </joint>
+</robot>
+"""
+
+
+def test_import_urdf_renames_joints_named_like_a_measured_coordinate(capsys, tmp_path):
+    """Joints x, y, z became axes x, y, z, which identify and simulate-measurements then refuse
+    (a column x would be both the axis and the measured coordinate)."""
+    import json
+
+    from chaincomp import identify, urdf
+    assert set(urdf.MEASURED_NAMES) == set(identify.COLUMNS)
+    src, m = tmp_path / "gantry.urdf", tmp_path / "gantry.yaml"
+    src.write_text(GANTRY)
+    code, _, err = _run(capsys, "import-urdf", src, "--base", "base", "--tip", "tool", "--errors", "joint-offsets",
+                        "--tool-point", "0,0,50", "-o", m)
+    assert code == 0, err
+    text = m.read_text()
+    assert ("# kx, ky, kz, the measured coordinates' names): x -> x_, y -> y_, z -> z_, kx -> kx_\n"
+            in text), text
+    # the tool point by hand: the origins and the slides add, in metres -> mm (the tip's 50 mm
+    # along z, which the rotation kx_ leaves where it is)
+    code, out, err = _run(capsys, "eval", m, "--set", "x_=10", "--set", "y_=-20", "--set", "z_=30",
+                          "--set", "kx_=40", "--json")
+    assert code == 0, err
+    assert json.loads(out)["position"] == pytest.approx([110.0, 180.0, 380.0], abs=1e-9)
+    meas = tmp_path / "meas.csv"
+    code, _, err = _run(capsys, "simulate-measurements", m, "--setups", "random:20", "-o", meas)
+    assert code == 0, err
+    code, out, err = _run(capsys, "identify", m, meas, "--assume-zero", "kx__zero", "--sigma", "1um")
+    assert code == 0, err
+    assert "x__zero" in out
+
