@@ -185,3 +185,13 @@ def test_import_urdf_renames_joints_named_like_a_measured_coordinate(capsys, tmp
     assert code == 0, err
     assert "x__zero" in out
 
+
+# ----------------------------------------------------------------------------- integer options
+
+def test_an_integer_option_with_a_control_character_is_not_an_internal_error(capsys):
+    """str.strip() takes '\\x1f' (a unit separator) off, int() does not: '--grid 3\\x1f' passed
+    the digits check and int() raised ValueError (exit 3). test_cli_options' property test found it."""
+    from chaincomp.cli.common import integer
+    assert integer(1, 10)("3\x1f") == 3 and integer(1, 10)(" 4\n") == 4
+    code, _, err = _run(capsys, "protocol", VMC, "--poses", "1\x1f0x")
+    assert code == 2 and "argument --poses: expected an integer, got '1\\x1f0x'" in err, err

@@ -177,9 +177,10 @@ MAX_SEED = 2**32 - 1   # numpy's and Python's seeders both take any value in [0,
 def integer(lo: int, hi: int):
     """An integer in [lo, hi], written as plain digits (no '1e3', '0x10', '1_000')."""
     def parse(text: str) -> int:
-        if not re.fullmatch(r"[+-]?[0-9]{1,30}", text.strip()):
+        t = text.strip()   # str.strip takes more than int() does (e.g. '\x1f'): parse what was matched
+        if not re.fullmatch(r"[+-]?[0-9]{1,30}", t):
             raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}")
-        value = int(text)
+        value = int(t)
         if not lo <= value <= hi:
             raise argparse.ArgumentTypeError(f"must be between {lo} and {hi}, got {value}")
         return value
