@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sympy as sp
 
-from ..derive import COMPONENTS, Derivation, Progress, derive
+from ..derive import COMPONENTS, EXPANDED_TERMS_LIMIT, Derivation, Progress, derive
 from ..machine import Rotation
 from .common import add_format_argument, add_machine_argument, add_order_argument, load, to_json
 
@@ -37,6 +37,18 @@ def _collect(expr: sp.Expr, small: list[sp.Symbol]) -> sp.Expr:
     return sp.collect(sp.expand(expr), small) if small else expr
 
 
+# The rotation vector's terms carry cos² + sin² from R·R₀ᵀ: trigsimp removes them on a short
+# chain (the expansion limit of generate), in terms of at most this many operations; on an arm
+# it takes seconds per term (a UR5: minutes in all), and they are printed as derived.
+TRIGSIMP_MAX_OPS = 150
+
+
+def _simplifier(d: Derivation):
+    short = sum(d.term_count(s, k) for s in d.point + (d.direction or []) for k in range(1, d.order + 1)) \
+        <= EXPANDED_TERMS_LIMIT
+    return lambda e: sp.trigsimp(e) if short and sp.count_ops(e) <= TRIGSIMP_MAX_OPS else e
+
+
 def report(d: Derivation, progress: bool = False) -> dict:
     """Every derived formula, as sympy expressions, keyed like the JSON output. Collecting the
     terms takes most of a high order's time (30 s at order 4 on five_axis_ac): progress on
@@ -44,6 +56,7 @@ def report(d: Derivation, progress: bool = False) -> dict:
     m = d.machine
     prog = Progress(f"derive {m.name}: formulas", progress)
     names = [s.name for s in m.errors]
+    _trig_simplified = _simplifier(d)
     out: dict = {"nominal": {}, "direction": {}, "reference": {}, "error": {}, "direction_error": {},
                  "orientation_error": {}, "gain": {}, "jacobian": {}}
     for i, c in enumerate(COMPONENTS):
@@ -61,11 +74,11 @@ def report(d: Derivation, progress: bool = False) -> dict:
             out["reference"][f"x{c}"] = d.nominal(d.reference[i])
             for k in range(1, d.order + 1):
                 out["orientation_error"].setdefault(f"order{k}", {})[f"w{c}"] = _collect(
-                    sp.trigsimp(d.degree_part(d.orientation[i], k)), d.small)
+                    _trig_simplified(d.degree_part(d.orientation[i], k)), d.small)
     prog.step("error gain matrix")
     for comp, row in d.gain_matrix().items():
-        if comp.startswith("w"):   # the rotation vector's rows carry cos² + sin² from R·R₀ᵀ
-            row = [sp.trigsimp(e) for e in row]
+        if comp.startswith("w"):
+            row = [_trig_simplified(e) for e in row]
         out["gain"][comp] = dict(zip(names, row))
     prog.done()
     return {k: v for k, v in out.items() if v}
