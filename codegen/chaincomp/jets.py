@@ -183,6 +183,18 @@ class JetModel:
         eps = [values[s.name] for s in self.machine.errors]
         return [self._at_errors(j, eps, order) for j in w] if w else None
 
+    def pose_error(self, values: dict, order: int | None = None, backend: str = "numpy") -> list:
+        """The error of every component of the generated Pose (point, direction, the frame's
+        x axis: chaincomp.emit), degrees 1..order, flat."""
+        order = self.order if order is None else order
+        if not 1 <= order <= self.order:
+            raise ValueError(f"order {order}: this model has orders 1..{self.order}")
+        values = resolve(complete(self.machine, values))
+        eps = [values[s.name] for s in self.machine.errors]
+        p, d, frame = self._all_jets(values, backend)
+        vectors = [p] + ([d] if d else []) + frame[:1]
+        return [self._at_errors(j, eps, order) for v in vectors for j in v]
+
     def all_errors(self, values: dict, order: int | None = None, backend: str = "numpy"):
         """(point error, direction error or None, ω or None) of degree 1..order, one pass."""
         order = self.order if order is None else order
