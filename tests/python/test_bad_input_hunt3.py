@@ -5,6 +5,7 @@ success)."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from chaincomp.cli.main import main
@@ -46,6 +47,29 @@ def test_identify_refuses_a_smoothing_weight_beyond_1e12(capsys, measurements, w
     _refused(capsys, "identify", VMC, measurements, "--minimal", "--vary", "EXX=table:-400,0,400",
              "--sigma", "1um", "--smooth", weight,
              match=f"argument --smooth: must be at least 0 and at most 1e+12, got '{weight}'")
+
+
+def test_identify_at_the_smoothing_bound_still_fits_a_straight_table(tmp_path):
+    """EXX a tent 0, 3, 0 um over X's knots -400, 0, 400 mm, every other error zero and held so:
+    without smoothing the fit finds the tent (within 4 standard uncertainties); at the bound,
+    1e12, the second difference is nil (a straight table) and every number finite."""
+    from chaincomp.identify import Vary, identify, read_table
+    from chaincomp.machine import load_machine
+    p, meas = tmp_path / "p.yaml", tmp_path / "meas.csv"
+    p.write_text("machine: vmc_xyz\nvalues:\n  EXX:\n    axis: X\n    units: [mm, um]\n    interpolation: linear\n"
+                 "    outside: hold\n    table:\n      - [-400, 0]\n      - [0, 3]\n      - [400, 0]\n")
+    assert main(["simulate-measurements", VMC, "--params", str(p), "--setups", "random:40", "--noise", "0.1um",
+                 "--seed", "5", "-o", str(meas)]) == 0
+    m = load_machine(VMC)
+    others = tuple(s.name for s in m.errors if s.name != "EXX")
+    knots = ("EXX@X=-400", "EXX@X=0", "EXX@X=400")
+    vary = [Vary("EXX", "X", "table", (-400.0, 0.0, 400.0))]
+    fit = identify(m, read_table(str(meas), m), others, 1e-4, vary=vary)
+    v, u = (np.array([d[k] * 1e3 for k in knots]) for d in (fit.estimates, fit.uncertainties))   # um
+    assert np.all(np.abs(v - [0, 3, 0]) < 4 * u), (v, u)
+    fit = identify(m, read_table(str(meas), m), others, 1e-4, vary=vary, smooth=1e12)
+    v = np.array([fit.estimates[k] * 1e3 for k in knots])
+    assert fit.converged and np.all(np.isfinite(v)) and abs(v[0] - 2 * v[1] + v[2]) < 1e-5, v
 
 
 def test_identify_api_refuses_a_smoothing_weight_beyond_1e12(measurements):
