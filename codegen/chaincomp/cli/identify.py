@@ -161,8 +161,8 @@ def add_parser(sub) -> None:
     p.add_argument("--smooth", type=number(0.0, MAX_SMOOTH), default=0.0, metavar="LAMBDA",
                    help="add LAMBDA x the sum of squared second differences of each table's knot values (in "
                         "the error's declared unit, e.g. um) to the weighted sum of squares; needs --sigma; "
-                        f"0 to {MAX_SMOOTH:g} (at {MAX_SMOOTH:g} a table is a straight line to a millionth "
-                        "of its unit: more only drowns the data in rounding) (default 0: none)")
+                        f"0 to {MAX_SMOOTH:g}, where a table is already straight to a millionth of its unit "
+                        "(more would only drown the data in rounding); default 0: none")
     p.add_argument("-o", "--output", metavar="params.yaml",
                    help="write the identified values as a params file (for eval and chaincompd); "
                         "never one of the inputs")
