@@ -338,12 +338,12 @@ def test_a_five_axis_machine_with_a_frame_compensates_as_without(tmp_path):
     framed.write_text(text.replace("  direction: [0, 0, 1]\n", "  direction: [0, 0, 1]\n  reference: [1, 0, 0]\n"))
     log = tmp_path / "path.lcmlog"
     assert run("simulate-log", plain, "-o", log, "--seconds", "0.2")[0] == 0
+    params = os.path.join(ROOT, "configs", "params", "five_axis_ac-demo.yaml")
+    config = os.path.join(ROOT, "tests", "e2e", "config_test.yaml")
     rows = []
     for m in (plain, framed):
         out = tmp_path / f"{len(rows)}.csv"
-        code, _, err = run("replay", log, "--machine", m, "--params", os.path.join(ROOT, "configs", "params",
-                           "five_axis_ac-demo.yaml"), "--config", os.path.join(ROOT, "tests", "e2e", "config_test.yaml"),
-                           "--csv", out)
+        code, _, err = run("replay", log, "--machine", m, "--params", params, "--config", config, "--csv", out)
         assert code == 0, err
         with open(out) as f:
             rows.append(list(csv.DictReader(f)))
