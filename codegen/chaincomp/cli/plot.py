@@ -216,11 +216,16 @@ def _machine_values(args):
     if getattr(args, "loaded", None) is None:
         machine = load(args.machine)
         values, has_errors = values_for(machine, args.params, args.sets)
-        if not has_errors:
-            F.warn("no error values (give --params P.yaml, or --set an error): every error is zero, so the "
-                   "figure shows nothing")
         args.loaded = machine, values, has_errors
     return args.loaded
+
+
+def _warn_without_errors(args) -> None:
+    """Once per run, after the view's options were checked (a bad option is then the one line)."""
+    if not args.loaded[2] and not getattr(args, "warned_without_errors", False):
+        F.warn("no error values (give --params P.yaml, or --set an error): every error is zero, so the "
+               "figure shows nothing")
+        args.warned_without_errors = True
 
 
 def map_data(args, over_text: str | None, grid: int) -> MapData:
@@ -244,6 +249,7 @@ def map_data(args, over_text: str | None, grid: int) -> MapData:
         i, j = bad[0]
         raise ChaincompError(f"{args.component} is not finite at {over[0]} = {g1[i]:g}, {over[1]} = {g2[j]:g}: the "
                              "machine's expressions or the values given leave their domain there")
+    _warn_without_errors(args)
     if has_errors and not np.any(z):
         F.warn(f"{args.component} is zero everywhere on this grid: no error given moves it, nothing to draw")
     factor, unit = F.component_unit(args.component, machine.length_unit, args.units)
@@ -338,6 +344,7 @@ def volume_data(args, over_text: str | None, grid: int) -> VolumeData:
         raise ChaincompError("the tool point or its error is not finite on this grid: the machine's expressions "
                              "or the values given leave their domain there")
     biggest = float(np.linalg.norm(err, axis=1).max())
+    _warn_without_errors(args)
     if has_errors and biggest == 0.0:
         F.warn("the tool point error is zero everywhere on this grid: nothing to draw")
     span = float((point.max(axis=0) - point.min(axis=0)).max()) or 1.0
