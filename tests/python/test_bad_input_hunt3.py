@@ -5,6 +5,9 @@ success)."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -219,3 +222,12 @@ def test_an_integer_option_with_a_control_character_is_not_an_internal_error(cap
     assert integer(1, 10)("3\x1f") == 3 and integer(1, 10)(" 4\n") == 4
     code, _, err = _run(capsys, "protocol", VMC, "--poses", "1\x1f0x")
     assert code == 2 and "argument --poses: expected an integer, got '1\\x1f0x'" in err, err
+
+
+def test_simulate_measurements_refuses_an_empty_params(tmp_path):
+    # '' (an unset shell variable) is a typo, not a request for every error at zero
+    proc = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "simulate-measurements",
+                           machine_path("vmc_xyz"), "--params", "", "-o", str(tmp_path / "m.csv")],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "--params: an empty value" in proc.stderr, proc.stderr
+    assert not (tmp_path / "m.csv").exists()

@@ -14,7 +14,7 @@ from ..identify import MAX_ROWS, coordinate_named_axes, read_table, simulate, wr
 from ..params import load_params, parse_sets
 from ..protocol import check_measure
 from ..protocol_linear import auto_levels
-from .common import add_machine_argument, add_seed_argument, check_output, load, number_list
+from .common import add_machine_argument, add_seed_argument, check_output, load, number_list, refuse_empty
 from .identify import length
 from .protocol import names
 
@@ -111,6 +111,7 @@ def setups(machine, spec: str, sets: list[str], rng) -> dict[str, np.ndarray]:
 
 
 def run(args) -> int:
+    refuse_empty(("--params", args.params), hint="leave the option out for every error zero")
     machine = load(args.machine)
     for s in coordinate_named_axes(machine):
         raise ChaincompError(f"axis {s.name!r} has the name of the measured coordinate {s.name}: the "
