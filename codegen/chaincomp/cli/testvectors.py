@@ -42,7 +42,7 @@ def run(args) -> int:
     params = [s for s in machine.symbols if s.role != "axis"]
     lines = [f"# chaincomp testvectors {machine.name}: count axes params pose_size; then per vector:",
              "# axes, params (kParams order), pose_exact, pose_nominal, error_order1, error_order2",
-             f"{args.count} {len(machine.axes)} {len(params)} {6 if machine.tool_direction else 3}"]
+             f"{args.count} {len(machine.axes)} {len(params)} {3 + 3 * len(machine.tool_axes)}"]
     for _ in range(args.count):
         values = machine.nominal_values()
         for a in machine.axes:
@@ -52,9 +52,10 @@ def run(args) -> int:
         mp = {k: mpmath.mpf(v) for k, v in values.items()}
         zero = dict(mp, **{e.name: mpmath.mpf(0) for e in machine.errors})
         rows = [[values[a.name] for a in machine.axes], [values[s.name] for s in params]]
-        for pose in (exact.pose(mp, "mpmath"), exact.pose(zero, "mpmath"),
-                     model.error(mp, 1, "mpmath"), model.error(mp, 2, "mpmath")):
-            rows.append(list(pose[0]) + list(pose[1] or []))
+        # the generated Pose's layout: point, then direction and the frame's x axis where defined
+        for pose in (exact.frame(mp, "mpmath"), exact.frame(zero, "mpmath")):
+            rows.append([v for vector in pose if vector is not None for v in vector])
+        rows += [model.pose_error(mp, k, "mpmath") for k in (1, 2)]
         if not all(math.isfinite(float(v)) for row in rows for v in row):
             at = ", ".join(f"{a.name} = {a.from_internal(values[a.name]):g}" for a in machine.axes)
             raise ChaincompError(f"the model is not finite at {at} (vector {len(lines) - 2}): the machine's "
