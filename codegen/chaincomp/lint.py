@@ -50,13 +50,14 @@ def _poses(machine: Machine) -> dict[str, np.ndarray]:
 
 
 def _moves_tool(model: ExactModel, values: dict, name: str) -> bool:
+    """Whether ``name`` moves the tool point, direction or frame (its x axis: a turn about the
+    tool axis moves only that)."""
     up, down = dict(values), dict(values)
     up[name] = values[name] + _STEP
     down[name] = values[name] - _STEP
-    (p1, d1), (p0, d0) = model.pose(up), model.pose(down)
-    parts = list(p1) + (list(d1) if d1 else [])
-    base = list(p0) + (list(d0) if d0 else [])
-    return any(np.max(np.abs((np.asarray(a) - np.asarray(b)) / (2 * _STEP))) > _ZERO for a, b in zip(parts, base))
+    plus, minus = model.frame(up), model.frame(down)
+    return any(np.max(np.abs((np.asarray(a) - np.asarray(b)) / (2 * _STEP))) > _ZERO
+               for u, v in zip(plus, minus) if u is not None for a, b in zip(u, v))
 
 
 def lint(machine: Machine, model: ExactModel | None = None) -> list[Finding]:
@@ -64,7 +65,8 @@ def lint(machine: Machine, model: ExactModel | None = None) -> list[Finding]:
     model = model or ExactModel(machine)
     values = {**_poses(machine), **{s.name: np.zeros(POSES) for s in machine.errors}}
     findings = []
-    what = "tool point or direction" if machine.tool_direction else "tool point"
+    what = ("tool frame (point and orientation)" if machine.tool_reference is not None
+            else "tool point or direction" if machine.tool_direction else "tool point")
     for s in machine.symbols:
         if s.role == "constant":
             continue

@@ -96,3 +96,24 @@ def test_bundled_machines_lint_clean(path):
     proc = run("lint", "--strict", path)
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ""
+
+
+def test_a_turn_about_the_tool_axis_moves_only_a_tool_frame(tmp_path):
+    # ez turns about the tool point's own z: with direction z it moves neither point nor
+    # direction, but a frame's x axis turns with it
+    direction = MACHINE.replace("point: [0, 0, 0]", "point: [0, 0, 0]\n  direction: [0, 0, 1]")
+    proc = run("lint", str(write(tmp_path, direction)))
+    assert proc.returncode == 0
+    assert "symbols.ez: error ez never moves the tool point or direction" in proc.stderr, proc.stderr
+    frame = direction.replace("direction: [0, 0, 1]", "direction: [0, 0, 1]\n  reference: [1, 0, 0]")
+    proc = run("lint", "--strict", str(write(tmp_path, frame)))
+    assert proc.returncode == 0 and "warning" not in proc.stderr, proc.stderr
+    # marked unobservable, as a spindle's turn is without a frame: with one it is seen
+    marked = frame.replace("{name: ez, role: error, unit: arcsec}", "{name: ez, role: error, unit: arcsec, unobservable: true}")
+    proc = run("lint", str(write(tmp_path, marked)))
+    assert "symbols.ez.unobservable: error ez is marked unobservable but moves the tool frame" in proc.stderr, \
+        proc.stderr
+    # ez turned back by a later -ez: it moves nothing, the frame included
+    dz = frame.replace("{errors: {dx: dx, ez: ez}}", "{errors: {dx: dx, ez: ez}}\n  - {rotate: z, angle: -ez}")
+    proc = run("lint", str(write(tmp_path, dz)))
+    assert "symbols.ez: error ez never moves the tool frame (point and orientation)" in proc.stderr, proc.stderr
