@@ -41,6 +41,21 @@ def line_of(node, key=None, default=None) -> int | None:
     return default if default is not None else getattr(node, "line", None)
 
 
+# A number with an exponent that YAML 1.1 (PyYAML) takes for text: it wants a dot in the
+# mantissa and a sign on the exponent (1.0e+3); 1e3, 1.5e3 and 1e+3 come as strings.
+_TEXT_EXPONENT = re.compile(r"([-+]?)([0-9]*)(\.?)([0-9]*)[eE]([-+]?)([0-9]+)")
+
+
+def yaml11_number(text: str) -> str | None:
+    """'1e3' -> '1.0e+3', the spelling YAML 1.1 reads as the number meant; None for other text
+    (and for '1.0e+3', which is text only when quoted). Number-sized text only, as the C++ loader's."""
+    m = _TEXT_EXPONENT.fullmatch(text) if len(text) <= 64 else None
+    if not m or not (m[2] or m[4]) or (m[3] and m[5]):
+        return None
+    sign, whole, _, frac, esign, exp = m.groups()
+    return f"{sign}{whole}.{frac or ('' if not whole else '0')}e{esign or '+'}{exp}"
+
+
 def describe(value) -> str:
     """A value of the wrong shape or type, as validation messages name it."""
     if isinstance(value, dict):
@@ -49,6 +64,9 @@ def describe(value) -> str:
         return f"a list of {len(value)} item" + ("" if len(value) == 1 else "s")
     if value is None:
         return "nothing"
+    number = yaml11_number(value) if isinstance(value, str) else None
+    if number:
+        return f"str {value!r} (YAML reads {value} as text: write {number})"
     return f"{type(value).__name__} {value!r}"
 
 

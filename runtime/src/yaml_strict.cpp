@@ -7,8 +7,8 @@
 #include <cstdio>
 #include <cstdint>
 #include <cstdlib>
-#include <regex>
 #include <map>
+#include <regex>
 #include <set>
 #include <sstream>
 #include <utility>
@@ -396,10 +396,28 @@ std::string py_repr(const YAML::Node& n) {
   return py_str_repr(n.Scalar());
 }
 
+// A number with an exponent that YAML 1.1 takes for text (1e3, 1.5e3, 1e+3: it wants a dot and
+// a signed exponent) -> the spelling it reads as that number (1.0e+3); "" for other text. As
+// chaincomp/yamlsource.py's yaml11_number, so that both loaders' messages carry the same hint.
+std::string yaml11_number(const std::string& s) {
+  static const std::regex re("([-+]?)([0-9]*)(\\.?)([0-9]*)[eE]([-+]?)([0-9]+)");
+  std::smatch m;   // libstdc++'s regex recurses per character: a hint only for number-sized text
+  if (s.size() > 64 || !std::regex_match(s, m, re) || (m.length(2) == 0 && m.length(4) == 0)) return "";
+  if (m.length(3) > 0 && m.length(5) > 0) return "";   // 1.0e+3 is text only when quoted
+  return m.str(1) + m.str(2) + "." + (m.length(4) > 0 ? m.str(4) : m.length(2) > 0 ? "0" : "") + "e" +
+         (m.length(5) > 0 ? m.str(5) : "+") + m.str(6);
+}
+
 std::string describe(const YAML::Node& n) {
   if (!n.IsDefined() || n.IsNull()) return "nothing";
   if (n.IsMap()) return "a mapping";
   if (n.IsSequence()) return "a list of " + std::to_string(n.size()) + (n.size() == 1 ? " item" : " items");
+  if (resolve(n) == Yaml11::kStr) {
+    const std::string number = yaml11_number(n.Scalar());
+    if (!number.empty()) {
+      return "str " + py_repr(n) + " (YAML reads " + n.Scalar() + " as text: write " + number + ")";
+    }
+  }
   static const char* const names[] = {"NoneType", "bool", "int", "float", "str"};
   return std::string(names[static_cast<int>(resolve(n))]) + " " + py_repr(n);
 }

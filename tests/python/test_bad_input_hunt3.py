@@ -231,3 +231,31 @@ def test_simulate_measurements_refuses_an_empty_params(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "--params: an empty value" in proc.stderr, proc.stderr
     assert not (tmp_path / "m.csv").exists()
+
+
+# ----------------------------------------------------------------------------- YAML 1.1 exponents
+
+@pytest.mark.parametrize("written,hint", [
+    ("1.0e300", "write 1.0e+300"), ("1e15", "write 1.0e+15"), ("1e+3", "write 1.0e+3"),
+    (".5e3", "write .5e+3"), ("-2E5", "write -2.0e+5"),
+])
+def test_a_yaml11_text_exponent_says_how_to_write_the_number(capsys, tmp_path, written, hint):
+    """PyYAML (YAML 1.1) reads an exponent number without a dot and a sign as text: the message
+    said 'expected a number, got str ...' and no more. Each suggested spelling is read back here
+    by PyYAML as a number."""
+    import yaml
+    suggested = hint.split()[-1]
+    assert isinstance(yaml.safe_load(f"v: {suggested}")["v"], float)
+    assert yaml.safe_load(f"v: {written}")["v"] == written
+    p = tmp_path / "p.yaml"
+    p.write_text(f"machine: vmc_xyz\nvalues:\n  EXX: {{axis: X, units: [mm, um], polynomial: [{written}, 2]}}\n")
+    _refused(capsys, "eval", VMC, "--params", p,
+             match=f"p.yaml:3: values.EXX.polynomial[0]: expected a number, got str '{written}' "
+                   f"(YAML reads {written} as text: {hint})")
+
+
+def test_a_quoted_number_gets_no_spelling_hint(capsys, tmp_path):
+    p = tmp_path / "p.yaml"
+    p.write_text("machine: vmc_xyz\nvalues:\n  EXX: {axis: X, units: [mm, um], polynomial: ['1.0e+3', 2]}\n")
+    err = _refused(capsys, "eval", VMC, "--params", p, match="expected a number, got str '1.0e+3'")
+    assert "YAML reads" not in err
