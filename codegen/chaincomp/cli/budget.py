@@ -50,8 +50,10 @@ def add_parser(sub) -> None:
     p.add_argument("--plot", metavar="OUT.png", help="also write worst-case and RSS maps and a bar chart of "
                    "the contributions")
     p.add_argument("--map", metavar="A1,A2", help="the two grid axes of the maps (default: the first two)")
-    p.add_argument("--component", choices=B.POSITION + B.DIRECTION,
-                   help="component of the plot (default: the position component with the largest worst case)")
+    p.add_argument("--component", choices=B.POSITION + B.DIRECTION + B.ORIENTATION,
+                   help="component of the plot: dx, dy, dz; dkx, dky, dkz (tool direction); wx, wy, wz "
+                        "(a tool frame's rotation vector); default: the position component with the largest "
+                        "worst case")
     p.set_defaults(run=run)
 
 
@@ -80,7 +82,8 @@ def run(args) -> int:
             raise ChaincompError("nothing to budget: give --tolerances T.yaml, or error values in --params")
     pick = _map_axes(grid, args.map)   # the plot's choices checked before the work
     if args.component and args.component not in B.components(machine):
-        raise ChaincompError(f"--component {args.component}: this machine has no tool direction")
+        missing = "tool frame (tool.reference or tool.rotation)" if args.component in B.ORIENTATION else "tool direction"
+        raise ChaincompError(f"--component {args.component}: this machine has no {missing}")
     b = B.compute(machine, values, tol, grid, order=args.model, samples=args.samples, seed=args.seed,
                   centre_on_params=centred, tables=tables)
     doc = B.to_json(b)
