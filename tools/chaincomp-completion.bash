@@ -79,7 +79,7 @@ _chaincomp() {
             --order) words='1 2 exact';;
             --format) words='text json';;
             --units) words='people internal';;
-            --component) words='dx dy dz dkx dky dkz';;
+            --component) words='dx dy dz dkx dky dkz wx wy wz';;
             *) words='-h --help --params --set --tolerances --over --grid --order --samples --seed --format --json --units --top --plot --map --component'; [[ $cur == -* ]] || return 0;;
           esac;;
         simulate-calibration)
