@@ -40,8 +40,10 @@ struct MachineInfo {
   const AxisInfo* axes;
   int num_params;
   const ParamInfo* params;
-  int pose_size;              // 3 (tool point) or 6 (tool point, tool direction)
-  bool corrects_direction;    // compensation also corrects the tool direction
+  int pose_size;              // 3 (tool point), 6 (point, tool direction) or 9 (point, direction,
+                              // the tool frame's x axis: a six-DOF frame)
+  bool corrects_direction;    // compensation also corrects the tool direction (with a frame and
+                              // three or more rotary axes: the full orientation, compensate.hpp)
 };
 
 // Type-erased entry points of one generated model; buffers are in internal units.
@@ -57,7 +59,8 @@ struct ModelEntry {
   // Tool error of the order-k truncated model, k = 1 .. max_order; false for another k.
   bool (*error)(const void* model, const double* axes, int order, double* pose) noexcept;
   int max_order;
-  // Returns a chaincomp::Status code; residual[0] point (mm), residual[1] direction (rad).
+  // Returns a chaincomp::Status code; residual[0] point (mm), residual[1] direction (rad),
+  // with a frame corrected in full the orientation residual (rad; compensate.hpp).
   // `workspace`: null (every call starts cold), or one set up by init_workspace and kept
   // across the commands of a stream (each starts from the last correction: compensate.hpp).
   int (*compensate)(const void* model, void* workspace, const double* command, double* corrected,
