@@ -340,8 +340,10 @@ def _origin(j: PathJoint) -> list[str]:
 
 
 def machine_text(urdf_path: str, base: str, tip: str, errors: str = "none", tool_point=(0.0, 0.0, 0.0),
-                 tool_direction=(0.0, 0.0, 1.0), name: str | None = None, version: str = "") -> str:
-    """The machine file (YAML text) of the path base -> tip of the URDF."""
+                 tool_direction=(0.0, 0.0, 1.0), name: str | None = None, version: str = "",
+                 tool_reference=None) -> str:
+    """The machine file (YAML text) of the path base -> tip of the URDF; with ``tool_reference``
+    a six-DOF tool frame (its x axis the reference's part orthogonal to the direction)."""
     if errors not in ERROR_MODES:
         raise ChaincompError(f"--errors {errors!r}: expected one of {', '.join(ERROR_MODES)}")
     robot, joints, _ = kinematic_path(urdf_path, base, tip)
@@ -406,7 +408,8 @@ def machine_text(urdf_path: str, base: str, tip: str, errors: str = "none", tool
         + ", ".join(f"{_comment(j.name)} ({j.type})" for j in joints),
         f"# errors: {errors}. Lengths in mm (the URDF's metres x 1000, exactly), angles in rad as written;",
         "# revolute limits converted from rad to deg, continuous joints limited to [-360, 360] deg.",
-        "# The tool point and direction are in the frame of the tip link.",
+        "# The tool point, direction" + (" and reference" if tool_reference is not None else "")
+        + " are in the frame of the tip link.",
     ]
     renamed = [j for j in moving if j.axis_name != j.name]
     if renamed:
@@ -431,6 +434,8 @@ def machine_text(urdf_path: str, base: str, tip: str, errors: str = "none", tool
         f"  point: [{', '.join(repr(float(v)) for v in tool_point)}]",
         f"  direction: [{', '.join(repr(float(v)) for v in tool_direction)}]",
     ]
+    if tool_reference is not None:
+        lines.append(f"  reference: [{', '.join(repr(float(v)) for v in tool_reference)}]")
     return "\n".join(lines) + "\n"
 
 

@@ -462,3 +462,52 @@ def test_a_cycle_of_joints_is_refused(tmp_path):
     path.write_text(text)
     err = refused(path, base="c", tip="a")
     assert f"{path}:{named(text, 'ab')}: joint ab: the joints above link 'a' form a cycle through link 'a'" in err
+
+
+@pytest.mark.parametrize("arm", sorted(ARMS))
+def test_tool_reference_gives_the_full_orientation_of_the_tip_frame_as_pinocchio(arm, tmp_path):
+    """--tool-reference: a six-DOF tool frame, its x axis the reference's part orthogonal to the
+    direction (both in the tip frame); the frame equals Pinocchio's tip rotation times it."""
+    urdf, base, tip = ARMS[arm]
+    out = tmp_path / f"{arm}-frame.yaml"
+    code, _, err = run("import-urdf", urdf, "--base", base, "--tip", tip, "--tool-point", ",".join(map(str, TOOL)),
+                       "--tool-direction", "0,1,1", "--tool-reference", "1,1,0.3", "-o", out)
+    assert code == 0, err
+    assert "  reference: [1.0, 1.0, 0.3]" in out.read_text().splitlines()
+    m = load_machine(str(out))
+    z0 = np.array([0, 1, 1]) / math.sqrt(2)
+    x0 = np.array([1, 1, 0.3]) - np.dot([1, 1, 0.3], z0) * z0
+    x0 /= np.linalg.norm(x0)
+    tool = np.column_stack([x0, np.cross(z0, x0), z0])       # the tool frame in the tip frame
+    model = pin.buildModelFromUrdf(urdf)
+    data = model.createData()
+    q = random_configurations(m, 300, seed=11)
+    point, direction, x_axis = ExactModel(m).frame(q)
+    base_id, tip_id = model.getFrameId(base), model.getFrameId(tip)
+    worst_point = worst_angle = 0.0
+    for k in range(300):
+        qk = pin.neutral(model)
+        for a in m.axes:
+            qk[model.joints[model.getJointId(a.name)].idx_q] = q[a.name][k]
+        pin.framesForwardKinematics(model, data, qk)
+        rel = data.oMf[base_id].inverse() * data.oMf[tip_id]
+        want_point = 1000.0 * (rel.translation + rel.rotation @ (np.array(TOOL) / 1000.0))
+        worst_point = max(worst_point, np.abs(np.array([c[k] for c in point]) - want_point).max())
+        z, x = np.array([c[k] for c in direction]), np.array([c[k] for c in x_axis])
+        got = np.column_stack([x, np.cross(z, x), z])
+        worst_angle = max(worst_angle, np.linalg.norm(pin.log3((rel.rotation @ tool).T @ got)))
+    assert worst_point < 1e-9, worst_point
+    assert worst_angle < 1e-12, worst_angle
+
+
+def test_tool_reference_values_are_checked(tmp_path):
+    path, _ = robot(tmp_path)
+    assert "--tool-reference: expected three numbers" in refused(path, "--tool-reference", "1,0")
+    for bad in ("0,0,-2", "1e-9,0,1", "1e-13,0,1e-8"):
+        assert f"--tool-reference {bad}: must not be (nearly) parallel to the tool direction 0,0,1" \
+            in refused(path, "--tool-reference", bad), bad
+    for option in ("--tool-reference", "--tool-direction"):
+        assert f"{option}: must not be zero" in refused(path, option, "0,0,0")
+        assert f"{option}: must not be zero" in refused(path, option, "1e-13,0,0")
+        assert f"{option}: a value below 1e-27 that is not 0" in refused(path, option, "1,1e-300,0")
+    assert "--tool-point: a value below 1e-27 that is not 0" in refused(path, "--tool-point", "1,1e-300,0")

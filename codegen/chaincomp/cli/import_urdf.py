@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import sys
 import tempfile
@@ -34,6 +35,9 @@ def add_parser(sub) -> None:
                    help="tool point in the tip link's frame, mm (default 0,0,0)")
     p.add_argument("--tool-direction", default="0,0,1", metavar="X,Y,Z",
                    help="tool direction in the tip link's frame (normalised; default 0,0,1)")
+    p.add_argument("--tool-reference", metavar="X,Y,Z",
+                   help="a six-DOF tool frame: its x axis, in the tip link's frame (the part orthogonal to "
+                        "the tool direction is taken); default none (point and direction only)")
     p.add_argument("--name", help="machine name (default: the URDF robot's name, sanitised)")
     p.add_argument("-o", "--output", required=True, metavar="M.yaml", help="machine file to write")
     add_format_argument(p, what="summary format on stdout")
@@ -46,16 +50,35 @@ def _vector(option: str, text: str) -> list[float]:
         raise ChaincompError(f"{option}: expected three numbers X,Y,Z, got {len(values)}")
     if max(abs(v) for v in values) > 1e15:
         raise ChaincompError(f"{option}: values beyond 1e15 mm")
+    if any(0 < abs(v) < 1e-27 for v in values):   # the machine file's numbers stop at 1e-30
+        raise ChaincompError(f"{option}: a value below 1e-27 that is not 0 (write 0)")
+    return values
+
+
+def _axis(option: str, text: str) -> list[float]:
+    """A direction: three numbers, its length at least the machine loader's 1e-12."""
+    values = _vector(option, text)
+    if math.hypot(*values) < 1e-12:
+        raise ChaincompError(f"{option}: must not be zero (its length is below 1e-12)")
     return values
 
 
 def run(args) -> int:
     point = _vector("--tool-point", args.tool_point)
-    direction = _vector("--tool-direction", args.tool_direction)
-    if not any(direction):
-        raise ChaincompError("--tool-direction: must not be zero")
+    direction = _axis("--tool-direction", args.tool_direction)
+    reference = None
+    if args.tool_reference is not None:
+        reference = _axis("--tool-reference", args.tool_reference)
+        # the loader's tests (machine.py): the part orthogonal to the direction becomes the x axis
+        along = sum(r * d for r, d in zip(reference, direction)) / sum(d * d for d in direction)
+        orthogonal = math.hypot(*(r - along * d for r, d in zip(reference, direction)))
+        if orthogonal < max(1e-6 * math.hypot(*reference), 1e-12):
+            raise ChaincompError(f"--tool-reference {args.tool_reference}: must not be (nearly) parallel "
+                                 f"to the tool direction {args.tool_direction} (its part orthogonal to the "
+                                 "direction is the frame's x axis)")
     check_output(args.output, args.urdf)
-    text = machine_text(args.urdf, args.base, args.tip, args.errors, point, direction, args.name, __version__)
+    text = machine_text(args.urdf, args.base, args.tip, args.errors, point, direction, args.name, __version__,
+                        reference)
     # Written beside the output and renamed over it only once it loads: a file that does
     # not load is a bug here, never left behind for the user.
     folder = os.path.dirname(os.path.abspath(args.output))
