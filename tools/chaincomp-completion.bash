@@ -117,7 +117,7 @@ _chaincomp() {
           case "$prev" in
             --errors) words='none joint-offsets origins all';;
             --format) words='text json';;
-            *) words='-h --help --base --tip --errors --tool-point --tool-direction --name -o --output --format --json'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --base --tip --errors --tool-point --tool-direction --tool-reference --name -o --output --format --json'; [[ $cur == -* ]] || return 0;;
           esac;;
         ballbar)
           case "$prev" in
