@@ -5,7 +5,8 @@
 // The baseline knows no machine: tools/bench_codegen exports, for the chosen params, each
 // elementary transform's angle or translation as an affine function of the axes
 // (constant + one coefficient per axis) for the actual chain (every error) and the nominal
-// chain (errors at zero), plus the tool point and direction. This program reads that file,
+// chain (errors at zero), plus the tool point, direction and (a tool frame) the reference x
+// axis, written "reference yes x y z" after the direction (optional). This program reads that file,
 // checks the baseline pose against the generated pose_exact (and the Python/numpy exact
 // model's poses) to 1e-9 before timing anything, and prints one JSON object on stdout.
 // The baseline is an interpreter: the number of axes is a run-time value (Eigen matrices
@@ -96,6 +97,8 @@ struct Chain {
   Affine point[3];
   bool has_direction = false;
   double direction[3] = {0, 0, 0};
+  bool has_reference = false;  // a tool frame: its x axis, pose rows 6..8
+  double reference[3] = {0, 0, 0};
 };
 
 struct MachineSpec {
@@ -115,6 +118,15 @@ class Reader {
     std::string w;
     if (!(in_ >> w)) die(path_ + ": unexpected end of file");
     return w;
+  }
+  // Reads the next word if it is `want`; otherwise leaves it for the next read.
+  bool accept(const std::string& want) {
+    const auto at = in_.tellg();
+    std::string w;
+    if (in_ >> w && w == want) return true;
+    in_.clear();
+    in_.seekg(at);
+    return false;
   }
   void expect(const std::string& want) {
     const std::string w = word();
@@ -177,6 +189,16 @@ Chain read_chain(Reader& r, const char* which, int n) {
   } else if (d != "no") {
     die("direction must be 'yes x y z' or 'no', got " + d);
   }
+  if (r.accept("reference")) {
+    const std::string x = r.word();
+    if (x == "yes") {
+      if (!ch.has_direction) die("a tool reference needs a tool direction");
+      ch.has_reference = true;
+      for (double& v : ch.reference) v = r.number();
+    } else if (x != "no") {
+      die("reference must be 'yes x y z' or 'no', got " + x);
+    }
+  }
   return ch;
 }
 
@@ -237,7 +259,8 @@ inline Eigen::Matrix4d elem_matrix(const Elem& e, const double* q, int n) noexce
   return m;
 }
 
-// Tool point (and direction) relative to the workpiece: E1 * E2 * ... * En applied to the tool.
+// Tool point (and direction, and a frame's x axis) relative to the workpiece: E1 * E2 * ... * En
+// applied to the tool.
 template <int PS>
 inline void baseline_pose(const Chain& ch, const double* q, double* pose) noexcept {
   const int n = ch.n;
@@ -248,11 +271,17 @@ inline void baseline_pose(const Chain& ch, const double* q, double* pose) noexce
   pose[0] = r[0];
   pose[1] = r[1];
   pose[2] = r[2];
-  if constexpr (PS == 6) {
+  if constexpr (PS >= 6) {
     const Eigen::Vector3d d = m.topLeftCorner<3, 3>() * Eigen::Map<const Eigen::Vector3d>(ch.direction);
     pose[3] = d[0];
     pose[4] = d[1];
     pose[5] = d[2];
+  }
+  if constexpr (PS == 9) {
+    const Eigen::Vector3d x = m.topLeftCorner<3, 3>() * Eigen::Map<const Eigen::Vector3d>(ch.reference);
+    pose[6] = x[0];
+    pose[7] = x[1];
+    pose[8] = x[2];
   }
 }
 
@@ -285,7 +314,9 @@ inline void baseline_jacobian(const Chain& ch, const double* q, double* pose, do
 // compensate.hpp's Gauss-Newton (same steps, weights, Levenberg term, LDLT, status codes) on
 // the numeric product, with the forward-difference Jacobian. Unlike compensate.hpp it skips
 // the Jacobian on the last pass, where only the residual is needed (in the baseline's favour).
-template <int PS, bool DIR>
+// ORI (a tool frame, three or more rotary axes): rows 3..5 are compensate.hpp's orientation
+// residual against the target frame instead of the change of the direction.
+template <int PS, bool DIR, bool ORI = false>
 int baseline_compensate(const Chain& actual, const Chain& nominal, const double* command, double* corrected,
                         double* residual) noexcept {
   using chaincomp::Status;
@@ -301,6 +332,11 @@ int baseline_compensate(const Chain& actual, const Chain& nominal, const double*
   if (!cmd.allFinite()) return static_cast<int>(Status::kNonFiniteInput);
   double target[PS], pose[PS], jac[PS * kMaxAxes];
   baseline_pose<PS>(nominal, command, target);
+  Eigen::Vector3d target_z = Eigen::Vector3d::Zero(), target_y = Eigen::Vector3d::Zero();
+  if constexpr (ORI) {
+    target_z = Eigen::Map<const Eigen::Vector3d>(target + 3);
+    target_y = chaincomp::cross3(target_z, Eigen::Map<const Eigen::Vector3d>(target + 6));
+  }
   Vec q = cmd;
   Eigen::Matrix<double, rows, 1> r;
   Eigen::Matrix<double, rows, Eigen::Dynamic, 0, rows, kMaxAxes> J(rows, N);
@@ -311,10 +347,21 @@ int baseline_compensate(const Chain& actual, const Chain& nominal, const double*
     } else {
       baseline_jacobian<PS>(actual, q.data(), pose, jac);
       J.template topRows<3>() = jm.template topRows<3>();
-      if constexpr (DIR) J.template bottomRows<3>() = chaincomp::kDirectionWeight * jm.template bottomRows<3>();
+      if constexpr (ORI) {
+        for (int j = 0; j < N; ++j)
+          J.col(j).template tail<3>() = chaincomp::kDirectionWeight *
+              chaincomp::orientation_residual(target_z, target_y, jm.col(j).template segment<3>(3),
+                                              jm.col(j).template segment<3>(6));
+      } else if constexpr (DIR) {
+        J.template bottomRows<3>() = chaincomp::kDirectionWeight * jm.template middleRows<3>(3);
+      }
     }
     for (int i = 0; i < 3; ++i) r[i] = pose[i] - target[i];
-    if constexpr (DIR) {
+    if constexpr (ORI) {
+      r.template tail<3>() = chaincomp::kDirectionWeight *
+          chaincomp::orientation_residual(target_z, target_y, Eigen::Map<const Eigen::Vector3d>(pose + 3),
+                                          Eigen::Map<const Eigen::Vector3d>(pose + 6));
+    } else if constexpr (DIR) {
       for (int i = 3; i < 6; ++i) r[i] = chaincomp::kDirectionWeight * (pose[i] - target[i]);
     }
     if (step == kBaselineSteps) break;
@@ -540,7 +587,7 @@ std::string bench_tables(const Options& opt) {
 
 // ----------------------------------------------------------------------------- one machine
 
-template <int PS, bool DIR>
+template <int PS, bool DIR, bool ORI = false>
 std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& e, const void* model,
                           const Options& opt) {
   const auto& info = *e.info;
@@ -620,7 +667,7 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
     double cg[kMaxAxes], cb[kMaxAxes], rg[2], rb[2];
     for (int s = 0; s < opt.samples; ++s) {
       const int sg = e.compensate(model, nullptr, q_at(s), cg, rg);
-      const int sb = baseline_compensate<PS, DIR>(spec.actual, spec.nominal, q_at(s), cb, rb);
+      const int sb = baseline_compensate<PS, DIR, ORI>(spec.actual, spec.nominal, q_at(s), cb, rb);
       status_mismatch += sg != sb;
       gen_ok += sg == 0;
       base_ok += sb == 0;
@@ -667,7 +714,7 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
                            [&](int s) { baseline_jacobian<PS>(spec.actual, q_at(s), out, jac); escape(jac); return out[0] + jac[0]; }));
   rows.push_back(timed_row("compensate",
                            [&](int s) { const int st = e.compensate(model, nullptr, q_at(s), corr, res); escape(corr); return corr[0] + st; },
-                           [&](int s) { const int st = baseline_compensate<PS, DIR>(spec.actual, spec.nominal, q_at(s), corr, res); escape(corr); return corr[0] + st; }));
+                           [&](int s) { const int st = baseline_compensate<PS, DIR, ORI>(spec.actual, spec.nominal, q_at(s), corr, res); escape(corr); return corr[0] + st; }));
 
   // the stream with a kept workspace (warm starts) lands where a cold start lands
   double stream_diff = 0;
@@ -683,10 +730,11 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
   }
   rows.push_back(timed_row("compensate_stream",
                            [&](int s) { const int st = e.compensate(model, ws, p_at(s), corr, res); escape(corr); return corr[0] + st; },
-                           [&](int s) { const int st = baseline_compensate<PS, DIR>(spec.actual, spec.nominal, p_at(s), corr, res); escape(corr); return corr[0] + st; }));
+                           [&](int s) { const int st = baseline_compensate<PS, DIR, ORI>(spec.actual, spec.nominal, p_at(s), corr, res); escape(corr); return corr[0] + st; }));
 
   std::string j = "{\"machine\":\"" + std::string(info.name) + "\",\"num_axes\":" + std::to_string(N) +
                   ",\"pose_size\":" + std::to_string(PS) + ",\"corrects_direction\":" + (DIR ? "true" : "false") +
+                  ",\"corrects_orientation\":" + (ORI ? "true" : "false") +
                   ",\"chain_transforms\":" + std::to_string(spec.actual.elems.size()) +
                   ",\"samples\":" + std::to_string(opt.samples) + ",\"checks\":{" +
                   "\"pose_max_abs_diff_baseline_vs_generated\":" + num(pose_diff) +
@@ -718,10 +766,15 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
 
 using BenchFn = std::string (*)(const MachineSpec&, const chaincomp::ModelEntry&, const void*, const Options&);
 
-BenchFn pick(int ps, bool dir) {
+// ori: a tool frame with three or more rotary axes, corrected in full (compensate.hpp's
+// kCorrectsOrientation)
+BenchFn pick(int ps, bool dir, bool ori) {
   if (ps == 3 && !dir) return bench_machine<3, false>;
   if (ps == 6 && !dir) return bench_machine<6, false>;
   if (ps == 6 && dir) return bench_machine<6, true>;
+  if (ps == 9 && !dir) return bench_machine<9, false>;
+  if (ps == 9 && dir && !ori) return bench_machine<9, true>;
+  if (ps == 9 && dir && ori) return bench_machine<9, true, true>;
   return nullptr;
 }
 
@@ -755,7 +808,8 @@ int main(int argc, char** argv) {
     if (info.num_axes != static_cast<int>(spec.axis_names.size())) die(spec.name + ": axis count differs from the export");
     for (int i = 0; i < info.num_axes; ++i)
       if (spec.axis_names[i] != info.axes[i].name) die(spec.name + ": axis " + spec.axis_names[i] + " where the model has " + info.axes[i].name);
-    if ((info.pose_size == 6) != spec.actual.has_direction) die(spec.name + ": pose size differs from the export");
+    if (info.pose_size != 3 + 3 * spec.actual.has_direction + 3 * spec.actual.has_reference)
+      die(spec.name + ": pose size differs from the export");
     if (e->model_size > sizeof(ModelBuffer) || e->model_align > 64) die(spec.name + ": model too large for the buffer");
     // parameters by name, every one required
     std::vector<double> params(info.num_params);
@@ -768,7 +822,9 @@ int main(int argc, char** argv) {
     if (static_cast<int>(spec.params.size()) != info.num_params) die(spec.name + ": the export has unknown parameters");
     auto* buf = new ModelBuffer;
     e->prepare(params.data(), buf->bytes);
-    const BenchFn fn = pick(info.pose_size, info.corrects_direction);
+    int rotary = 0;
+    for (int i = 0; i < info.num_axes; ++i) rotary += info.axes[i].kind == chaincomp::UnitKind::kAngle;
+    const BenchFn fn = pick(info.pose_size, info.corrects_direction, info.pose_size == 9 && rotary >= 3);
     if (fn == nullptr) die(spec.name + ": no baseline for this pose size / direction correction");
     json += (first ? "" : ",") + fn(spec, *e, buf->bytes, opt);
     first = false;
