@@ -93,7 +93,7 @@ class JetModel:
 
     def jets(self, values: dict, backend: str = "numpy") -> tuple[list[dict], list[dict] | None]:
         """The jets of the tool point and direction (3 each) at the large values given."""
-        p, d, _ = self._all_jets(values, backend)
+        p, d, _ = self._all_jets(self._resolved(values), backend)
         return p, d
 
     def orientation_jets(self, values: dict, backend: str = "numpy") -> list[dict] | None:
@@ -102,6 +102,9 @@ class JetModel:
 
     def pose_jets(self, values: dict, backend: str = "numpy"):
         """(point, direction or None, ω or None): the jets of every pose component at once."""
+        return self._pose_jets(self._resolved(values), backend)
+
+    def _pose_jets(self, values: dict, backend: str):
         p, d, frame = self._all_jets(values, backend)
         if not frame:
             return p, d, None
@@ -111,8 +114,11 @@ class JetModel:
                                    lambda a, c: {m: float(c) * v for m, v in a.items()})
         return p, d, w
 
+    def _resolved(self, values: dict) -> dict:
+        return resolve(complete(self.machine, values))
+
     def _all_jets(self, values: dict, backend: str):
-        values = resolve(complete(self.machine, values))
+        """Point, direction and frame jets at ``values`` already completed and resolved."""
         coeff = self._fn(backend)(*[values[n] for n in self._large])
         return self._propagate(coeff, _lib(backend))
 
@@ -161,49 +167,41 @@ class JetModel:
                 total = total + term
         return total
 
-    def error(self, values: dict, order: int | None = None, backend: str = "numpy"):
-        """(point error, direction error or None): the terms of degree 1..order."""
+    def _evaluation(self, values: dict, order: int | None) -> tuple[int, dict, list]:
+        """(the order asked, the values completed and resolved, the errors' values)."""
         order = self.order if order is None else order
         if not 1 <= order <= self.order:
             raise ValueError(f"order {order}: this model has orders 1..{self.order}")
-        values = resolve(complete(self.machine, values))
-        eps = [values[s.name] for s in self.machine.errors]
-        p, d = self.jets(values, backend)
+        values = self._resolved(values)
+        return order, values, [values[s.name] for s in self.machine.errors]
+
+    def error(self, values: dict, order: int | None = None, backend: str = "numpy"):
+        """(point error, direction error or None): the terms of degree 1..order."""
+        order, values, eps = self._evaluation(values, order)
+        p, d, _ = self._all_jets(values, backend)
         dp = [self._at_errors(j, eps, order) for j in p]
         dd = [self._at_errors(j, eps, order) for j in d] if d else None
         return dp, dd
 
     def orientation_error(self, values: dict, order: int | None = None, backend: str = "numpy"):
         """ω (rad, 3 components) to degree 1..order with a tool frame, else None."""
-        order = self.order if order is None else order
-        if not 1 <= order <= self.order:
-            raise ValueError(f"order {order}: this model has orders 1..{self.order}")
-        values = resolve(complete(self.machine, values))
-        w = self.orientation_jets(values, backend)
-        eps = [values[s.name] for s in self.machine.errors]
+        order, values, eps = self._evaluation(values, order)
+        w = self._pose_jets(values, backend)[2]
         return [self._at_errors(j, eps, order) for j in w] if w else None
 
     def pose_error(self, values: dict, order: int | None = None, backend: str = "numpy") -> list:
         """The error of every component of the generated Pose (point, direction, the frame's
         x axis: chaincomp.emit), degrees 1..order, flat."""
-        order = self.order if order is None else order
-        if not 1 <= order <= self.order:
-            raise ValueError(f"order {order}: this model has orders 1..{self.order}")
-        values = resolve(complete(self.machine, values))
-        eps = [values[s.name] for s in self.machine.errors]
+        order, values, eps = self._evaluation(values, order)
         p, d, frame = self._all_jets(values, backend)
         vectors = [p] + ([d] if d else []) + frame[:1]
         return [self._at_errors(j, eps, order) for v in vectors for j in v]
 
     def all_errors(self, values: dict, order: int | None = None, backend: str = "numpy"):
         """(point error, direction error or None, ω or None) of degree 1..order, one pass."""
-        order = self.order if order is None else order
-        if not 1 <= order <= self.order:
-            raise ValueError(f"order {order}: this model has orders 1..{self.order}")
-        values = resolve(complete(self.machine, values))
-        eps = [values[s.name] for s in self.machine.errors]
+        order, values, eps = self._evaluation(values, order)
         return tuple(None if v is None else [self._at_errors(j, eps, order) for j in v]
-                     for v in self.pose_jets(values, backend))
+                     for v in self._pose_jets(values, backend))
 
     def gains(self, values: dict, backend: str = "numpy") -> dict[str, list]:
         """The first-order error gain matrix at the large values: {dx: [gain per error], ...}."""
