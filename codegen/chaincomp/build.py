@@ -161,14 +161,20 @@ def copy_to(path: str, folder: str) -> str:
     try:
         if not os.path.isdir(folder):
             os.mkdir(folder)  # the folder itself, never its parents: a typo makes no tree
-        target = os.path.join(folder, os.path.basename(path))
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix="." + os.path.basename(path) + "-")
-        with os.fdopen(fd, "wb") as out, open(path, "rb") as src:
-            shutil.copyfileobj(src, out)
-        os.chmod(tmp, 0o755)
-        os.replace(tmp, target)
+        return _copy_into(path, folder, 0o755)
     except OSError as exc:
         raise ChaincompError(f"-o {folder}: cannot write ({exc.strerror})") from None
+
+
+def _copy_into(path: str, folder: str, mode: int) -> str:
+    """folder/basename(path), written under a temporary name and renamed (a reader never sees
+    half of it); OSError for the caller to name."""
+    target = os.path.join(folder, os.path.basename(path))
+    fd, tmp = tempfile.mkstemp(dir=folder, prefix="." + os.path.basename(path) + "-")
+    with os.fdopen(fd, "wb") as out, open(path, "rb") as src:
+        shutil.copyfileobj(src, out)
+    os.chmod(tmp, mode)
+    os.replace(tmp, target)
     return target
 
 
@@ -326,14 +332,8 @@ def linuxcnc_module_dir() -> str:
 def install_rt(path: str) -> str:
     """Copies the module (MODULE.so) into LinuxCNC's module folder (root only), atomically."""
     folder = linuxcnc_module_dir()
-    target = os.path.join(folder, os.path.basename(path))
     try:
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix="." + os.path.basename(path) + "-")
-        with os.fdopen(fd, "wb") as out, open(path, "rb") as src:
-            shutil.copyfileobj(src, out)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, target)
+        return _copy_into(path, folder, 0o644)
     except OSError as exc:
         raise ChaincompError(f"--install: cannot write {folder} ({exc.strerror}): run as root (sudo), "
                              f"or copy {path} there yourself") from None
-    return target
