@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -125,6 +126,23 @@ def find_slides(machine: Machine) -> list[Slide]:
                         comps.append(Component(str(sym), "roll" if abs(w @ u) > 0.99 else "tilt", k, w))
             slides.append(Slide(roles[ax].name, u, comps, g[0].line))
     return slides
+
+
+def slide_axis(machine: Machine, error: str) -> str | None:
+    """The axis of the slide whose error block holds ``error``, or None."""
+    return next((sl.axis for sl in find_slides(machine) if any(c.error == error for c in sl.components)), None)
+
+
+_ISO_NAME = re.compile(r"E[XYZABC]([A-Z])")   # ISO 230-1: E, the component, the axis (EXX, EBY, ...)
+
+
+def varying_axis(machine: Machine, error: str) -> str | None:
+    """The axis an error varies along, by its ISO 230-1 name (EXX: along X) where the machine has
+    that axis, else the slide whose error block holds it; None when neither tells."""
+    m = _ISO_NAME.fullmatch(error)
+    if m and m.group(1) in {a.name for a in machine.axes}:
+        return m.group(1)
+    return slide_axis(machine, error)
 
 
 def _smooth(rng, s: np.ndarray, cycles: tuple[float, float], waves: int = 3, bow: float = 1.0) -> np.ndarray:

@@ -57,6 +57,12 @@ COLUMNS = COMPONENTS + DIRECTIONS     # every measured column, in the order of T
 _NORM_TOL = 0.01  # a measured direction whose three components are given is a unit vector to 1 %
 
 
+def numeric_rank(singular_values: np.ndarray) -> int:
+    """How many singular values (largest first) are not zero at _RANK_TOL relative to the largest."""
+    s = singular_values
+    return int((s > _RANK_TOL * s[0]).sum()) if len(s) else 0
+
+
 @dataclass
 class Table:
     """Rows of a measurement (or set-up) file, in internal units."""
@@ -594,7 +600,7 @@ def _analyse(j0: np.ndarray, params: list[Param], measured: list[str], prefer, m
         # with fewer data than parameters the reduced vt lacks part of the null space; only then
         # is the full one needed (and small: U is data x data)
         _, s, vt = np.linalg.svd(scaled, full_matrices=len(scaled) < len(cols))
-    rank = int((s > _RANK_TOL * s[0]).sum()) if len(s) else 0
+    rank = numeric_rank(s)
     basis = np.zeros((n, rank))
     if rank == 0:
         return rank, basis, unidentifiable, {}, {}, []

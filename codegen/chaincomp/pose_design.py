@@ -29,7 +29,7 @@ import numpy as np
 
 from .derive import COMPONENTS
 from .errors import ChaincompError
-from .identify import _CSTEP, _RANK_TOL, _STEP, pose_points
+from .identify import _CSTEP, _STEP, numeric_rank, pose_points
 from .machine import Machine
 from .numeric import ExactModel
 
@@ -155,7 +155,7 @@ def design_poses(machine: Machine, n: int, seed: int, index: str = "min-sv", mea
                              f"({', '.join(measure)}) at any pose: nothing to identify")
     j = jac[:, :, visible] / scale[visible]
     _, s, vt = np.linalg.svd(j.reshape(-1, j.shape[-1]), full_matrices=False)
-    r = int((s > _RANK_TOL * s[0]).sum())
+    r = numeric_rank(s)
     blocks = j @ vt[:r].T                                                        # (pool, c, r)
     if n * len(measure) < r:
         raise ChaincompError(f"--poses {n}: {n} poses give {n * len(measure)} coordinates for the {r} "

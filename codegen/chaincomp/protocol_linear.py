@@ -33,7 +33,8 @@ import sympy as sp
 
 from .derive import COMPONENTS
 from .errors import ChaincompError
-from .identify import _RANK_TOL, pose_points
+from .calibration import varying_axis
+from .identify import numeric_rank, pose_points
 from .machine import Machine
 from .numeric import ExactModel
 from .pose_design import point_jacobian
@@ -58,12 +59,8 @@ def auto_levels(s) -> list[float]:
 
 def slide_of(machine: Machine, error: str) -> str | None:
     """The linear axis an error varies along (laser-to-params' rule), or None: a constant."""
-    from .cli.laser_to_params import _axis_for   # one rule for both verbs
-    try:
-        axis = _axis_for(machine, error, None)
-    except ChaincompError:
-        return None
-    return axis if machine.symbol(axis).unit.kind == "length" else None
+    axis = varying_axis(machine, error)
+    return axis if axis is not None and machine.symbol(axis).unit.kind == "length" else None
 
 
 @dataclass
@@ -333,7 +330,7 @@ def identified(a: np.ndarray, n_params: int) -> tuple[int, np.ndarray, np.ndarra
     visible = norm > 1e-12 * max(norm.max(initial=0.0), 1e-300)
     scaled = a[:, visible] / norm[visible]
     _, s, vt = np.linalg.svd(scaled, full_matrices=True)
-    rank = int((s > _RANK_TOL * s[0]).sum()) if len(s) else 0
+    rank = numeric_rank(s)
     null = vt[rank:]
     proj = np.zeros((a.shape[1], a.shape[1]))
     proj[np.ix_(visible, visible)] = null.T @ null

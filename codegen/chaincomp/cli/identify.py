@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 import sys
 
-from ..calibration import _write_loadable, find_slides
+from ..calibration import _write_loadable, slide_axis
 from ..display import add_units_argument
 from ..errors import ChaincompError
 from ..identify import COMPONENTS, DIRECTIONS, MAX_SMOOTH, Vary, identify, params_yaml, read_table, to_json, to_text
@@ -89,12 +89,11 @@ def vary_spec(machine, raw: str) -> Vary:
         if axis not in axes:
             fail(f"{axis!r} is not an axis of {machine.name} (axes: {', '.join(axes)})")
     else:
-        found = [sl.axis for sl in find_slides(machine) if any(c.error == name for c in sl.components)]
-        if not found:
+        axis = slide_axis(machine, name)
+        if axis is None:
             fail(f"{name} is not a component error of a slide (an error block after a translation along one "
                  f"linear axis), so the axis it varies along is not known: name it, e.g. "
                  f"--vary {name}@{axes[0]}={form.strip()}")
-        axis = found[0]
     a = machine.symbol(axis)
     kind, colon, rest = (t.strip() for t in form.partition(":"))
     if kind == "table":

@@ -10,7 +10,7 @@ import sys
 import numpy as np
 
 from .. import iso230_2 as iso
-from ..calibration import _write_loadable, find_slides
+from ..calibration import _write_loadable, varying_axis
 from ..errors import ChaincompError
 from ..machine import ROT_PLANE, Machine, Rotation
 from ..numeric import ExactModel
@@ -20,7 +20,6 @@ from ..yamlsource import load_yaml, read_text
 from .common import add_machine_argument, check_output, load, resolve_machine
 from .iso230_2 import add_columns_arguments, read
 
-_ISO_NAME = re.compile(r"E[XYZABC]([A-Z])")   # ISO 230-1: E, the component, the axis (EXX, EBY, ...)
 _FIELD = {"mean": ("mean", "mean bidirectional deviations x̄_i"),
           "up": ("mean_up", "mean unidirectional deviations x̄_i↑ (positive approach)"),
           "down": ("mean_down", "mean unidirectional deviations x̄_i↓ (negative approach)")}
@@ -60,12 +59,9 @@ def _axis_for(machine: Machine, error: str, given: str | None) -> str:
         if given not in names:
             raise ChaincompError(f"--axis: {given!r} is not an axis of {machine.name} (axes: {', '.join(names)})")
         return given
-    m = _ISO_NAME.fullmatch(error)
-    if m and m.group(1) in names:
-        return m.group(1)
-    for slide in find_slides(machine):
-        if any(c.error == error for c in slide.components):
-            return slide.axis
+    axis = varying_axis(machine, error)
+    if axis is not None:
+        return axis
     raise ChaincompError(f"--axis: give the axis {error} varies along (axes: {', '.join(names)})")
 
 
