@@ -96,10 +96,6 @@ class JetModel:
         p, d, _ = self._all_jets(self._resolved(values), backend)
         return p, d
 
-    def orientation_jets(self, values: dict, backend: str = "numpy") -> list[dict] | None:
-        """The jets of the orientation error ω (chaincomp.orientation) with a tool frame, else None."""
-        return self.pose_jets(values, backend)[2]
-
     def pose_jets(self, values: dict, backend: str = "numpy"):
         """(point, direction or None, ω or None): the jets of every pose component at once."""
         return self._pose_jets(self._resolved(values), backend)

@@ -74,15 +74,3 @@ def rotation_vector(actual: tuple, nominal: tuple, lib=None):
     else:
         ratio = 1 + theta ** 2 / 6 if sin_t < 1e-4 else theta / sin_t
     return [ratio * c for c in s]
-
-
-def first_order(z0, x0, dz, dx):
-    """ω to first order from the nominal axes and the changes of z and x: z₀ × δz (the part
-    of ω orthogonal to z₀) plus (y₀·δx)·z₀ (its part about z₀, the turn about the tool axis)."""
-    y0 = cross(z0, x0)
-    about_z = y0[0] * dx[0] + y0[1] * dx[1] + y0[2] * dx[2]
-    return [a + about_z * b for a, b in zip(cross(z0, dz), z0)]
-
-
-def arcsec(rad: float) -> float:
-    return rad * 180 / math.pi * 3600
