@@ -14,7 +14,6 @@ only their product and linear combination differ.
 
 from __future__ import annotations
 
-import math
 from fractions import Fraction
 
 ROWS = ("wx", "wy", "wz")
