@@ -38,12 +38,13 @@ UR5_TOOL_FRAME = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
 URDF_HALF_PI = 1.57079632679
 
 
-def import_with(tmp_path, arm, tip, point, direction):
+def import_with(tmp_path, arm, tip, point, direction, reference=None):
     urdf, base, _ = ARMS[arm]
     out = tmp_path / f"{arm}-urdf.yaml"
+    frame = [] if reference is None else ["--tool-reference", ",".join(repr(float(v)) for v in reference)]
     code, _, err = run("import-urdf", urdf, "--base", base, "--tip", tip, "--tool-point",
                        ",".join(repr(float(v)) for v in point), "--tool-direction",
-                       ",".join(repr(float(v)) for v in direction), "-o", out)
+                       ",".join(repr(float(v)) for v in direction), *frame, "-o", out)
     assert code == 0, err
     return load_machine(str(out))
 
@@ -55,10 +56,19 @@ def poses(machine, q_by_index):
         np.array([np.broadcast_to(c, q_by_index[0].shape) for c in d], float).T
 
 
+def frames(machine, q_by_index):
+    """The tool frame's x axis (N x 3) of ``machine`` with its i-th axis at q_by_index[i]."""
+    _, _, x = ExactModel(machine).frame({a.name: q_by_index[i] for i, a in enumerate(machine.axes)})
+    return np.array([np.broadcast_to(c, q_by_index[0].shape) for c in x], float).T
+
+
 def test_ur5_equals_urs_urdf_after_the_stated_alignment(tmp_path):
     dh = load_machine(machine_path("ur5"))
     point, direction = np.array(dh.tool_point, float), np.array(dh.tool_direction, float)
-    urdf = import_with(tmp_path, "ur5", "ee_link", UR5_TOOL_FRAME.T @ point, UR5_TOOL_FRAME.T @ direction)
+    x_axis = np.array(dh.tool_reference, float)       # the bundled frame: DH frame 6 (x6, z6)
+    assert np.array_equal(x_axis, [1, 0, 0]) and np.array_equal(direction, [0, 0, 1])
+    urdf = import_with(tmp_path, "ur5", "ee_link", UR5_TOOL_FRAME.T @ point, UR5_TOOL_FRAME.T @ direction,
+                       UR5_TOOL_FRAME.T @ x_axis)
     assert [a.name for a in urdf.axes] == ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint",
                                            "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"]
     q = list(random_configurations(dh, 1000, seed=17).values())   # q1..q6 = the URDF's joints 1..6
@@ -69,6 +79,9 @@ def test_ur5_equals_urs_urdf_after_the_stated_alignment(tmp_path):
     assert 1e-9 < bound < 2e-8
     assert np.abs(p_urdf - p_dh @ RZ_PI.T).max() < bound
     assert np.abs(d_urdf - d_dh @ RZ_PI.T).max() < 3 * (math.pi / 2 - URDF_HALF_PI)
+    # the frame's x axis too: ee_link's -y (the URDF's own tip orientation) is DH x6 after the base turn
+    assert np.abs(frames(urdf, q) - frames(dh, q) @ RZ_PI.T).max() < 3 * (math.pi / 2 - URDF_HALF_PI)
+    assert np.abs(frames(urdf, q) - frames(dh, q)).max() > 1     # not by accident either
     # not by accident: without the base rotation they are far apart
     assert np.abs(p_urdf - p_dh).max() > 100
 
@@ -76,7 +89,8 @@ def test_ur5_equals_urs_urdf_after_the_stated_alignment(tmp_path):
 def test_panda_equals_frankas_urdf_frame_for_frame(tmp_path):
     dh = load_machine(machine_path("panda"))
     point, direction = np.array(dh.tool_point, float), np.array(dh.tool_direction, float)
-    urdf = import_with(tmp_path, "panda", "panda_link8", point, direction)
+    assert np.array_equal(np.array(dh.tool_reference, float), [1, 0, 0])   # the flange frame, panda_link8
+    urdf = import_with(tmp_path, "panda", "panda_link8", point, direction, [1, 0, 0])
     assert [a.name for a in urdf.axes] == [f"panda_joint{i}" for i in range(1, 8)]
     # the bundled limits are Franka's datasheet degrees; the URDF's radians within 0.01 deg of them
     for a, b in zip(dh.axes, urdf.axes):
@@ -86,6 +100,7 @@ def test_panda_equals_frankas_urdf_frame_for_frame(tmp_path):
     p_urdf, d_urdf = poses(urdf, q)
     assert np.abs(p_urdf - p_dh).max() < 1e-9
     assert np.abs(d_urdf - d_dh).max() < 1e-12
+    assert np.abs(frames(urdf, q) - frames(dh, q)).max() < 1e-12
 
 
 # ---------------------------------------------------------------- compensation today
@@ -102,12 +117,14 @@ def test_compensation_of_an_arm_holds_point_and_direction_or_reports_the_residua
     exact chain leaves. Never another status, never a correction beyond 1 degree."""
     if not os.path.isfile(os.path.join(BUILD, "bin", "chaincomp_replay")):
         pytest.skip("no C++ build (tools/setup)")
-    m = load_machine(machine_path(arm))
+    from test_tool_frame import no_frame_file
+    path = str(no_frame_file(tmp_path, arm))     # the bundled arm without its tool frame
+    m = load_machine(path)
     params = os.path.join(PARAMS, f"{arm}-demo.yaml")
     log, out = tmp_path / "arm.lcmlog", tmp_path / "replay.csv"
-    code, _, err = run("simulate-log", machine_path(arm), "-o", log, "--seconds", "0.2")
+    code, _, err = run("simulate-log", path, "-o", log, "--seconds", "0.2")
     assert code == 0, err
-    code, _, err = run("replay", log, "--machine", machine_path(arm), "--params", params, "--config", E2E_CONFIG,
+    code, _, err = run("replay", log, "--machine", path, "--params", params, "--config", E2E_CONFIG,
                        "--csv", out)
     assert code == 0, err
     with open(out) as f:

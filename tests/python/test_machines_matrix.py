@@ -135,8 +135,11 @@ machine = pytest.mark.parametrize("name", NAMES)
 def test_derive(name):
     out = json.loads(run_cli("derive", machine_path(name), "--format", "json").stdout)
     errors, axes = declared(name, "error"), declared(name, "axis")
-    has_direction = "direction" in raw(name)["tool"]
-    rows = ["dx", "dy", "dz"] + (["dkx", "dky", "dkz"] if has_direction else [])
+    tool = raw(name)["tool"]
+    has_direction = "direction" in tool or "rotation" in tool
+    has_frame = "reference" in tool or "rotation" in tool   # a tool frame: its rotation vector's rows too
+    rows = ["dx", "dy", "dz"] + (["dkx", "dky", "dkz"] if has_direction else []) \
+        + (["wx", "wy", "wz"] if has_frame else [])
     assert sorted(out["gain"]) == sorted(rows)
     for r in rows:  # a gain for every declared error, no other
         assert sorted(out["gain"][r]) == sorted(errors), r

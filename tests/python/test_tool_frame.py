@@ -53,6 +53,18 @@ def ur5_frame_file(tmp_path, tool="  point: [40, 0, 100]\n  direction: [0, 0, 1]
     return path
 
 
+def no_frame_file(tmp_path, name):
+    """A bundled arm's file with its tool frame taken out (point and direction kept): the
+    machine without a frame that the tests compare against."""
+    with open(machine_path(name)) as f:
+        head, tool = f.read().split("\ntool:\n")
+    kept = [line for line in tool.splitlines(keepends=True) if not line.startswith("  reference:")]
+    assert len(kept) == len(tool.splitlines()) - 1, tool    # the bundled file has one reference line
+    path = tmp_path / f"{name}_no_frame.yaml"
+    path.write_text(head + "\ntool:\n" + "".join(kept))
+    return path
+
+
 def ur5_frame(q, e=None):
     """(R, p): the tool frame (N x 3 x 3, columns x, y, z) and point (N x 3) of the UR5 variant."""
     e = e or {}
@@ -94,8 +106,10 @@ def test_reference_is_made_orthogonal_and_rotation_gives_the_same_frame(tmp_path
     rows = ", ".join("[" + ", ".join(repr(float(v)) for v in row) + "]" for row in UR5_FRAME)
     m2 = load_machine(str(ur5_frame_file(tmp_path, f"  point: [40, 0, 100]\n  rotation: [{rows}]\n")))
     assert np.allclose(np.array(m2.tool_frame, float), np.array(m.tool_frame, float), atol=1e-15)
-    plain = load_machine(machine_path("ur5"))
+    plain = load_machine(str(no_frame_file(tmp_path, "ur5")))
     assert plain.tool_frame is None and plain.tool_reference is None
+    bundled = load_machine(machine_path("ur5"))   # the bundled UR5's frame is DH frame 6 itself
+    assert np.array_equal(np.array(bundled.tool_frame, float), np.eye(3))
 
 
 @pytest.mark.parametrize("tool, line, field, words", [
@@ -245,8 +259,8 @@ def test_budget_has_the_orientation_rows_on_a_long_chain(ur5f, tmp_path):
 def test_machines_without_a_frame_generate_what_they_did(tmp_path):
     """The pose layout of a frame is the point, the direction and the x axis; without a frame
     nothing changes (the bundled machines' files carry no trace of it)."""
-    for name in ("ur5", "angle_head"):
-        files = generate(load_machine(machine_path(name)), 2)
+    for name, path in (("ur5", str(no_frame_file(tmp_path, "ur5"))), ("angle_head", machine_path("angle_head"))):
+        files = generate(load_machine(path), 2)
         assert "the frame's x axis" not in files[f"{name}.hpp"]
         assert "constexpr int kPoseSize = 6;  // tool point, tool direction\n" in files[f"{name}.hpp"]
 
