@@ -45,7 +45,7 @@ _chaincomp() {
           esac;;
         simulate-measurements)
           case "$prev" in
-            *) words='-h --help --params --setups --set-ups --set --noise --measure --seed -o --output'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --params --setups --set-ups --set --noise --angle-noise --measure --seed -o --output'; [[ $cur == -* ]] || return 0;;
           esac;;
         simulate-log)
           case "$prev" in

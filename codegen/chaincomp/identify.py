@@ -1,12 +1,14 @@
 """Error values from measured tool-tip coordinates: nonlinear least squares on the exact model.
 
 Measurements are a CSV file (see ``read_table``): one row per set-up, one column per axis
-and per measured coordinate (tool point x, y, z; tool direction kx, ky, kz). The fit is
-Gauss-Newton on the exact chain, each coordinate weighted by its standard uncertainty. Its
-Jacobian is taken by the complex step (the derivative is the imaginary part of the chain
-evaluated at an imaginary error, free of the cancellation that makes a difference quotient
-of 500 mm coordinates lose eight digits and blur the rank), for all rows and all parameters
-in one broadcast call.
+and per measured coordinate (tool point x, y, z; tool direction kx, ky, kz; with a tool frame
+its orientation as a unit quaternion qw, qx, qy, qz). The fit is Gauss-Newton on the exact
+chain, each coordinate weighted by its standard uncertainty; a measured orientation enters as
+the rotation vector ω = log(R_measured·R_modelᵀ) (chaincomp.orientation: about the base
+frame's axes), the rows wx, wy, wz. Its Jacobian is taken by the complex step (the derivative
+is the imaginary part of the chain evaluated at an imaginary error, free of the cancellation
+that makes a difference quotient of 500 mm coordinates lose eight digits and blur the rank),
+for all rows and all parameters in one broadcast call (``step_derivatives``).
 
 The parameters are the errors' values, or, for an error fitted as varying along an axis
 (``Vary``), its values at given knots (piecewise linear between them) or its polynomial
@@ -35,12 +37,13 @@ from .errors import ChaincompError
 from .expressions import MAX_LITERAL
 from .machine import Machine
 from .numeric import ExactModel
+from .orientation import ROWS as ROTATION, cross, rotation_vector
 from .units import INTERNAL, UNITS
 from .varying import MAX_POLYNOMIAL_COEFFICIENTS, MAX_TABLE_KNOTS, MAX_VARYING_ERRORS
 from .yamlsource import read_text
 
-_CSTEP = 1e-20    # complex step, internal units (mm, rad): any tiny value gives the same digits
-_STEP = 1e-6      # central-difference step, where the chain cannot take complex values
+CSTEP = 1e-20     # complex step, internal units (mm, rad): any tiny value gives the same digits
+STEP = 1e-6       # central-difference step, where the chain cannot take complex values
 _RANK_TOL = 1e-9  # singular values below this, relative to the largest, are zero
 MAX_ROWS = 20_000  # set-ups in a file or a --setups spec: bounds the fit's memory (rows x errors)
 MAX_JACOBIAN = 5_000_000    # measured coordinates x parameters (40 MB a copy): bounds the fit's memory and time
@@ -53,8 +56,57 @@ MAX_SMOOTH = 1e12
 PROGRESS_SIZE = 1_000_000   # parameters x coordinates above which a fit reports its stages (seconds)
 _TIE = 1e-9       # pivoted QR: columns this close (relative) to the largest remaining norm tie
 DIRECTIONS = ("kx", "ky", "kz")       # measured tool direction (unit vector components)
-COLUMNS = COMPONENTS + DIRECTIONS     # every measured column, in the order of Table.observations
+QUATERNION = ("qw", "qx", "qy", "qz")  # measured tool frame orientation (unit quaternion, scalar first)
+COLUMNS = COMPONENTS + DIRECTIONS + QUATERNION     # every measured column a file may have
+# every observed component, in the order of Table.observations: a measured orientation is
+# observed as the three components of its rotation vector residual (wx, wy, wz)
+OBSERVED = COMPONENTS + DIRECTIONS + ROTATION
 _NORM_TOL = 0.01  # a measured direction whose three components are given is a unit vector to 1 %
+# a measured quaternion is a unit one to 1e-3 (rounded to 4 decimals it is within 1e-4), then
+# normalised; beyond that it is more likely a wrong column or another convention than rounding
+_QUAT_TOL = 1e-3
+
+
+def step_derivatives(f, p: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """d/dt f(p + t·s) at t = 0 for each row s of ``steps``: (len(steps), ...) by the complex step
+    (f evaluated once at p + i·CSTEP·steps, a row per step), or by central differences where f
+    cannot take complex values (numpy has no complex arctan2: an error inside atan2)."""
+    try:
+        return f(p + 1j * CSTEP * steps).imag / CSTEP
+    except TypeError:
+        both = f(np.vstack([p + STEP * steps, p - STEP * steps]))
+        return (both[:len(steps)] - both[len(steps):]) / (2 * STEP)
+
+
+def quaternion_matrix(q: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotation matrices of unit quaternions (..., 4) qw, qx, qy, qz (Hamilton,
+    scalar first): the columns are the rotated frame's x, y, z axes."""
+    w, x, y, z = np.moveaxis(np.asarray(q, float), -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)], -1),
+        np.stack([2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)], -1),
+        np.stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)], -1)], -1)
+
+
+def matrix_quaternion(r: np.ndarray) -> np.ndarray:
+    """(..., 4) unit quaternions qw, qx, qy, qz (qw >= 0) of rotation matrices (..., 3, 3), the
+    inverse of quaternion_matrix (Shepperd: from the largest of the four squares)."""
+    r = np.asarray(r, float)
+    t = np.stack([1 + r[..., 0, 0] + r[..., 1, 1] + r[..., 2, 2], 1 + r[..., 0, 0] - r[..., 1, 1] - r[..., 2, 2],
+                  1 - r[..., 0, 0] + r[..., 1, 1] - r[..., 2, 2], 1 - r[..., 0, 0] - r[..., 1, 1] + r[..., 2, 2]], -1)
+    k = np.argmax(t, axis=-1)[..., None]
+    s = np.sqrt(np.maximum(np.take_along_axis(t, k, -1), 1e-300)) * 2        # 4 |q_k|
+    a = r[..., 2, 1] - r[..., 1, 2]   # 4 w x
+    b = r[..., 0, 2] - r[..., 2, 0]   # 4 w y
+    c = r[..., 1, 0] - r[..., 0, 1]   # 4 w z
+    d = r[..., 0, 1] + r[..., 1, 0]   # 4 x y
+    e = r[..., 0, 2] + r[..., 2, 0]   # 4 x z
+    f = r[..., 1, 2] + r[..., 2, 1]   # 4 y z
+    tk = np.take_along_axis(t, k, -1)[..., 0]
+    cand = np.stack([np.stack([tk, a, b, c], -1), np.stack([a, tk, d, e], -1),
+                     np.stack([b, d, tk, f], -1), np.stack([c, e, f, tk], -1)], -2)
+    q = np.take_along_axis(cand, k[..., None], -2)[..., 0, :] / s
+    return q * np.where(q[..., :1] < 0, -1.0, 1.0)
 
 
 def numeric_rank(singular_values: np.ndarray) -> int:
@@ -72,16 +124,20 @@ class Table:
     lines: list[int]                      # line of each row in the file
     columns: list[str] = field(default_factory=list)
     directions: np.ndarray | None = None  # (rows, 3) tool direction kx, ky, kz; NaN where not measured
+    rotations: np.ndarray | None = None   # (rows, 3, 3) measured tool frame (columns x, y, z); NaN where not
 
     @property
     def observations(self) -> np.ndarray:
-        """(rows, 6): x, y, z, kx, ky, kz; NaN where not measured."""
-        d = self.directions if self.directions is not None else np.full_like(self.coords, math.nan)
-        return np.concatenate([self.coords, d], axis=1)
+        """(rows, 9): x, y, z, kx, ky, kz and wx, wy, wz; NaN where not measured. An orientation
+        is observed through its residual ω = log(R_measured·R_modelᵀ), whose measured value is 0."""
+        nan = np.full_like(self.coords, math.nan)
+        d = self.directions if self.directions is not None else nan
+        w = nan if self.rotations is None else np.where(np.isnan(self.rotations[:, :, 0]), math.nan, 0.0)
+        return np.concatenate([self.coords, d, w], axis=1)
 
     @property
     def measured(self) -> list[str]:
-        return [c for i, c in enumerate(COLUMNS) if not np.isnan(self.observations[:, i]).all()]
+        return [c for i, c in enumerate(OBSERVED) if not np.isnan(self.observations[:, i]).all()]
 
 
 def coordinate_named_axes(machine: Machine) -> list:
@@ -91,17 +147,20 @@ def coordinate_named_axes(machine: Machine) -> list:
 
 def measured_columns(machine: Machine) -> tuple[str, ...]:
     """The measured columns a file for ``machine`` may have: the tool direction only where the
-    machine defines one."""
-    return COLUMNS if machine.tool_direction is not None else COMPONENTS
+    machine defines one, the orientation quaternion only where it defines a tool frame."""
+    return COMPONENTS + (DIRECTIONS if machine.tool_direction is not None else ()) \
+        + (QUATERNION if machine.tool_reference is not None else ())
 
 
 def read_table(path: str, machine: Machine, coords_required: bool = True) -> Table:
     """Read a CSV: '#' comments and blank lines skipped; a header naming every axis of the
     machine (values in each axis' declared unit) and any of x, y, z (tool-tip coordinates in
     the machine's length unit) and kx, ky, kz (the measured tool direction, components of a unit
-    vector, where the machine has a tool direction); an empty cell is a coordinate not measured
-    in that row. Names are matched exactly as spelt: axis X and coordinate x are different
-    columns."""
+    vector, where the machine has a tool direction) and qw, qx, qy, qz (the measured tool frame's
+    orientation in the base frame as a unit quaternion, Hamilton, scalar first: R(q)'s columns
+    are the frame's x, y, z axes; where the machine has a tool frame); an empty cell is a
+    coordinate not measured in that row (a quaternion is measured whole or not at all). Names
+    are matched exactly as spelt: axis X and coordinate x are different columns."""
     axes = [s.name for s in machine.axes]
     length = UNITS[machine.length_unit].to_internal
     text = read_text(path).removeprefix("\ufeff")     # the byte-order mark spreadsheets write
@@ -124,7 +183,7 @@ def read_table(path: str, machine: Machine, coords_required: bool = True) -> Tab
             raise ChaincompError(f"more than {MAX_ROWS} rows", path, lineno)
         row = {}
         for name, cell in zip(header, cells):
-            if cell == "" and name in COLUMNS:
+            if cell == "" and name not in axes:
                 row[name] = math.nan
                 continue
             try:
@@ -141,17 +200,39 @@ def read_table(path: str, machine: Machine, coords_required: bool = True) -> Tab
             raise ChaincompError(f"the measured tool direction (kx, ky, kz) = ({', '.join(f'{v:g}' for v in k)}) "
                                  f"is not a unit vector (length {math.sqrt(sum(v * v for v in k)):.4g})",
                                  path, lineno, "kx")
+        _check_quaternion(row, header, path, lineno)
         rows.append(row)
         lines.append(lineno)
     if header is None or not rows:
         raise ChaincompError("no measurements: expected a header row and at least one data row", path)
+    quats = np.array([[r.get(c, math.nan) for c in QUATERNION] for r in rows])
+    quats /= np.linalg.norm(quats, axis=1, keepdims=True)            # NaN rows stay NaN
     table = Table(path, {a: np.array([machine.symbol(a).to_internal(r[a]) for r in rows]) for a in axes},
                   np.array([[r.get(c, math.nan) * length for c in COMPONENTS] for r in rows]),
-                  lines, header, np.array([[r.get(c, math.nan) for c in DIRECTIONS] for r in rows]))
+                  lines, header, np.array([[r.get(c, math.nan) for c in DIRECTIONS] for r in rows]),
+                  quaternion_matrix(quats) if any(c in header for c in QUATERNION) else None)
     if coords_required and np.isnan(table.observations).all():
         raise ChaincompError(f"no measured coordinate: every {', '.join(c for c in header if c in COLUMNS)} "
                              f"cell is empty", path)
     return table
+
+
+def _check_quaternion(row: dict, header: list[str], path, lineno) -> None:
+    """A measured quaternion: all four components or none, a unit one to _QUAT_TOL."""
+    given = [c for c in QUATERNION if c in header and not math.isnan(row.get(c, math.nan))]
+    if not given:
+        return
+    missing = [c for c in QUATERNION if c not in given]
+    if missing:
+        raise ChaincompError(f"the measured orientation needs all four quaternion components qw, qx, qy, qz: "
+                             f"{', '.join(missing)} {'is' if len(missing) == 1 else 'are'} empty "
+                             f"(leave all four empty where the orientation is not measured)", path, lineno, missing[0])
+    q = [row[c] for c in QUATERNION]
+    norm = math.sqrt(sum(v * v for v in q))
+    if not abs(norm - 1) <= _QUAT_TOL:
+        raise ChaincompError(f"the measured orientation (qw, qx, qy, qz) = ({', '.join(f'{v:g}' for v in q)}) is not "
+                             f"a unit quaternion (norm {norm:.6g}, expected 1 within {_QUAT_TOL:g})",
+                             path, lineno, "qw")
 
 
 def _header(cells, machine, coords_required, path, lineno) -> list[str]:
@@ -162,6 +243,9 @@ def _header(cells, machine, coords_required, path, lineno) -> list[str]:
         if cell in DIRECTIONS and cell not in columns and cell not in axes:
             raise ChaincompError(f"column {cell!r} is a measured tool direction, but {machine.name} has no tool "
                                  f"direction (tool: direction in {machine.file})", path, lineno, "header")
+        if cell in QUATERNION and cell not in columns and cell not in axes:
+            raise ChaincompError(f"column {cell!r} is a measured tool frame orientation, but {machine.name} has no "
+                                 f"tool frame (tool: reference or rotation in {machine.file})", path, lineno, "header")
         if cell in axes and cell in columns:
             raise ChaincompError(f"column {cell!r} is ambiguous: it is both the axis {cell} "
                                  f"({machine.file}:{machine.symbol(cell).line}) and the measured tool-tip "
@@ -179,24 +263,33 @@ def _header(cells, machine, coords_required, path, lineno) -> list[str]:
         if a not in header:
             raise ChaincompError(f"missing column for axis {a} (every axis of the machine needs one)",
                                  path, lineno, "header")
+    quat = [c for c in QUATERNION if c in header]
+    if quat and len(quat) < 4:
+        raise ChaincompError(f"the measured orientation needs all four quaternion columns qw, qx, qy, qz; "
+                             f"missing {', '.join(c for c in QUATERNION if c not in header)}", path, lineno, "header")
+    if quat and any(c in header for c in DIRECTIONS):
+        raise ChaincompError("columns kx, ky, kz and qw, qx, qy, qz both measure the tool axis (the quaternion's "
+                             "frame holds the direction as its z axis): give one of them", path, lineno, "header")
     if coords_required and not any(c in header for c in columns):
         raise ChaincompError(f"no measured coordinate column ({', '.join(columns)})", path, lineno, "header")
     return header
 
 
 def write_table(path: str, machine: Machine, axes: dict[str, np.ndarray], coords: np.ndarray,
-                measure, comments=()) -> None:
-    """Write measurements in the format ``read_table`` reads (full float precision)."""
+                measure, comments=(), quaternions: np.ndarray | None = None) -> None:
+    """Write measurements in the format ``read_table`` reads (full float precision): the tool
+    point coordinates in ``measure`` and, if given, the orientation quaternions (rows, 4)."""
     length = UNITS[machine.length_unit].to_internal
     names = [s.name for s in machine.axes]
     idx = [COMPONENTS.index(c) for c in measure]
     with open(path, "w", encoding="utf-8") as f:
         for c in comments:
             f.write(f"# {c}\n")
-        f.write(",".join(names + list(measure)) + "\n")
+        f.write(",".join(names + list(measure) + (list(QUATERNION) if quaternions is not None else [])) + "\n")
         for r in range(coords.shape[0]):
             cells = [f"{machine.symbol(a).from_internal(axes[a][r]):.15g}" for a in names]
             cells += [f"{coords[r, i] / length:.17g}" for i in idx]
+            cells += [f"{v:.17g}" for v in (quaternions[r] if quaternions is not None else ())]
             f.write(",".join(cells) + "\n")
 
 
@@ -210,16 +303,55 @@ def pose_points(machine: Machine, model: ExactModel, axes: dict[str, np.ndarray]
     return np.stack([np.broadcast_to(v, shape) for v in point], axis=-1)
 
 
-def pose_observations(machine: Machine, model: ExactModel, axes: dict[str, np.ndarray], errors: dict) -> np.ndarray:
-    """Tool points and directions (..., rows, 6): x, y, z, kx, ky, kz (directions zero where the
-    machine has none)."""
+def pose_frames(machine: Machine, model: ExactModel, axes: dict[str, np.ndarray], errors: dict) -> np.ndarray:
+    """Tool points, directions and frames' x axes (..., rows, 9) for error values that may carry
+    leading dimensions (direction and x axis zero where the machine has none)."""
     values = machine.nominal_values()
     values.update(axes)
     values.update(errors)
-    point, direction = model.pose(values)
-    parts = point + (direction if direction is not None else [0.0] * 3)
+    point, direction, x_axis = model.frame(values)
+    parts = point + (direction if direction is not None else [0.0] * 3) + (x_axis if x_axis is not None else [0.0] * 3)
     shape = np.broadcast_shapes(*[np.shape(v) for v in parts])
     return np.stack([np.broadcast_to(v, shape) for v in parts], axis=-1)
+
+
+def _observed(frames: np.ndarray, rotations: np.ndarray | None) -> np.ndarray:
+    """(..., rows, 9) predictions in the order of Table.observations from pose_frames' output:
+    the point, the direction and, where an orientation is measured, minus the residual
+    log(R_measured·R_modelᵀ) (so that measured 0 minus the prediction is the residual)."""
+    out = frames.copy()
+    if rotations is None:
+        return out
+    z, x = np.moveaxis(frames[..., 3:6], -1, 0), np.moveaxis(frames[..., 6:9], -1, 0)
+    zm, xm = np.moveaxis(rotations[..., 2], -1, 0), np.moveaxis(rotations[..., 0], -1, 0)
+    with np.errstate(invalid="ignore"):            # rows without a measured orientation are NaN
+        w = rotation_vector((list(zm), list(xm)), (list(z), list(x)))
+    out[..., 6:9] = -np.stack(np.broadcast_arrays(*w), axis=-1)
+    return out
+
+
+def _observed_derivatives(frames: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """(k, rows, 9) derivatives of the observations from those of pose_frames (``d``, (k, rows,
+    9)) at the frames ``frames`` (rows, 9): the orientation's rows are the model frame's
+    rotation δω = ½ Σ_v v × δv over its axes x, y, z (δv = δω × v for an orthonormal frame), y =
+    z × x, δy = δz × x + z × δx; the residual log(R_measured·R_modelᵀ) moves by −δω."""
+    out = d.copy()
+    z, x = np.moveaxis(frames[..., 3:6], -1, 0), np.moveaxis(frames[..., 6:9], -1, 0)
+    dz, dx = np.moveaxis(d[..., 3:6], -1, 0), np.moveaxis(d[..., 6:9], -1, 0)
+    y = cross(z, x)
+    dy = [a + b for a, b in zip(cross(dz, x), cross(z, dx))]
+    parts = [cross(x, dx), cross(y, dy), cross(z, dz)]
+    out[..., 6:9] = np.stack([0.5 * (parts[0][i] + parts[1][i] + parts[2][i]) for i in range(3)], axis=-1)
+    return out
+
+
+def residuals(machine: Machine, table: Table, errors: dict, model: ExactModel | None = None) -> np.ndarray:
+    """(rows, 9) measured minus predicted at the error values ``errors`` (internal units, by name):
+    x, y, z, kx, ky, kz, and for a measured orientation the rotation vector ω = log(R_measured·
+    R_modelᵀ) (rad, about the base frame's axes); NaN where not measured."""
+    f = pose_frames(machine, model or ExactModel(machine), table.axes, errors)
+    f = np.broadcast_to(f, (len(table.lines), 9))
+    return table.observations - _observed(f, table.rotations)
 
 
 def simulate(machine: Machine, values: dict, axes: dict[str, np.ndarray], noise: float,
@@ -233,6 +365,32 @@ def simulate(machine: Machine, values: dict, axes: dict[str, np.ndarray], noise:
         if c not in measure:
             pts[:, i] = math.nan
     return pts
+
+
+def rotation_matrix(w: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) exp([w]×) of rotation vectors (..., 3) (Rodrigues; its series below 1e-8 rad)."""
+    w = np.asarray(w, float)
+    t = np.linalg.norm(w, axis=-1)[..., None, None]
+    k = np.zeros(w.shape[:-1] + (3, 3))
+    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -w[..., 2], w[..., 1], -w[..., 0]
+    k = k - np.swapaxes(k, -1, -2)
+    small = t < 1e-8
+    a = np.where(small, 1.0, np.sin(t) / np.where(small, 1.0, t))
+    b = np.where(small, 0.5, (1 - np.cos(t)) / np.where(small, 1.0, t) ** 2)
+    return np.eye(3) + a * k + b * (k @ k)
+
+
+def simulate_orientations(machine: Machine, values: dict, axes: dict[str, np.ndarray], noise: float,
+                          rng: np.random.Generator, model: ExactModel | None = None) -> np.ndarray:
+    """Measured tool frame orientations (rows, 4) as unit quaternions qw, qx, qy, qz (qw >= 0),
+    with the errors in ``values``: the actual frame turned by a rotation vector about the base
+    axes with Gaussian components of standard deviation ``noise`` (rad)."""
+    rows = len(next(iter(axes.values())))
+    f = np.broadcast_to(pose_frames(machine, model or ExactModel(machine),
+                                    {k: np.asarray(v) for k, v in axes.items()}, values), (rows, 9))
+    z, x = f[:, 3:6], f[:, 6:9]
+    frame = np.stack([x, np.cross(z, x), z], axis=-1)                  # columns x, y, z
+    return matrix_quaternion(rotation_matrix(noise * rng.standard_normal((rows, 3))) @ frame)
 
 
 # ----------------------------------------------------------------------------- parameters
@@ -351,15 +509,16 @@ def _weights(sigma, measured: list[str], mask: np.ndarray, smooth: float):
         sig = dict(sigma)
     else:
         sig = {c: float(sigma) for c in COMPONENTS}
+    angles = DIRECTIONS + ROTATION
     pos = [c for c in measured if c in COMPONENTS]
-    ang = [c for c in measured if c in DIRECTIONS]
+    ang = [c for c in measured if c in angles]
     for c, value in sig.items():
-        if c not in COLUMNS or not value > 0:
-            raise ChaincompError(f"--sigma: expected positive values for columns of {', '.join(COLUMNS)}, "
+        if c not in OBSERVED or not value > 0:
+            raise ChaincompError(f"--sigma: expected positive values for columns of {', '.join(OBSERVED)}, "
                                  f"got {c}={value!r}")
-    if any(c in DIRECTIONS for c in sig) and not ang:
-        raise ChaincompError("--sigma gives an angle, the standard uncertainty of the measured tool direction, "
-                             "but the measurements have no kx, ky, kz column")
+    if any(c in angles for c in sig) and not ang:
+        raise ChaincompError("--sigma gives an angle, the standard uncertainty of the measured tool direction "
+                             "or orientation, but the measurements have no kx, ky, kz (or qw, qx, qy, qz) column")
     if any(c in COMPONENTS for c in sig) and not pos:
         raise ChaincompError("--sigma gives a length, the standard uncertainty of the measured tool point, but "
                              "the measurements have no x, y, z column")
@@ -369,15 +528,17 @@ def _weights(sigma, measured: list[str], mask: np.ndarray, smooth: float):
         if missing:
             raise ChaincompError(f"--sigma gives no standard uncertainty for the measured "
                                  f"{'columns' if len(missing) > 1 else 'column'} {', '.join(missing)} "
-                                 f"(give a length for x, y, z and an angle for kx, ky, kz, e.g. --sigma 20um,10arcsec)")
+                                 f"(give a length for x, y, z and an angle for kx, ky, kz and wx, wy, wz, the "
+                                 f"measured orientation's rotation vector; e.g. --sigma 20um,10arcsec)")
     elif pos and ang:
-        raise ChaincompError("tool points (x, y, z) and directions (kx, ky, kz) are both measured: weighing one "
+        what = "directions (kx, ky, kz)" if ang[0] in DIRECTIONS else "orientations (qw, qx, qy, qz)"
+        raise ChaincompError(f"tool points (x, y, z) and {what} are both measured: weighing one "
                              "against the other needs their standard uncertainties; give --sigma LENGTH,ANGLE "
                              "(e.g. --sigma 20um,10arcsec)")
     if smooth and not sig:
         raise ChaincompError("--smooth weighs the tables' second differences against the measurements' standard "
                              "uncertainty: give --sigma as well")
-    col = np.array([1.0 / sig[c] if c in sig else 1.0 for c in COLUMNS])
+    col = np.array([1.0 / sig[c] if c in sig else 1.0 for c in OBSERVED])
     return np.broadcast_to(col, mask.shape)[mask], sig
 
 
@@ -428,18 +589,20 @@ class Fit:
     rms_direction: float = math.nan        # rms residual of the tool direction (rad; nan: not measured)
     smooth: float = 0.0
     notes: list[str] = field(default_factory=list)
+    rms_orientation: float = math.nan      # rms of the orientation residual's components (rad; nan: not measured)
 
 
 def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_iterations: int = 50,
              model: ExactModel | None = None, vary=(), smooth: float = 0.0, minimal: bool = False,
              prefer=(), progress=None) -> Fit:
-    """Fit the errors of ``machine`` (all but ``assume_zero``) to the measured tool points and
-    directions.
+    """Fit the errors of ``machine`` (all but ``assume_zero``) to the measured tool points,
+    directions and orientations.
 
     ``sigma``: None (one standard uncertainty for all, estimated from the residuals), a length
     for x, y, z (internal units), or {column: sigma} (lengths for x, y, z, angles in rad for
-    kx, ky, kz). ``vary``: ``Vary`` specs of errors fitted as tables or polynomials along an
-    axis; ``smooth``: the weight of their tables' second differences (declared unit). ``minimal``:
+    kx, ky, kz and for wx, wy, wz, the components of a measured orientation's residual).
+    ``vary``: ``Vary`` specs of errors fitted as tables or polynomials along an axis;
+    ``smooth``: the weight of their tables' second differences (declared unit). ``minimal``:
     fit a minimal identifiable set, every other parameter held at zero; ``prefer``: errors to take
     into that set (and keep out of the suggested assume-zero set) first; ``progress``: called with
     a line of text at each stage of a large fit (parameters x coordinates above PROGRESS_SIZE). ``model``: the machine's
@@ -462,7 +625,7 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     obs = table.observations
     mask = ~np.isnan(obs)
     y = obs[mask]
-    measured = [c for i, c in enumerate(COLUMNS) if mask[:, i].any()]
+    measured = [c for i, c in enumerate(OBSERVED) if mask[:, i].any()]
     w, sig = _weights(sigma, measured, mask, smooth)
     params, bases, ranges, notes = _parameters(machine, free, varies, table)
     penalty = _penalty(params, varies, smooth)
@@ -479,25 +642,24 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     nonfinite = ChaincompError(f"the fit went to non-finite values on these {data} (coordinates in "
                                f"{machine.length_unit}? axes in their declared units?)", table.file)
 
-    def predict(P: np.ndarray) -> np.ndarray:            # (k, n) parameter sets -> (k, m)
+    rows = len(table.lines)
+
+    def frames(P: np.ndarray) -> np.ndarray:             # (k, n) parameter sets -> (k, rows, 9)
         errs = {e: P[:, idx] @ basis.T for e, (idx, basis) in bases.items()}
-        f = pose_observations(machine, model, table.axes, errs)[:, mask]
+        f = np.broadcast_to(pose_frames(machine, model, table.axes, errs), (len(P), rows, 9))
         if not np.isfinite(f).all():
             raise nonfinite
         return f
 
-    chunk = max(1, _CHUNK // len(table.lines))            # parameters per broadcast call: bounded memory
+    def predict(P: np.ndarray) -> np.ndarray:            # (k, n) parameter sets -> (k, m)
+        return _observed(frames(P), table.rotations)[:, mask]
 
-    def columns(p: np.ndarray, steps: np.ndarray) -> np.ndarray:
-        try:
-            return predict(p + 1j * _CSTEP * steps).imag.T / _CSTEP
-        except TypeError:      # numpy has no complex arctan2: an error inside atan2
-            f = predict(np.vstack([p + _STEP * steps, p - _STEP * steps]))
-            return ((f[:len(steps)] - f[len(steps):]) / (2 * _STEP)).T
+    chunk = max(1, _CHUNK // rows)                        # parameters per broadcast call: bounded memory
 
     def jacobian(p: np.ndarray) -> np.ndarray:           # (m + penalty rows, n), weighted
         eye = np.eye(n)
-        j = np.hstack([columns(p, eye[i:i + chunk]) for i in range(0, n, chunk)])
+        d = np.concatenate([step_derivatives(frames, p, eye[i:i + chunk]) for i in range(0, n, chunk)])
+        j = _observed_derivatives(frames(p[None])[0], d)[:, mask].T
         return np.vstack([w[:, None] * j, penalty])
 
     def residual(p: np.ndarray) -> np.ndarray:
@@ -560,7 +722,7 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
             if abs(c) > 0.9:
                 corr.append((names[a_], names[b_], float(c)))
     raw = (y - predict(p[None])[0])
-    kinds = np.broadcast_to(np.arange(6) < 3, mask.shape)[mask]
+    kinds = np.broadcast_to(np.arange(9) // 3, mask.shape)[mask]     # 0 point, 1 direction, 2 orientation
 
     def rms(sel):
         return math.sqrt(float(np.mean(raw[sel] ** 2))) if sel.any() else math.nan
@@ -568,9 +730,9 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     fit = Fit(machine, free, [s.name for s in machine.errors if s.name in assume_zero],
               {names[j]: float(p[j]) for j in ident}, {names[j]: float(std[j]) for j in ident},
               unidentifiable, suggested, rank, float(sv[0] / sv[-1]), corr,
-              rms(kinds), m, len(table.lines), dof, iterations, converged, measured,
+              rms(kinds == 0), m, len(table.lines), dof, iterations, converged, measured,
               params, varies, ranges, minimal, redundant, carried, sig,
-              rss / dof if sig else None, rms(~kinds), smooth, notes)
+              rss / dof if sig else None, rms(kinds == 1), smooth, notes, rms(kinds == 2))
     if not all(math.isfinite(v) for v in [*fit.estimates.values(), *fit.uncertainties.values(),
                                           fit.condition, dof]):
         raise nonfinite
@@ -771,6 +933,7 @@ def to_json(fit: Fit, source: str) -> dict:
         "rms_residual": None if math.isnan(fit.rms) else fit.rms, "length_unit": "mm",
         "rms_direction_residual": None if math.isnan(fit.rms_direction) else fit.rms_direction,
         "direction_unit": "rad",
+        "rms_orientation_residual": None if math.isnan(fit.rms_orientation) else fit.rms_orientation,
         "sigma": {c: {"value": v, "unit": "mm" if c in COMPONENTS else "rad"} for c, v in fit.sigma.items()},
         "chi2_per_dof": fit.chi2, "smooth": fit.smooth, "notes": fit.notes,
         "degrees_of_freedom": fit.dof, "iterations": fit.iterations, "converged": fit.converged,
@@ -778,10 +941,15 @@ def to_json(fit: Fit, source: str) -> dict:
 
 
 def _residuals(fit: Fit, units: str) -> str:
-    """'rms residual 0.785 µm', or with directions '... 0.785 µm (tool point), 9.8 arcsec (tool direction)'."""
+    """'rms residual 0.785 µm', or with directions '... 0.785 µm (tool point), 9.8 arcsec (tool
+    direction)', with orientations '..., 9.8 arcsec (tool orientation, per component of ω)'."""
     point, direction = not math.isnan(fit.rms), not math.isnan(fit.rms_direction)
-    parts = ([quantity(fit.rms, "length", units) + (" (tool point)" if direction else "")] if point else []) \
-        + ([quantity(fit.rms_direction, "angle", units) + " (tool direction)"] if direction else [])
+    orientation = not math.isnan(fit.rms_orientation)
+    parts = ([quantity(fit.rms, "length", units) + (" (tool point)" if direction or orientation else "")]
+             if point else []) \
+        + ([quantity(fit.rms_direction, "angle", units) + " (tool direction)"] if direction else []) \
+        + ([quantity(fit.rms_orientation, "angle", units) + " (tool orientation, per component of ω)"]
+           if orientation else [])
     return "rms residual " + ", ".join(parts)
 
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from .derive import COMPONENTS
 from .errors import ChaincompError
-from .identify import _CSTEP, _STEP, numeric_rank, pose_points
+from .identify import numeric_rank, pose_points, step_derivatives
 from .machine import Machine
 from .numeric import ExactModel
 
@@ -52,13 +52,10 @@ def point_jacobian(machine: Machine, model: ExactModel, axes: dict[str, np.ndarr
     out = np.empty((rows, len(idx), n))
     for start in range(0, rows, _CHUNK):
         part = {k: np.asarray(v)[start:start + _CHUNK] for k, v in axes.items()}
-        try:
-            errs = {e: 1j * _CSTEP * np.eye(n)[:, j:j + 1] for j, e in enumerate(errors)}
-            d = pose_points(machine, model, part, errs).imag / _CSTEP         # (n, rows, 3)
-        except TypeError:        # numpy has no complex arctan2: an error inside atan2
-            plus = pose_points(machine, model, part, {e: _STEP * np.eye(n)[:, j:j + 1] for j, e in enumerate(errors)})
-            minus = pose_points(machine, model, part, {e: -_STEP * np.eye(n)[:, j:j + 1] for j, e in enumerate(errors)})
-            d = (plus - minus) / (2 * _STEP)
+
+        def points(P):        # (k, n) error sets -> (k, rows, 3)
+            return pose_points(machine, model, part, {e: P[:, j:j + 1] for j, e in enumerate(errors)})
+        d = step_derivatives(points, np.zeros(n), np.eye(n))         # (n, rows, 3)
         d = np.broadcast_to(d, (n, len(next(iter(part.values()))), 3))
         out[start:start + _CHUNK] = np.transpose(d[:, :, idx], (1, 2, 0))
         if say:

@@ -180,7 +180,7 @@ def sanitise(name: str) -> str:
 
 # The measured coordinates' column names (chaincomp.identify.COLUMNS): an axis of one of these
 # names would make a measurements file's column mean both, which identify refuses.
-MEASURED_NAMES = ("x", "y", "z", "kx", "ky", "kz")
+MEASURED_NAMES = ("x", "y", "z", "kx", "ky", "kz", "qw", "qx", "qy", "qz")
 
 
 def axis_name(joint: str) -> str:

@@ -8,7 +8,8 @@ import sys
 from ..calibration import _write_loadable, slide_axis
 from ..display import add_units_argument
 from ..errors import ChaincompError
-from ..identify import COMPONENTS, DIRECTIONS, MAX_SMOOTH, Vary, identify, params_yaml, read_table, to_json, to_text
+from ..identify import (COMPONENTS, DIRECTIONS, MAX_SMOOTH, ROTATION, Vary, identify, params_yaml, read_table,
+                        to_json, to_text)
 from ..machine import Symbol
 from ..params import parse_value
 from ..protocol import check_errors
@@ -32,16 +33,18 @@ def length(machine, option: str, raw: str, positive: bool = False) -> float:
 
 
 def sigma_spec(machine, raw: str) -> dict[str, float]:
-    """'--sigma 20um,10arcsec' -> {x, y, z: 0.02, kx, ky, kz: 4.8e-5} (internal units). Items
-    separated by commas: a length is every tool-point column's standard uncertainty, an angle
-    every tool-direction column's, COLUMN=VALUE one column's (later items win); a bare number is
-    a length in the machine's unit."""
+    """'--sigma 20um,10arcsec' -> {x, y, z: 0.02, kx, ky, kz, wx, wy, wz: 4.8e-5} (internal
+    units). Items separated by commas: a length is every tool-point column's standard
+    uncertainty, an angle every tool-direction column's and every component of a measured
+    orientation's rotation vector (wx, wy, wz), COLUMN=VALUE one column's (later items win); a
+    bare number is a length in the machine's unit."""
     out: dict[str, float] = {}
     for item in (t.strip() for t in raw.split(",")):
         column, sep, text = item.rpartition("=")
         column = column.strip()
-        if sep and column not in COMPONENTS + DIRECTIONS:
-            raise ChaincompError(f"--sigma: unknown column {column!r} (expected x, y, z, kx, ky, kz)")
+        if sep and column not in COMPONENTS + DIRECTIONS + ROTATION:
+            raise ChaincompError(f"--sigma: unknown column {column!r} (expected x, y, z, kx, ky, kz, or wx, wy, wz "
+                                 f"for the components of a measured orientation)")
         value, error = None, None
         for kind, unit in (("length", machine.length_unit), ("angle", "rad")):
             try:
@@ -52,17 +55,19 @@ def sigma_spec(machine, raw: str) -> dict[str, float]:
                 wrong_kind = re.match(r"(unit '.*' is an? \w+ unit) but", error)
                 if not wrong_kind:
                     break
-                error = f"{wrong_kind.group(1)}: expected a length (tool point) or an angle (tool direction)"
+                error = (f"{wrong_kind.group(1)}: expected a length (tool point) or an angle (tool direction "
+                         f"or orientation)")
         if value is None:
             raise ChaincompError(f"--sigma: {error}")
         if not value > 0:
             raise ChaincompError(f"--sigma: must be positive, got {text.strip()!r}")
-        targets = [column] if sep else list(COMPONENTS if kind == "length" else DIRECTIONS)
+        targets = [column] if sep else list(COMPONENTS if kind == "length" else DIRECTIONS + ROTATION)
         want = "length" if targets[0] in COMPONENTS else "angle"
         if kind != want:
             raise ChaincompError(f"--sigma {item}: {column} is a measured "
-                                 f"{'tool-point coordinate' if want == 'length' else 'tool-direction component'}: "
-                                 f"give {'a length, e.g. 20um' if want == 'length' else 'an angle, e.g. 10arcsec'}")
+                                 + ("tool-point coordinate: " if want == "length"
+                                    else "tool-direction or orientation component: ")
+                                 + f"give {'a length, e.g. 20um' if want == 'length' else 'an angle, e.g. 10arcsec'}")
         out.update({c: value for c in targets})
     return out
 
@@ -128,7 +133,10 @@ def add_parser(sub) -> None:
                                    "exact model). MEAS.csv: '#' comments, a header row naming every axis "
                                    "exactly as the machine file spells it (values in its declared unit) "
                                    "and any of x, y, z (tool tip in the machine's length unit) and kx, ky, kz "
-                                   "(measured tool direction, a unit vector, where the machine has one; an "
+                                   "(measured tool direction, a unit vector, where the machine has one) or qw, qx, "
+                                   "qy, qz (the measured tool frame's orientation in the base frame, a unit "
+                                   "quaternion, scalar first, where the machine has a tool frame: the residual is "
+                                   "the rotation vector wx, wy, wz of R_measured R_model^T); an "
                                    "empty cell is not measured), one row per set-up. Reports each estimate "
                                    "with its standard uncertainty, the condition number, correlations above "
                                    "0.9, the errors these set-ups cannot identify, which get no value, and "
@@ -142,9 +150,10 @@ def add_parser(sub) -> None:
     p.add_argument("--sigma", metavar="SIGMA",
                    help="standard uncertainty of the measured coordinates, positive: a length for x, y, z "
                         "(e.g. 20um; a bare number is in the machine's length unit), an angle for the "
-                        "direction kx, ky, kz (e.g. 10arcsec), or COLUMN=VALUE for one column, separated by "
+                        "direction kx, ky, kz and for each component wx, wy, wz of a measured orientation's "
+                        "rotation vector (e.g. 10arcsec), or COLUMN=VALUE for one column, separated by "
                         "commas: 20um,10arcsec (default: one for all, estimated from the residuals; needed "
-                        "when both points and directions are measured)")
+                        "when both points and directions or orientations are measured)")
     p.add_argument("--minimal", action="store_true",
                    help="fit a minimal identifiable set (QR with column pivoting of the scaled Jacobian); "
                         "every other parameter is held at zero and reported with the combination that "

@@ -4,16 +4,20 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 import sys
 
 import numpy as np
 
 from ..errors import ChaincompError
 from ..expressions import MAX_LITERAL
-from ..identify import MAX_ROWS, coordinate_named_axes, read_table, simulate, write_table
-from ..params import load_params, parse_sets
+from ..identify import (MAX_ROWS, QUATERNION, coordinate_named_axes, read_table, simulate, simulate_orientations,
+                        write_table)
+from ..machine import Symbol
+from ..params import load_params, parse_sets, parse_value
 from ..protocol import check_measure
 from ..protocol_linear import auto_levels
+from ..units import UNITS
 from .common import add_machine_argument, add_seed_argument, check_output, load, number_list, refuse_empty
 from .identify import length
 from .protocol import names
@@ -41,7 +45,12 @@ def add_parser(sub) -> None:
                    help="hold an axis at this value (within its limits) in every set-up")
     p.add_argument("--noise", default="0", metavar="LENGTH",
                    help="standard deviation of the noise on each coordinate, e.g. 1um (default 0)")
-    p.add_argument("--measure", default="x,y,z", metavar="x,y,z", help="coordinates written (default x,y,z)")
+    p.add_argument("--angle-noise", default="0", metavar="ANGLE",
+                   help="standard deviation of the noise on each component of the measured orientation's "
+                        "rotation vector (about the base axes), e.g. 10arcsec (default 0); with q")
+    p.add_argument("--measure", default="x,y,z", metavar="x,y,z",
+                   help="coordinates written (default x,y,z); q (or qw,qx,qy,qz) adds the tool frame's "
+                        "orientation (unit quaternion qw, qx, qy, qz), where the machine has a tool frame")
     add_seed_argument(p, "random seed of the noise and of random:N set-ups")
     p.add_argument("-o", "--output", required=True, metavar="MEAS.csv",
                    help="CSV file to write (never one of the inputs)")
@@ -110,8 +119,22 @@ def setups(machine, spec: str, sets: list[str], rng) -> dict[str, np.ndarray]:
     return out
 
 
+def _angle(raw: str) -> float:
+    """--angle-noise: an angle with its unit (a bare number only if 0) -> rad, zero or positive."""
+    try:
+        value = parse_value(Symbol("--angle-noise", "constant", UNITS["rad"], ""), raw)
+    except ValueError as exc:
+        raise ChaincompError(f"--angle-noise: {exc}") from None
+    if value != 0 and re.fullmatch(r"\s*[-+0-9.eE]+\s*", raw):
+        raise ChaincompError(f"--angle-noise: give the unit, e.g. {raw.strip()}arcsec or {raw.strip()}rad, got {raw!r}")
+    if value < 0:
+        raise ChaincompError(f"--angle-noise: must be zero or positive, got {raw!r}")
+    return value
+
+
 def run(args) -> int:
     refuse_empty(("--params", args.params), hint="leave the option out for every error zero")
+    refuse_empty(("--angle-noise", args.angle_noise))
     machine = load(args.machine)
     for s in coordinate_named_axes(machine):
         raise ChaincompError(f"axis {s.name!r} has the name of the measured coordinate {s.name}: the "
@@ -119,8 +142,22 @@ def run(args) -> int:
                              machine.file, s.line, "symbols")
     is_file = args.setups.partition(":")[0] not in ("auto", "grid", "random")
     check_output(args.output, args.machine, args.params, args.setups if is_file else None)
-    measure = check_measure(names(args.measure))
+    asked = names(args.measure)
+    quaternion = [c for c in asked if c.lower() in ("q",) + QUATERNION]
+    if quaternion and machine.tool_reference is None:
+        raise ChaincompError(f"--measure {quaternion[0]}: {machine.name} has no tool frame (tool: reference or "
+                             f"rotation in {machine.file}), so there is no orientation to measure")
+    if quaternion and sorted({c.lower() for c in quaternion}) not in (["q"], sorted(QUATERNION)):
+        raise ChaincompError(f"--measure: give the orientation as q or as all four of qw, qx, qy, qz, once, "
+                             f"got {', '.join(quaternion)}")
+    if quaternion and len(quaternion) not in (1, 4):
+        raise ChaincompError(f"--measure: {', '.join(quaternion)}: the orientation named more than once")
+    rest = [c for c in asked if c not in quaternion]
+    measure = check_measure(rest) if rest or not quaternion else []
     noise = length(machine, "--noise", args.noise)
+    angle_noise = _angle(args.angle_noise)
+    if angle_noise and not quaternion:
+        raise ChaincompError("--angle-noise: no orientation is measured (add q to --measure)")
     values = load_params(args.params, machine) if args.params else {}
     rng = np.random.default_rng(args.seed)
     axes = setups(machine, args.setups, args.sets, rng)
@@ -132,15 +169,19 @@ def run(args) -> int:
     print(f"chaincomp simulate-measurements: {count} set-up{'s' if count != 1 else ''} ({args.setups}) "
           f"of {', '.join(s.name for s in machine.axes)}", file=sys.stderr)
     coords = simulate(machine, values, axes, noise, rng, measure)
+    quats = simulate_orientations(machine, values, axes, angle_noise, rng) if quaternion else None
     if not (np.abs(coords[~np.isnan(coords)]) <= MAX_LITERAL).all():
         raise ChaincompError(f"the simulated coordinates reach beyond {MAX_LITERAL:g} {machine.length_unit} "
                              f"(or are not finite), which identify would refuse: check --noise and the "
                              f"values in --params")
     comments = [f"chaincomp simulate-measurements {machine.name}: params {args.params or '(all errors zero)'}, "
-                f"set-ups {args.setups}, noise {args.noise}, seed {args.seed}",
-                f"axes in their declared units; x, y, z: tool tip in {machine.length_unit}"]
+                f"set-ups {args.setups}, noise {args.noise}"
+                + (f", angle noise {args.angle_noise}" if quaternion else "") + f", seed {args.seed}",
+                f"axes in their declared units; x, y, z: tool tip in {machine.length_unit}"
+                + ("; qw, qx, qy, qz: the tool frame's orientation in the base frame (unit quaternion)"
+                   if quaternion else "")]
     try:
-        write_table(args.output, machine, axes, coords, measure, comments)
+        write_table(args.output, machine, axes, coords, measure, comments, quats)
     except OSError as exc:
         raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
     return 0
