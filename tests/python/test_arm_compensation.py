@@ -22,30 +22,21 @@ from scipy.spatial.transform import Rotation
 
 from chaincomp import load_machine, load_params
 
+from arm_models import panda
 from conftest import PARAMS, ROOT, machine_path
-from test_demo_arm import rot, trans
 from test_tool_frame import UR5_FRAME, arr, ur5_frame, ur5_frame_file
 
 INT, VOID_P, DBL_P = ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(ctypes.c_double)
 COMPENSATE = ctypes.CFUNCTYPE(INT, VOID_P, VOID_P, DBL_P, DBL_P, DBL_P)
 INIT = ctypes.CFUNCTYPE(None, VOID_P)
 BOUND = 0.0175   # rad: kMaxAngularCorrection
-# Franka's modified DH (alpha rad, a mm, d mm) and the flange
-PANDA = [(0, 0, 333), (-math.pi / 2, 0, 0), (math.pi / 2, 0, 316), (math.pi / 2, 82.5, 0),
-         (-math.pi / 2, -82.5, 384), (math.pi / 2, 0, 0), (math.pi / 2, 88, 0)]
 PANDA_FRAME = np.array([[0, 1, 0], [0, 0, 1], [1, 0, 0.0]])   # columns x, y, z in the flange frame
 PANDA_POINT = np.array([40.0, 0.0, 103.4])
 
 
 def panda_frame(q, e=None):
-    e = e or {}
-    g = lambda name: e.get(name, 0.0)  # noqa: E731
-    t = np.broadcast_to(np.eye(4), (len(q), 4, 4))
-    for j, (alpha, a, d) in enumerate(PANDA):
-        n = j + 1
-        t = t @ rot("x", alpha + g(f"dalpha{n}")) @ trans("x", a + g(f"da{n}")) \
-            @ rot("z", q[:, j] + g(f"dtheta{n}")) @ trans("z", d + g(f"dd{n}"))
-    t = t @ trans("z", np.full(len(q), 107.0))
+    """(R, p): the Panda variant's tool frame (N x 3 x 3) and point (N x 3); q: N x 7 (rad)."""
+    t = panda(q.T, e)
     return t[:, :3, :3] @ PANDA_FRAME, t[:, :3, :3] @ PANDA_POINT + t[:, :3, 3]
 
 

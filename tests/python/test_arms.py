@@ -28,6 +28,7 @@ import pytest
 from chaincomp import load_machine, load_params
 from chaincomp.numeric import ExactModel
 
+from arm_models import UR5_A, UR5_D
 from conftest import PARAMS, ROOT, machine_path
 from test_import_urdf import ARMS, random_configurations, run
 
@@ -74,7 +75,7 @@ def test_ur5_equals_urs_urdf_after_the_stated_alignment(tmp_path):
     q = list(random_configurations(dh, 1000, seed=17).values())   # q1..q6 = the URDF's joints 1..6
     p_dh, d_dh = poses(dh, q)
     p_urdf, d_urdf = poses(urdf, q)
-    reach = 89.159 + 425 + 392.25 + 109.15 + 94.65 + 82.3 + np.linalg.norm(point)
+    reach = sum(map(abs, UR5_D + UR5_A)) + np.linalg.norm(point)
     bound = 3 * (math.pi / 2 - URDF_HALF_PI) * reach
     assert 1e-9 < bound < 2e-8
     assert np.abs(p_urdf - p_dh @ RZ_PI.T).max() < bound

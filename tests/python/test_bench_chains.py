@@ -5,7 +5,6 @@ C++ lines."""
 
 import importlib.machinery
 import importlib.util
-import math
 import os
 
 import numpy as np
@@ -13,6 +12,8 @@ import pytest
 
 from chaincomp import ExactModel, load_machine
 from chaincomp.lint import lint
+
+from arm_models import panda, rx, rz, tr, ur5
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 MACHINES = os.path.join(ROOT, "tools", "bench_machines")
@@ -27,22 +28,6 @@ def bench_chains():
     return module
 
 
-def rx(a):
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1, 0, 0, 0], [0, c, -s, 0], [0, s, c, 0], [0, 0, 0, 1.0]])
-
-
-def rz(a):
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
-
-
-def tr(x, y, z):
-    t = np.eye(4)
-    t[:3, 3] = x, y, z
-    return t
-
-
 def random_axes(m):
     return {s.name: s.to_internal(RNG.uniform(*s.limits)) for s in m.axes}
 
@@ -53,12 +38,6 @@ def check(m, q, T, tool=(30.0, 0.0, 120.0)):
     assert np.allclose(direction, T[:3, 2], atol=1e-12)
 
 
-# Universal Robots' UR5 DH table (mm, deg)
-UR5_D = [89.159, 0, 0, 109.15, 94.65, 82.3]
-UR5_A = [0, -425.0, -392.25, 0, 0, 0]
-UR5_ALPHA = [90, 0, 0, 90, -90, 0]
-
-
 @pytest.mark.parametrize("name", ["ur5", "ur5_blocks"])
 def test_ur5_is_the_standard_dh_product(name):
     m = load_machine(os.path.join(MACHINES, f"{name}.yaml"))
@@ -66,16 +45,7 @@ def test_ur5_is_the_standard_dh_product(name):
     assert {s.name for s in m.constants} >= {f"al{i}" for i in range(1, 7)}  # the twists are symbols
     for _ in range(5):
         q = random_axes(m)
-        T = np.eye(4)
-        for i in range(6):  # Rz(theta) Tz(d) Tx(a) Rx(alpha)
-            T = T @ rz(q[f"q{i + 1}"]) @ tr(0, 0, UR5_D[i]) @ tr(UR5_A[i], 0, 0) @ rx(math.radians(UR5_ALPHA[i]))
-        check(m, q, T)
-
-
-# Franka Emika Panda, Craig's modified DH (m -> mm, deg)
-PANDA_A = [0, 0, 0, 82.5, -82.5, 0, 88]
-PANDA_D = [333, 0, 316, 0, 384, 0, 0]
-PANDA_ALPHA = [0, -90, 90, 90, -90, 90, 90]
+        check(m, q, ur5([q[f"q{i + 1}"] for i in range(6)]))
 
 
 def test_panda_gantry_is_the_modified_dh_product_on_the_gantry():
@@ -83,10 +53,8 @@ def test_panda_gantry_is_the_modified_dh_product_on_the_gantry():
     assert len(m.axes) == 9 and len(m.errors) == 41
     for _ in range(5):
         q = random_axes(m)
-        T = tr(q["X"], 0, 0) @ tr(0, q["Y"], 0) @ tr(0, 0, 50)  # carriage top 50 mm up
-        for i in range(7):  # Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i) Tz(d_i)
-            T = T @ rx(math.radians(PANDA_ALPHA[i])) @ tr(PANDA_A[i], 0, 0) @ rz(q[f"q{i + 1}"]) @ tr(0, 0, PANDA_D[i])
-        check(m, q, T @ tr(0, 0, 107))  # flange
+        gantry = tr(q["X"], 0, 0) @ tr(0, q["Y"], 0) @ tr(0, 0, 50)  # carriage top 50 mm up
+        check(m, q, gantry @ panda([q[f"q{i + 1}"] for i in range(7)]))
 
 
 def test_five_axis_iso_nominal_trunnion_and_its_41_errors():

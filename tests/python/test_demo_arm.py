@@ -19,14 +19,11 @@ import numpy as np
 import pytest
 import yaml
 
+from arm_models import UR5_A, UR5_ALPHA, UR5_D, rot, trans, ur5  # noqa: F401 (test_tool_frame imports these from here)
 from conftest import ROOT
 
 DEMO = os.path.join(ROOT, "tools", "demo-arm")
 PARAMS = os.path.join(ROOT, "configs", "params", "ur5-demo.yaml")
-# UR5 (CB3) DH: theta offset 0 for every joint; d, a in mm; alpha in rad
-UR5_D = [89.159, 0, 0, 109.15, 94.65, 82.3]
-UR5_A = [0, -425, -392.25, 0, 0, 0]
-UR5_ALPHA = [math.pi / 2, 0, 0, math.pi / 2, -math.pi / 2, 0]
 TOOL = np.array([40.0, 0.0, 100.0, 1.0])
 UNITS = {"um": 1e-3, "arcsec": math.pi / (180 * 3600)}   # to mm and rad
 NOISE = 0.020   # mm: the demo's --noise 20um
@@ -43,35 +40,9 @@ def read_values(path):
     return out
 
 
-def rot(axis, angle):
-    c, s = np.cos(angle), np.sin(angle)
-    m = np.zeros(np.shape(angle) + (4, 4))
-    m[..., 3, 3] = 1
-    i, j = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}[axis]
-    k = 3 - i - j
-    m[..., k, k] = 1
-    m[..., i, i], m[..., i, j], m[..., j, i], m[..., j, j] = c, -s, s, c
-    return m
-
-
-def trans(axis, length):
-    m = np.broadcast_to(np.eye(4), np.shape(length) + (4, 4)).copy()
-    m[..., "xyz".index(axis), 3] = length
-    return m
-
-
 def ur5_point(q, e=None, tool=TOOL):
     """Tool point (N x 3, mm) at joint angles q (N x 6, rad) with errors e (name -> mm | rad)."""
-    e = e or {}
-    g = lambda name: e.get(name, 0.0)
-    t = np.broadcast_to(np.eye(4), (len(q), 4, 4))
-    for j in range(6):
-        n = j + 1
-        t = t @ rot("z", q[:, j] + g(f"dtheta{n}")) @ trans("z", UR5_D[j] + g(f"dd{n}")) \
-            @ trans("x", UR5_A[j] + g(f"da{n}")) @ rot("x", UR5_ALPHA[j] + g(f"dalpha{n}"))
-        if n in (2, 3):
-            t = t @ rot("y", g(f"dbeta{n}"))
-    return (t @ tool)[:, :3]
+    return (ur5(q.T, e, betas=(2, 3)) @ tool)[:, :3]
 
 
 def read_csv(path):

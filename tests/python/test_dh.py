@@ -15,27 +15,17 @@ from chaincomp import ChaincompError, ExactModel, load_machine
 from chaincomp.jets import JetModel
 from chaincomp.lint import lint
 
+from arm_models import PANDA_A, PANDA_ALPHA, PANDA_D, PANDA_FLANGE, UR5_A, UR5_ALPHA, UR5_D, panda, ur5
+
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
-UR5 = {"d": [89.159, 0, 0, 109.15, 94.65, 82.3], "a": [0, -425.0, -392.25, 0, 0, 0],
-       "alpha": [math.pi / 2, 0, 0, math.pi / 2, -math.pi / 2, 0]}
-PANDA = {"a": [0, 0, 0, 82.5, -82.5, 0, 88.0], "d": [333.0, 0, 316.0, 0, 384.0, 0, 0],
-         "alpha": [0, -math.pi / 2, math.pi / 2, math.pi / 2, -math.pi / 2, math.pi / 2, math.pi / 2]}
-FLANGE = 107.0
+UR5 = {"d": UR5_D, "a": UR5_A, "alpha": UR5_ALPHA}
+PANDA = {"a": PANDA_A, "d": PANDA_D, "alpha": PANDA_ALPHA}
+FLANGE = PANDA_FLANGE
 
 
-def std_link(theta, d, a, alpha):
-    ct, st, ca, sa = math.cos(theta), math.sin(theta), math.cos(alpha), math.sin(alpha)
-    return np.array([[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st], [0, sa, ca, d], [0, 0, 0, 1]])
-
-
-def mod_link(alpha, a, theta, d):
-    ct, st, ca, sa = math.cos(theta), math.sin(theta), math.cos(alpha), math.sin(alpha)
-    return np.array([[ct, -st, 0, a], [st * ca, ct * ca, -sa, -d * sa], [st * sa, ct * sa, ca, d * ca], [0, 0, 0, 1]])
-
-
-def roty(b):
-    c, s = math.cos(b), math.sin(b)
-    return np.array([[c, 0, s, 0], [0, 1, 0, 0], [-s, 0, c, 0], [0, 0, 0, 1]])
+def num(x):
+    """A table number as the YAML is written: integral values without a decimal point."""
+    return str(int(x)) if float(x).is_integer() else repr(x)
 
 
 def axes_yaml(n):
@@ -49,15 +39,15 @@ def write(tmp_path, name, text):
 
 
 def ur5_text(errors="auto", extra=""):
-    chain = "".join(f"  - {{dh: {{theta: q{i + 1}, d: {UR5['d'][i]}, a: {UR5['a'][i]}, alpha: {UR5['alpha'][i]!r}}}, "
-                    f"errors: {errors}}}\n" for i in range(6))
+    chain = "".join(f"  - {{dh: {{theta: q{i + 1}, d: {num(UR5['d'][i])}, a: {num(UR5['a'][i])}, "
+                    f"alpha: {num(UR5['alpha'][i])}}}, errors: {errors}}}\n" for i in range(6))
     return (f"name: ur5_test\nsymbols:\n{axes_yaml(6)}{extra}chain:\n{chain}"
             "tool:\n  point: [0, 0, 0]\n  direction: [0, 0, 1]\n")
 
 
 def panda_text():
-    chain = "".join(f"  - {{mdh: {{alpha: {PANDA['alpha'][i]!r}, a: {PANDA['a'][i]}, theta: q{i + 1}, "
-                    f"d: {PANDA['d'][i]}}}, errors: auto}}\n" for i in range(7))
+    chain = "".join(f"  - {{mdh: {{alpha: {num(PANDA['alpha'][i])}, a: {num(PANDA['a'][i])}, theta: q{i + 1}, "
+                    f"d: {num(PANDA['d'][i])}}}, errors: auto}}\n" for i in range(7))
     return (f"name: panda_test\nsymbols:\n{axes_yaml(7)}chain:\n{chain}  - {{translate: [0, 0, {FLANGE}]}}\n"
             "tool:\n  point: [0, 0, 0]\n  direction: [0, 0, 1]\n")
 
@@ -75,10 +65,7 @@ def test_ur5_dh_against_the_textbook_product(tmp_path):
     for _ in range(50):
         q = rng.uniform(-math.pi, math.pi, 6)
         e = random_errors(m, rng)
-        T = np.eye(4)
-        for i in range(6):
-            T = T @ std_link(q[i] + e[f"dtheta{i + 1}"], UR5["d"][i] + e[f"dd{i + 1}"], UR5["a"][i] + e[f"da{i + 1}"],
-                             UR5["alpha"][i] + e[f"dalpha{i + 1}"])
+        T = ur5(q, e)
         p, d = exact.pose({f"q{i + 1}": q[i] for i in range(6)} | e)
         assert np.allclose(p, T[:3, 3], atol=1e-9) and np.allclose(d, T[:3, 2], atol=1e-12)
 
@@ -90,11 +77,7 @@ def test_panda_mdh_against_the_textbook_product(tmp_path):
     for _ in range(50):
         q = rng.uniform(-math.pi, math.pi, 7)
         e = random_errors(m, rng)
-        T = np.eye(4)
-        for i in range(7):
-            T = T @ mod_link(PANDA["alpha"][i] + e[f"dalpha{i + 1}"], PANDA["a"][i] + e[f"da{i + 1}"],
-                             q[i] + e[f"dtheta{i + 1}"], PANDA["d"][i] + e[f"dd{i + 1}"])
-        T = T @ np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, FLANGE], [0, 0, 0, 1]])
+        T = panda(q, e)
         p, d = exact.pose({f"q{i + 1}": q[i] for i in range(7)} | e)
         assert np.allclose(p, T[:3, 3], atol=1e-9) and np.allclose(d, T[:3, 2], atol=1e-12)
 
@@ -113,13 +96,7 @@ def test_hayati_beta_and_the_parallel_axes_lint(tmp_path):
     rng = np.random.default_rng(3)
     q = rng.uniform(-math.pi, math.pi, 6)
     e = random_errors(m, rng)
-    T = np.eye(4)
-    for i in range(6):
-        j = i + 1
-        T = T @ std_link(q[i] + e[f"dtheta{j}"], UR5["d"][i] + e.get(f"dd{j}", 0.0), UR5["a"][i] + e[f"da{j}"],
-                         UR5["alpha"][i] + e[f"dalpha{j}"])
-        if j == 3:
-            T = T @ roty(e["dbeta3"])
+    T = ur5(q, e, betas=(3,))
     p, _ = ExactModel(m).pose({f"q{i + 1}": q[i] for i in range(6)} | e)
     assert np.allclose(p, T[:3, 3], atol=1e-9)
 

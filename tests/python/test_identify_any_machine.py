@@ -20,6 +20,7 @@ import pytest
 from chaincomp import load_machine, load_params
 from chaincomp.cli.main import main
 
+from arm_models import block, rx, ry, rz, tr
 from conftest import machine_path
 
 FIVE = machine_path("five_axis_ac")
@@ -27,40 +28,6 @@ UM, ARCSEC, DEG = 1e-3, math.pi / 180 / 3600, math.pi / 180      # to mm, rad
 
 
 # ----------------------------------------------------------------- independent HTM products
-
-def _rot(i, j, a):
-    a = np.asarray(a, float)
-    m = np.zeros(a.shape + (4, 4))
-    m[..., 0, 0] = m[..., 1, 1] = m[..., 2, 2] = m[..., 3, 3] = 1.0
-    c, s = np.cos(a), np.sin(a)
-    m[..., i, i], m[..., i, j], m[..., j, i], m[..., j, j] = c, -s, s, c
-    return m
-
-
-def rx(a):
-    return _rot(1, 2, a)
-
-
-def ry(a):
-    return _rot(2, 0, a)
-
-
-def rz(a):
-    return _rot(0, 1, a)
-
-
-def tr(x, y, z):
-    x, y, z = np.broadcast_arrays(*(np.asarray(v, float) for v in (x, y, z)))
-    m = np.zeros(x.shape + (4, 4))
-    m[..., 0, 0] = m[..., 1, 1] = m[..., 2, 2] = m[..., 3, 3] = 1.0
-    m[..., 0, 3], m[..., 1, 3], m[..., 2, 3] = x, y, z
-    return m
-
-
-def block(dx, dy, dz, ex, ey, ez):
-    """The error block of order txyz: T(dx,dy,dz) Rx(ex) Ry(ey) Rz(ez)."""
-    return tr(dx, dy, dz) @ rx(ex) @ ry(ey) @ rz(ez)
-
 
 def point(*matrices):
     """Leftmost matrix first, applied to the tool point (the origin) from the right."""

@@ -17,15 +17,12 @@ import pytest
 from chaincomp import load_machine, load_params
 from chaincomp.cli.main import main
 
+from arm_models import block, ur5
 from conftest import ROOT
-from test_identify_any_machine import rx, rz, tr, block
 
 UR5 = f"{ROOT}/tools/bench_machines/ur5_blocks.yaml"
 UM, ARCSEC, DEG = 1e-3, math.pi / 648000, math.pi / 180
 NOISE = 0.02                                     # mm, the tracker's standard uncertainty per coordinate
-DH = [  # d, a, alpha (mm, mm, deg): UR's published UR5 table
-    (89.159, 0.0, 90.0), (0.0, -425.0, 0.0), (0.0, -392.25, 0.0),
-    (109.15, 0.0, 90.0), (94.65, 0.0, -90.0), (82.3, 0.0, 0.0)]
 TOOL = np.array([30.0, 0.0, 120.0, 1.0])
 DIR = np.array([0.0, 0.0, 1.0, 0.0])
 
@@ -33,11 +30,8 @@ DIR = np.array([0.0, 0.0, 1.0, 0.0])
 def ur5_pose(q, e):
     """(rows, 6): tool point x, y, z and tool direction; q: 6 joint angle arrays (rad), e: the
     36 errors by name (mm, rad)."""
-    m = block(e["bx"], e["by"], e["bz"], e["ba"], e["bb"], e["bc"])
-    for i, (d, a, al) in enumerate(DH, 1):
-        m = m @ rz(q[i - 1] + e[f"dth{i}"]) @ tr(0, 0, d + e[f"dd{i}"]) @ tr(a + e[f"da{i}"], 0, 0) \
-            @ rx(al * DEG + e[f"dal{i}"])
-    m = m @ block(e["tx"], e["ty"], e["tz"], e["ta"], e["tb"], e["tc"])
+    m = block(e["bx"], e["by"], e["bz"], e["ba"], e["bb"], e["bc"]) @ ur5(q, e, ("dth{}", "dd{}", "da{}", "dal{}")) \
+        @ block(e["tx"], e["ty"], e["tz"], e["ta"], e["tb"], e["tc"])
     return np.concatenate([(m @ TOOL)[..., :3], (m @ DIR)[..., :3]], axis=-1)
 
 

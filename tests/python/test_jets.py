@@ -13,12 +13,12 @@ import pytest
 from chaincomp import ExactModel, TruncatedModel, derive, load_machine
 from chaincomp.jets import JetModel
 
+from arm_models import UR5_A, UR5_D, ur5 as ur5_frame
+
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 BUNDLED = sorted(glob.glob(os.path.join(ROOT, "configs", "machines", "*.yaml")))
 
-# UR5: d1, a2, a3, d4, d5, d6 (mm) and the twists alpha_i, from Universal Robots' DH table.
-UR5_D = [89.159, 0, 0, 109.15, 94.65, 82.3]
-UR5_A = [0, -425.0, -392.25, 0, 0, 0]
+# the UR5's twists as the YAML writes them (arm_models.UR5_ALPHA in rad)
 UR5_ALPHA = ["pi/2", "0", "0", "pi/2", "-pi/2", "0"]
 
 
@@ -74,13 +74,7 @@ def test_ur5_point_matches_a_numpy_dh_product(ur5):
     """The nominal tool point against the textbook DH product Rz(q) Tz(d) Tx(a) Rx(alpha)."""
     rng = np.random.default_rng(3)
     q = rng.uniform(-math.pi, math.pi, 6)
-    T = np.eye(4)
-    for i in range(6):
-        c, s = math.cos(q[i]), math.sin(q[i])
-        al = [math.pi / 2, 0, 0, math.pi / 2, -math.pi / 2, 0][i]
-        ca, sa = math.cos(al), math.sin(al)
-        T = T @ np.array([[c, -s * ca, s * sa, UR5_A[i] * c], [s, c * ca, -c * sa, UR5_A[i] * s],
-                          [0, sa, ca, UR5_D[i]], [0, 0, 0, 1]])
+    T = ur5_frame(q)
     point, direction = ExactModel(ur5).pose({f"q{i + 1}": q[i] for i in range(6)})
     assert np.allclose(point, T[:3, 3], atol=1e-9)
     assert np.allclose(direction, T[:3, 2], atol=1e-12)

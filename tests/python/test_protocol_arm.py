@@ -14,12 +14,11 @@ import math
 import numpy as np
 import pytest
 
+from arm_models import UR5_A, UR5_ALPHA, UR5_D, dh_chain
 from conftest import ROOT, run_cli
 
 UR5_FILE = f"{ROOT}/tools/bench_machines/ur5.yaml"
-UR5 = {"d": [89.159, 0, 0, 109.15, 94.65, 82.3], "a": [0, -425.0, -392.25, 0, 0, 0],
-       "alpha": [math.pi / 2, 0, 0, math.pi / 2, -math.pi / 2, 0], "tool": [30.0, 0.0, 120.0],
-       "limits": [(-360.0, 360.0)] * 6}
+UR5 = {"d": UR5_D, "a": UR5_A, "alpha": UR5_ALPHA, "tool": [30.0, 0.0, 120.0], "limits": [(-360.0, 360.0)] * 6}
 ARM3 = {"d": [300.0, 0.0, 0.0], "a": [50.0, 400.0, 250.0], "alpha": [math.pi / 2, 0.0, 0.0],
         "tool": [0.0, 20.0, 60.0], "limits": [(-170.0, 170.0), (-60.0, 120.0), (-140.0, 100.0)]}
 ARM3_YAML = """\
@@ -42,28 +41,23 @@ tool:
 ARCSEC = math.pi / 648000
 
 
-def link(theta, d, a, alpha):
-    ct, st, ca, sa = math.cos(theta), math.sin(theta), math.cos(alpha), math.sin(alpha)
-    return np.array([[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st], [0, sa, ca, d], [0, 0, 0, 1]])
-
-
 def tool_point(arm, q, e):
-    """e: (joints, 4) errors of theta, d, a, alpha (rad, mm)."""
-    t = np.eye(4)
-    for i, qi in enumerate(q):
-        t = t @ link(qi + e[i, 0], arm["d"][i] + e[i, 1], arm["a"][i] + e[i, 2], arm["alpha"][i] + e[i, 3])
-    return (t @ np.array([*arm["tool"], 1.0]))[:3]
+    """(poses, 3) at q (poses, joints; rad); e: (joints, 4) errors of theta, d, a, alpha (rad, mm)."""
+    names = ("dtheta{}", "dd{}", "da{}", "dalpha{}")
+    errors = {names[k].format(i + 1): e[i, k] for i in range(len(e)) for k in range(4)}
+    t = dh_chain(q.T, arm["d"], arm["a"], arm["alpha"], errors)
+    return (t @ np.array([*arm["tool"], 1.0]))[..., :3]
 
 
 def jacobian(arm, poses_deg, h=1e-6):
     """(poses, 3, 4 joints) by central differences, errors in mm and rad."""
     n = len(arm["d"])
-    out = np.zeros((len(poses_deg), 3, 4 * n))
-    for r, q in enumerate(np.radians(poses_deg)):
-        for k in range(4 * n):
-            e = np.zeros(4 * n)
-            e[k] = h
-            out[r, :, k] = (tool_point(arm, q, e.reshape(n, 4)) - tool_point(arm, q, -e.reshape(n, 4))) / (2 * h)
+    q = np.radians(np.asarray(poses_deg, float)).reshape(-1, n)
+    out = np.zeros((len(q), 3, 4 * n))
+    for k in range(4 * n):
+        e = np.zeros(4 * n)
+        e[k] = h
+        out[:, :, k] = (tool_point(arm, q, e.reshape(n, 4)) - tool_point(arm, q, -e.reshape(n, 4))) / (2 * h)
     return out
 
 

@@ -84,13 +84,12 @@ import re  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from test_dh import mod_link, roty, std_link  # noqa: E402
+from arm_models import UR5_A, UR5_ALPHA, UR5_D, mod_link, ry, std_link  # noqa: E402
 
-# A UR5 in both conventions (joints 2, 3, 4 parallel), and the same arm written in Craig's.
-ARM = {"dh": {"d": [89.159, 0, 0, 109.15, 94.65, 82.3], "a": [0, -425.0, -392.25, 0, 0, 0],
-              "alpha": [math.pi / 2, 0, 0, math.pi / 2, -math.pi / 2, 0]},
-       "mdh": {"d": [89.159, 0, 0, 109.15, 94.65, 82.3], "a": [0, 0, -425.0, -392.25, 0, 0],
-               "alpha": [0, math.pi / 2, 0, 0, math.pi / 2, -math.pi / 2]}}
+# A UR5 in both conventions (joints 2, 3, 4 parallel), and the same arm written in Craig's
+# (each link's a and alpha moved to the next link).
+ARM = {"dh": {"d": UR5_D, "a": UR5_A, "alpha": UR5_ALPHA},
+       "mdh": {"d": UR5_D, "a": [0.0] + UR5_A[:-1], "alpha": [0.0] + UR5_ALPHA[:-1]}}
 
 
 def arm_text(kind, no_d=(), betas=()):
@@ -121,7 +120,7 @@ def numpy_rank(kind, no_d, betas):
                             p["a"][i] + e.get((j, "a"), 0), p["alpha"][i] + e.get((j, "alpha"), 0))
             T = T @ (std_link(th, d, a, al) if kind == "dh" else mod_link(al, a, th, d))
             if j in betas:
-                T = T @ roty(e.get((j, "beta"), 0))
+                T = T @ ry(e.get((j, "beta"), 0))
         T = T @ np.array([[1, 0, 0, 10], [0, 1, 0, 0], [0, 0, 1, 50], [0, 0, 0, 1.0]])
         return np.concatenate([T[:3, 3], T[:3, 2]])
 
