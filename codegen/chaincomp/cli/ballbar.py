@@ -20,7 +20,8 @@ from ..jets import JetModel
 from ..numeric import ExactModel
 from ..varying import Varying
 from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, add_values_arguments,
-                     _same_file, check_image, check_output, integer, load, number, to_json, values_for)
+                     _same_file, check_image, check_output, integer, load, number, refuse_empty, to_json,
+                     values_for)
 from ..protocol import check_errors
 from .laser_to_params import _one_line, merge
 from .protocol import names
@@ -339,19 +340,11 @@ def _sigma_text(machine, error, axis, k, sd) -> str:
         (f"^{k}" if k > 1 else "")
 
 
-def _no_empty_values(args) -> None:
-    """An empty option value is a typo, not a request for the default (as protocol --angles '')."""
-    given = [("--params", args.params), ("--centre", args.centre), ("--axes", args.axes), ("--fit", args.fit),
-             ("--plot", args.plot),
-             ("-o", args.output)] + [("--prefer", v) for v in args.prefer] + \
-        [("--assume-zero", v) for v in args.assume_zero]
-    for opt, v in given:
-        if v is not None and not v.strip():
-            raise ChaincompError(f"{opt}: an empty value (leave the option out for its default)")
-
-
 def run(args) -> int:
-    _no_empty_values(args)
+    # an empty option value is a typo, not a request for the default (as protocol --angles '')
+    refuse_empty(("--params", args.params), ("--centre", args.centre), ("--axes", args.axes), ("--fit", args.fit),
+                 ("--plot", args.plot), ("-o", args.output), *(("--prefer", v) for v in args.prefer),
+                 *(("--assume-zero", v) for v in args.assume_zero))
     if args.fit:
         return run_fit(args)
     for opt, v in (("--plane", args.plane), ("--radius", args.radius)):

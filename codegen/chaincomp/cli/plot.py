@@ -21,7 +21,7 @@ from ..numeric import ExactModel
 from ..units import UNITS
 from . import figures as F
 from .common import (MODEL_NAMES, add_machine_argument, add_model_argument, add_values_arguments, check_image,
-                     check_output, integer, load, parse_number, values_for)
+                     check_output, integer, load, parse_number, refuse_empty, values_for)
 from .eval import angle_between
 
 COMPONENTS = ("dx", "dy", "dz", "dkx", "dky", "dkz", "norm")
@@ -159,10 +159,8 @@ def run(args) -> int:
     import matplotlib
     matplotlib.use("Agg")
     _normalise(args)
-    for opt, v in (("--params", args.params), ("--over", args.over), ("--range", args.range1),
-                   ("--range2", args.range2), ("-o", args.output), ("--html", args.html)):
-        if v is not None and not v.strip():
-            raise ChaincompError(f"{opt}: an empty value (leave the option out for its default)")
+    refuse_empty(("--params", args.params), ("--over", args.over), ("--range", args.range1),
+                 ("--range2", args.range2), ("-o", args.output), ("--html", args.html))
     inputs = (args.machine, args.params, args.replay, args.table)
     check_image(args.output, *inputs)
     if args.html:
