@@ -57,7 +57,8 @@ def test_markdown_formulas_equal_the_exact_model(name):
     comps = ["x", "y", "z"] + (["kx", "ky", "kz"] if machine.tool_direction else [])
     assert set(exprs) == set(comps) | {"d" + c for c in comps}
     gains = {k: parse_expr(v, local_dict=table) for k, v in _gain_cells(md, machine).items()}
-    assert len(gains) == len(machine.errors) * len(comps)
+    turns = ["wx", "wy", "wz"] if machine.tool_reference else []     # a tool frame's rotation vector
+    assert len(gains) == len(machine.errors) * (len(comps) + len(turns))
     exact = ExactModel(machine)
     rng = random.Random(3)
     for _ in range(3):
@@ -81,6 +82,16 @@ def test_markdown_formulas_equal_the_exact_model(name):
                 g = gains[("d" + c, e.name)]
                 got = float(sp.sympify(g).evalf(subs={table[n]: v for n, v in values.items()})) if g != "0" else 0.0
                 assert got == pytest.approx(col[i], abs=1e-9), (c, e.name)
+            if turns:   # the frame turns by w: each axis v moves by w x v, so w = (x*dx + y*dy + z*dz)/2
+                _, z0, x0 = (np.real(np.array(v, complex)) for v in exact.frame(zero))
+                _, z1, x1 = exact.frame(dict(zero, **{e.name: 1j * H}))
+                dz, dx = np.imag(np.array(z1, complex)) / H, np.imag(np.array(x1, complex)) / H
+                y0, dy = np.cross(z0, x0), np.cross(dz, x0) + np.cross(z0, dx)
+                w = (np.cross(x0, dx) + np.cross(y0, dy) + np.cross(z0, dz)) / 2
+                for i, c in enumerate(turns):
+                    g = gains[(c, e.name)]
+                    got = float(sp.sympify(g).evalf(subs={table[n]: v for n, v in values.items()})) if g != "0" else 0.0
+                    assert got == pytest.approx(w[i], abs=1e-9), (c, e.name)
 
 
 def test_markdown_reads_like_the_paper():
