@@ -1,6 +1,9 @@
-"""The math text of machine, check and tolerance files, parsed into sympy expressions by a
-small recursive-descent parser that can only build arithmetic: nothing in the text is ever
-evaluated as Python (no ``eval``, no ``parse_expr``).
+"""The math text of machine, check and tolerance files, parsed by a small recursive-descent
+parser that can only build arithmetic: nothing in the text is ever evaluated as Python (no
+``eval``, no ``parse_expr``). It builds a small immutable tree of our own (Expr), which
+evaluates numerically (numbers, numpy arrays, mpmath) and as truncated Taylor series in the
+errors without sympy; ``Expr.to_sympy`` builds the sympy expression, operation by operation,
+for the symbolic verbs, which alone import sympy.
 
 Grammar (whitespace between tokens is free)::
 
@@ -23,15 +26,13 @@ from __future__ import annotations
 import keyword
 import math
 import re
+from fractions import Fraction
 
-import sympy as sp
-
+from . import jetmath as J
 from .yamlsource import describe
 
-FUNCTIONS = {
-    "sin": sp.sin, "cos": sp.cos, "tan": sp.tan, "asin": sp.asin, "acos": sp.acos,
-    "atan": sp.atan, "atan2": sp.atan2, "sqrt": sp.sqrt, "pi": sp.pi,
-}
+# The functions the grammar knows (and pi): their sympy forms are looked up by name.
+FUNCTIONS = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sqrt", "pi")
 _ARITY = {"atan2": 2}
 
 MAX_LENGTH = 1000      # characters of one expression
@@ -87,10 +88,357 @@ def _shown(source: str) -> str:
     return repr(source if len(source) <= 80 else source[:77] + "...")
 
 
+# ----------------------------------------------------------------------------- the tree
+# A node is a tuple: ("num", Fraction or float), ("sym", name), ("pi",), ("add"|"sub"|"mul"|"div",
+# a, b), ("neg", a), ("pow", a, Fraction exponent), or a function's name with its arguments
+# ("sin", a), ("atan2", y, x).
+ZERO = ("num", Fraction(0))
+
+
+def fold(node) -> Fraction | None:
+    """The exact value of a node built from numbers by + - * / and integer powers, else None."""
+    op = node[0]
+    if op == "num":
+        return node[1] if isinstance(node[1], Fraction) else None
+    if op == "neg":
+        a = fold(node[1])
+        return None if a is None else -a
+    if op == "pow":
+        a = fold(node[1])
+        if a is None or node[2].denominator != 1 or (a == 0 and node[2] < 0):
+            return None
+        return a ** int(node[2])
+    if op in ("add", "sub", "mul", "div"):
+        a, b = fold(node[1]), fold(node[2])
+        if a is None or b is None or (op == "div" and b == 0):
+            return None
+        return a + b if op == "add" else a - b if op == "sub" else a * b if op == "mul" else a / b
+    return None
+
+
+def _names(node, out: set) -> set:
+    if node[0] == "sym":
+        out.add(node[1])
+    elif node[0] not in ("num", "pi"):
+        for a in node[1:]:
+            if isinstance(a, tuple):
+                _names(a, out)
+    return out
+
+
+def _real_symbols(names) -> dict:
+    import sympy as sp
+    return {n: sp.Symbol(n, real=True) for n in names}
+
+
+def _to_sympy(node, table: dict, source: str):
+    """The sympy expression of ``node``, built by the same operations in the same order as
+    the text reads, with sympy's own view of what is zero (x/(a - a) divides by zero)."""
+    import sympy as sp
+    op = node[0]
+    if op == "num":
+        v = node[1]
+        return sp.Rational(v.numerator, v.denominator) if isinstance(v, Fraction) else sp.Float(v)
+    if op == "sym":
+        return table[node[1]]
+    if op == "pi":
+        return sp.pi
+    if op == "neg":
+        return -_to_sympy(node[1], table, source)
+    if op == "pow":
+        base, exp = _to_sympy(node[1], table, source), sp.Rational(node[2].numerator, node[2].denominator)
+        if base == 0 and exp < 0:
+            raise ExpressionError(f"division by zero in {_shown(source)}")
+        if base.is_Number and abs(exp) * math.log10(max(abs(base.p), base.q, 1)) > math.log10(MAX_MAGNITUDE):
+            raise ExpressionError(f"{_shown(source)} holds a number larger than {MAX_MAGNITUDE:g}")
+        return base ** exp
+    args = [_to_sympy(a, table, source) for a in node[1:]]
+    if op == "add":
+        return args[0] + args[1]
+    if op == "sub":
+        return args[0] - args[1]
+    if op == "mul":
+        return args[0] * args[1]
+    if op == "div":
+        if args[1] == 0:
+            raise ExpressionError(f"division by zero in {_shown(source)}")
+        return args[0] / args[1]
+    return getattr(sp, op)(*args)
+
+
+class Expr:
+    """A parsed expression: an immutable tree (see above), its source text for messages, and
+    its sympy form once built (or given: an expression sympy rewrote, see from_sympy)."""
+
+    __slots__ = ("node", "source", "_names", "_sympy")
+
+    def __init__(self, node, source: str = "", sympy_form=None):
+        self.node, self.source = node, source
+        self._names = None
+        self._sympy = sympy_form   # a sympy expression, a function making one, or None
+
+    def __eq__(self, other):
+        return isinstance(other, Expr) and self.node == other.node
+
+    def __hash__(self):
+        return hash(self.node)
+
+    def __repr__(self):
+        return f"Expr({self.source or self.node!r})"
+
+    @property
+    def names(self) -> frozenset:
+        """The names of the symbols it uses."""
+        if self._names is None:
+            self._names = frozenset(_names(self.node, set()))
+        return self._names
+
+    @property
+    def is_zero(self) -> bool:
+        return fold(self.node) == 0
+
+    # New trees from this one; their sympy forms are made from this one's, by the same operation.
+    def __neg__(self) -> "Expr":
+        return Expr(("neg", self.node), self.source, lambda: -self.to_sympy())
+
+    def plus(self, name: str) -> "Expr":
+        """This + the symbol ``name`` (a dh parameter and its error)."""
+        return Expr(("add", self.node, ("sym", name)), self.source,
+                    lambda: self.to_sympy() + _real_symbols([name])[name])
+
+    def scaled(self, k: int) -> "Expr":
+        """k·this, for a rotation sense of ±1."""
+        return Expr(("mul", ("num", Fraction(k)), self.node), self.source, lambda: k * self.to_sympy())
+
+    def to_sympy(self, table: dict | None = None):
+        """The sympy expression (symbols from ``table``, by default real symbols of the names)."""
+        if table is not None and self._sympy is None:
+            return _to_sympy(self.node, table, self.source)
+        if callable(self._sympy):
+            self._sympy = self._sympy()
+        if self._sympy is None:
+            self._sympy = _to_sympy(self.node, _real_symbols(self.names), self.source)
+        return self._sympy
+
+    def function(self, lib):
+        """A function of a {name: value} mapping giving the value (numbers or arrays)."""
+        return _compile(self.node, lib)
+
+    def value(self, values: dict, lib=math):
+        return _compile(self.node, lib)(values)
+
+    def jet(self, values: dict, index: dict, k: int, lib) -> dict:
+        """The Taylor series to degree ``k`` in the symbols of ``index`` (name -> position) at
+        ``values`` of the others: {monomial: coefficient}, as chaincomp.series."""
+        return _jet(self.node, values, index, k, lib)
+
+
+def constant(value: float) -> Expr:
+    """A number already computed (a normalised tool vector's component)."""
+    return Expr(("num", float(value)), repr(value))
+
+
+def from_sympy(expr, source: str = "") -> Expr:
+    """The tree of a sympy expression (one sympy rewrote: the tree keeps that form exactly)."""
+    import sympy as sp
+
+    def node(e):
+        if e.is_Rational:
+            return ("num", Fraction(int(e.p), int(e.q)))
+        if e.is_Symbol:
+            return ("sym", e.name)
+        if e is sp.pi:
+            return ("pi",)
+        if e.is_Add or e.is_Mul:
+            out = node(e.args[0])
+            for a in e.args[1:]:
+                out = ("add" if e.is_Add else "mul", out, node(a))
+            return out
+        if e.is_Pow and e.exp.is_Rational:
+            return ("pow", node(e.base), Fraction(int(e.exp.p), int(e.exp.q)))
+        if isinstance(e, sp.Abs):   # sqrt(x^2) of a real x
+            return ("pow", ("pow", node(e.args[0]), Fraction(2)), Fraction(1, 2))
+        name = type(e).__name__
+        if name in FUNCTIONS and name != "pi":
+            return (name,) + tuple(node(a) for a in e.args)
+        raise ExpressionError(f"{_shown(source)} becomes {e}, which chaincomp cannot evaluate")
+    return Expr(node(expr), source, expr)
+
+
+# ----------------------------------------------------------------------------- numbers
+
+def _lib_functions(lib) -> dict:
+    if lib.__name__ == "numpy":
+        names = {"asin": "arcsin", "acos": "arccos", "atan": "arctan", "atan2": "arctan2"}
+    else:
+        names = {}
+    return {f: getattr(lib, names.get(f, f)) for f in FUNCTIONS if f != "pi"}
+
+
+def _number(v, lib):
+    """A tree's number for ``lib``: mpmath keeps its precision, the others take floats."""
+    if lib.__name__ == "mpmath":
+        return lib.mpf(v.numerator) / v.denominator if isinstance(v, Fraction) else lib.mpf(v)
+    return float(v)
+
+
+def _power(a, p: Fraction, lib):
+    if p.denominator == 1:
+        return a ** int(p)
+    if p == Fraction(1, 2):
+        return _lib_functions(lib)["sqrt"](a)
+    return a ** _number(p, lib)
+
+
+def _compile(node, lib):
+    """Closures over the tree (no source text is generated and run)."""
+    op = node[0]
+    if op == "num":
+        c = _number(node[1], lib)
+        return lambda v: c
+    if op == "sym":
+        name = node[1]
+        return lambda v: v[name]
+    if op == "pi":
+        c = lib.pi
+        return lambda v: c
+    if op == "neg":
+        f = _compile(node[1], lib)
+        return lambda v: -f(v)
+    if op == "pow":
+        f, p = _compile(node[1], lib), node[2]
+        return lambda v: _power(f(v), p, lib)
+    fs = [_compile(a, lib) for a in node[1:]]
+    if op in ("add", "sub", "mul", "div"):
+        f, g = fs
+        return {"add": lambda v: f(v) + g(v), "sub": lambda v: f(v) - g(v),
+                "mul": lambda v: f(v) * g(v), "div": lambda v: f(v) / g(v)}[op]
+    fn = _lib_functions(lib)[op]
+    if len(fs) == 2:
+        f, g = fs
+        return lambda v: fn(f(v), g(v))
+    f = fs[0]
+    return lambda v: fn(f(v))
+
+
+# ----------------------------------------------------------------------------- jets
+
+def _jet(node, values: dict, index: dict, k: int, lib) -> dict:
+    op = node[0]
+    if op == "num":
+        return {(): _number(node[1], lib)}
+    if op == "sym":
+        return {(index[node[1]],): 1} if node[1] in index else {(): values[node[1]]}
+    if op == "pi":
+        return {(): lib.pi}
+    if op == "neg":
+        return {m: -c for m, c in _jet(node[1], values, index, k, lib).items()}
+    args = [_jet(a, values, index, k, lib) for a in node[1:] if isinstance(a, tuple)]
+    if op == "add":
+        return J.lin(args[0], 1, args[1], 1)
+    if op == "sub":
+        return J.lin(args[0], 1, args[1], -1)
+    if op == "mul":
+        return J.mul_all(args[0], args[1], k)
+    fn = _lib_functions(lib)
+    if op == "div":
+        return J.mul_all(args[0], J.power(args[1], -1, k, lambda a, p: _power(a, p, lib)), k)
+    if op == "pow":
+        return J.power(args[0], node[2], k, lambda a, p: _power(a, p, lib))
+    if op == "sqrt":
+        return J.power(args[0], Fraction(1, 2), k, lambda a, p: _power(a, p, lib))
+    if op in ("sin", "cos", "tan"):
+        s, c = J.sin_cos_at(args[0], k, fn["sin"], fn["cos"])
+        return s if op == "sin" else c if op == "cos" else \
+            J.mul_all(s, J.power(c, -1, k, lambda a, p: _power(a, p, lib)), k)
+    if op in ("atan", "asin", "acos"):
+        return J.inverse_trig(op, args[0], k, fn[op], lambda a, p: _power(a, p, lib))
+    if op == "atan2":
+        return J.atan2(args[0], args[1], k, fn["atan2"], lambda a, p: _power(a, p, lib))
+    raise AssertionError(op)
+
+
+# ----------------------------------------------------------------------------- load checks
+
+class _Doubtful(Exception):
+    pass
+
+
+def plausible(e: Expr, values: dict, errors: set) -> bool:
+    """Whether ``e`` is, beyond doubt, finite and real at ``values`` (floats, errors at zero),
+    analytic in the ``errors`` there and free of numbers sympy would find too large. Cheap
+    and numeric; where it doubts, the loader asks sympy (which has the last word and the
+    messages): a division by something that vanishes at these values, a power, asin or acos,
+    tan or atan2 near where it is not analytic, anything not finite or not real."""
+    try:
+        _screen(e.node, values, errors)
+    except (_Doubtful, ArithmeticError, ValueError, TypeError):
+        return False
+    return True
+
+
+_NEAR = 1e-9   # far below any value a machine means, far above rounding of a symbolic zero
+
+
+def _screen(node, values, errors):
+    """(value, whether it varies with an error, log10 of a bound on the height of any rational
+    number sympy could fold out of it)."""
+    op = node[0]
+    if op == "num":
+        v = node[1]
+        h = math.log10(max(abs(v.numerator), v.denominator, 1)) if isinstance(v, Fraction) else 0.0
+        return float(v), False, h
+    if op == "sym":
+        return float(values[node[1]]), node[1] in errors, 0.0
+    if op == "pi":
+        return math.pi, False, 0.0
+    parts = [_screen(a, values, errors) for a in node[1:] if isinstance(a, tuple)]
+    x = [p[0] for p in parts]
+    err = any(p[1] for p in parts)
+    h = sum(p[2] for p in parts) + math.log10(2) * (len(parts) - 1)
+    if op == "neg":
+        v = -x[0]
+    elif op in ("add", "sub", "mul"):
+        v = x[0] + x[1] if op == "add" else x[0] - x[1] if op == "sub" else x[0] * x[1]
+    elif op == "div":
+        if abs(x[1]) < _NEAR:
+            raise _Doubtful
+        v = x[0] / x[1]
+    elif op in ("pow", "sqrt"):
+        p = node[2] if op == "pow" else Fraction(1, 2)
+        h = parts[0][2] * math.ceil(abs(p)) + math.log10(MAX_EXPONENT)
+        natural = p.denominator == 1 and p >= 0
+        if not natural and abs(x[0]) < _NEAR and (p < 0 or err):
+            raise _Doubtful
+        if not natural and x[0] < 0 and p.denominator != 1:
+            raise _Doubtful
+        v = x[0] ** (int(p) if p.denominator == 1 else float(p))
+    elif op in ("asin", "acos"):
+        if abs(x[0]) > 1 - _NEAR:
+            raise _Doubtful
+        v = getattr(math, op)(x[0])
+    elif op == "tan":
+        if abs(math.cos(x[0])) < _NEAR:
+            raise _Doubtful
+        v = math.tan(x[0])
+    elif op == "atan2":
+        if abs(x[0]) < _NEAR and (abs(x[1]) < _NEAR or x[1] < 0):
+            raise _Doubtful
+        v = math.atan2(x[0], x[1])
+    else:
+        v = getattr(math, op)(x[0])
+        h += 2   # sympy folds constants of known values: sin(pi/6) = 1/2
+    if isinstance(v, complex) or not math.isfinite(v) or abs(v) > MAX_MAGNITUDE or h > math.log10(MAX_MAGNITUDE):
+        raise _Doubtful
+    return v, err, h
+
+
+# ----------------------------------------------------------------------------- parsing
+
 class _Parser:
-    def __init__(self, source: str, symbols: dict[str, sp.Symbol]):
+    def __init__(self, source: str, names):
         self.source = source
-        self.symbols = symbols
+        self.names = names
         self.tokens = self._tokenize(source)
         self.pos = 0
         self.depth = 0
@@ -131,14 +479,14 @@ class _Parser:
         if self.depth > MAX_DEPTH:
             raise ExpressionError(f"expression {_shown(self.source)} is nested more than {MAX_DEPTH} deep")
 
-    # Each rule returns (expression, degree): the degree bounds what expanding it could give.
+    # Each rule returns (node, degree): the degree bounds what expanding it could give.
     def expr(self):
         self.enter()
         e, d = self.term()
         while self.peek() in ("+", "-"):
             op = self.take()[1]
             f, g = self.term()
-            e, d = (e + f if op == "+" else e - f), max(d, g)
+            e, d = ("add" if op == "+" else "sub", e, f), max(d, g)
         self.depth -= 1
         return e, d
 
@@ -147,9 +495,9 @@ class _Parser:
         while self.peek() in ("*", "/"):
             op = self.take()[1]
             f, g = self.unary()
-            if op == "/" and f == 0:
+            if op == "/" and fold(f) == 0:   # a divisor only sympy sees is zero: Expr.to_sympy
                 raise ExpressionError(f"division by zero in {_shown(self.source)}")
-            e, d = (e * f if op == "*" else e / f), self._degree(d + g)
+            e, d = ("mul" if op == "*" else "div", e, f), self._degree(d + g)
         return e, d
 
     def unary(self):
@@ -158,7 +506,7 @@ class _Parser:
             op = self.take()[1]
             e, d = self.unary()
             self.depth -= 1
-            return (e if op == "+" else -e), d
+            return (e if op == "+" else ("neg", e)), d
         return self.power()
 
     def power(self):
@@ -167,18 +515,29 @@ class _Parser:
             return base, d
         self.enter()
         self.take()
-        exp, _ = self.unary()
+        exp_node, _ = self.unary()
         self.depth -= 1
+        exp = fold(exp_node)
+        if exp is None:
+            exp = self._sympy_exponent(exp_node)
+        if abs(exp) > MAX_EXPONENT or exp.denominator > MAX_EXPONENT:
+            raise ExpressionError(f"exponent {exp} in {_shown(self.source)} is larger than {MAX_EXPONENT}")
+        b = fold(base)
+        if b == 0 and exp < 0:
+            raise ExpressionError(f"division by zero in {_shown(self.source)}")
+        if b is not None and abs(exp) * math.log10(max(abs(b.numerator), b.denominator, 1)) > \
+                math.log10(MAX_MAGNITUDE):
+            raise ExpressionError(f"{_shown(self.source)} holds a number larger than {MAX_MAGNITUDE:g}")
+        return ("pow", base, exp), self._degree(d * math.ceil(abs(exp)))
+
+    def _sympy_exponent(self, node) -> Fraction:
+        """An exponent that is no plain fraction (2^(1/2)*2^(1/2), pi/pi): sympy says whether it
+        is a constant rational number, as it always did."""
+        exp = _to_sympy(node, _real_symbols(_names(node, set())), self.source)
         if exp.free_symbols or not exp.is_Rational:
             raise ExpressionError(f"exponent {exp} in {_shown(self.source)}: exponents must be constant "
                                   f"rational numbers (write a varying power with sqrt, sin, ...)")
-        if abs(exp) > MAX_EXPONENT or exp.q > MAX_EXPONENT:
-            raise ExpressionError(f"exponent {exp} in {_shown(self.source)} is larger than {MAX_EXPONENT}")
-        if base == 0 and exp < 0:
-            raise ExpressionError(f"division by zero in {_shown(self.source)}")
-        if base.is_Number and abs(exp) * math.log10(max(abs(base.p), base.q, 1)) > math.log10(MAX_MAGNITUDE):
-            raise ExpressionError(f"{_shown(self.source)} holds a number larger than {MAX_MAGNITUDE:g}")
-        return base ** exp, self._degree(d * math.ceil(abs(exp)))
+        return Fraction(int(exp.p), int(exp.q))
 
     def atom(self):
         kind, text = self.take()
@@ -191,11 +550,11 @@ class _Parser:
                 raise ExpressionError(f"unknown function {text!r} in {_shown(self.source)} "
                                       f"(known: {', '.join(sorted(k for k in FUNCTIONS if k != 'pi'))})")
             if text == "pi":
-                return sp.pi, 0
-            if text not in self.symbols:
+                return ("pi",), 0
+            if text not in self.names:
                 raise ExpressionError(f"unknown symbol {text!r} in {_shown(self.source)} "
                                       f"(declare it under 'symbols')")
-            return self.symbols[text], 1
+            return ("sym", text), 1
         if text == "(":
             e = self.expr()
             self.take(")")
@@ -215,9 +574,9 @@ class _Parser:
         if len(args) != want:
             raise ExpressionError(f"{name} takes {want} argument{'s' if want > 1 else ''}, got {len(args)} "
                                   f"in {_shown(self.source)}")
-        return FUNCTIONS[name](*args), deg
+        return (name, *args), deg
 
-    def _number(self, text: str) -> sp.Rational:
+    def _number(self, text: str):
         if len(text) > MAX_LITERAL_CHARS:
             raise ExpressionError(f"number {text[:20]}... in {_shown(self.source)} has more than "
                                   f"{MAX_LITERAL_CHARS} characters")
@@ -225,11 +584,11 @@ class _Parser:
         if not abs(value) <= MAX_LITERAL:
             raise ExpressionError(f"number {text} in {_shown(self.source)} is larger than {MAX_LITERAL:g}")
         if value == 0:
-            return sp.Integer(0)
+            return ZERO
         if abs(value) < 1 / MAX_LITERAL**2:
             raise ExpressionError(f"number {text} in {_shown(self.source)} is smaller than "
                                   f"{1 / MAX_LITERAL**2:g} (write 0, or use a smaller unit)")
-        return sp.Rational(text)
+        return ("num", Fraction(text))
 
     def _degree(self, d: int) -> int:
         if d > MAX_DEGREE:
@@ -238,12 +597,12 @@ class _Parser:
         return d
 
 
-def parse(text: object, symbols: dict[str, sp.Symbol]) -> sp.Expr:
-    """Parse ``text`` (a string or number) using only the declared ``symbols``.
+def parse_expr(text: object, names) -> Expr:
+    """Parse ``text`` (a string or number) using only the declared symbol ``names``.
 
-    Decimal numbers become exact rationals, so derived formulas stay exact. Raises
-    ExpressionError, with the text, for anything outside the grammar or its bounds.
-    """
+    Decimal numbers become exact fractions. Raises ExpressionError, with the text, for
+    anything outside the grammar or its bounds. What only sympy can tell (that a divisor
+    is identically zero, that a constant is not real) Expr.to_sympy and check_sympy tell."""
     if isinstance(text, bool) or not isinstance(text, (str, int, float)):
         raise ExpressionError(f"expected a number or an expression, got {describe(text)}")
     if isinstance(text, (int, float)):
@@ -259,10 +618,17 @@ def parse(text: object, symbols: dict[str, sp.Symbol]) -> sp.Expr:
         raise ExpressionError("empty expression")
     if len(source) > MAX_LENGTH:
         raise ExpressionError(f"expression of {len(source)} characters (at most {MAX_LENGTH})")
-    p = _Parser(source, symbols)
-    expr, _ = p.expr()
+    p = _Parser(source, names)
+    node, _ = p.expr()
     if p.pos != len(p.tokens):
         raise p.fail(f"unexpected {p.tokens[p.pos][1]!r}")
+    return Expr(node, source)
+
+
+def check_sympy(expr, source: str) -> None:
+    """What sympy's evaluation of a parsed expression may show: not finite, not real, or
+    holding too large a number."""
+    import sympy as sp
     if expr.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
         raise ExpressionError(f"{_shown(source)} is not finite")
     # I itself, and constants sympy keeps unevaluated off the real line: (-8)^(1/3), acos(2)
@@ -271,4 +637,12 @@ def parse(text: object, symbols: dict[str, sp.Symbol]) -> sp.Expr:
     for n in expr.atoms(sp.Number):
         if abs(n) > MAX_MAGNITUDE:
             raise ExpressionError(f"{_shown(source)} holds a number larger than {MAX_MAGNITUDE:g}")
+
+
+def parse(text: object, symbols: dict):
+    """Parse ``text`` into a sympy expression with the declared ``symbols`` ({name: sympy
+    symbol}): the formulas of check and tolerance files, symbolic by nature."""
+    e = parse_expr(text, symbols)
+    expr = e.to_sympy(symbols)
+    check_sympy(expr, e.source)
     return expr

@@ -17,6 +17,8 @@ import sympy as sp
 from sympy.polys.rings import ring as poly_ring
 from sympy.polys.domains import QQ
 
+from .jetmath import mul_all  # the product of truncated series, numeric or symbolic: one place
+
 Monomial = tuple[int, ...]
 
 
@@ -56,20 +58,6 @@ class Atoms:
 def mul(a: dict, b: dict, k: int) -> dict:
     """Product of two series, dropping monomials of degree above k (and zero coefficients)."""
     return {m: c for m, c in mul_all(a, b, k).items() if c}
-
-
-def mul_all(a: dict, b: dict, k: int) -> dict:
-    """The same, keeping every coefficient (numpy arrays cannot be tested for zero)."""
-    out: dict = {}
-    for ma, ca in a.items():
-        room = k - len(ma)
-        for mb, cb in b.items():
-            if len(mb) > room:
-                continue
-            m = tuple(sorted(ma + mb)) if (ma and mb) else (ma or mb)
-            c = ca * cb
-            out[m] = out[m] + c if m in out else c
-    return out
 
 
 def add(a: dict, b: dict, sign: int = 1) -> dict:
