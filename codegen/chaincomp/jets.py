@@ -2,50 +2,21 @@
 (jets) carried through the chain, with no symbolic expansion of the product.
 
 A jet is a dict from a monomial of error indices (as in chaincomp.series) to a number or a
-numpy array (values broadcast over poses). Each chain element's expression is expanded in
-the errors symbolically — a small expression, once per model — and its Taylor coefficients
-are compiled into one function of the large symbols; the chain is then applied to the tool
-point and direction from the right, multiplying truncated jets, exactly as the symbolic
-derivation multiplies truncated series. The cost is linear in the number of elements, so a
-six-joint arm evaluates in milliseconds where its expanded formulas take minutes to derive.
+numpy array (values broadcast over poses). Each chain element's expression tree gives its jet
+at the large values (chaincomp.expressions, chaincomp.jetmath: no sympy); the chain is then
+applied to the tool point and direction from the right, multiplying truncated jets, exactly
+as the symbolic derivation multiplies truncated series. The cost is linear in the number of
+elements, so a six-joint arm evaluates in milliseconds where its expanded formulas take
+minutes to derive.
 """
 
 from __future__ import annotations
 
-import math
-
-import sympy as sp
-
-from . import series as S
+from .jetmath import lin as _lin, mul_all, sin_cos as _sin_cos
 from .machine import ROT_PLANE, Machine, Rotation
 from .numeric import _lib, complete
 from .orientation import ROWS as ORIENTATION_ROWS, rotation_vector_series
 from .varying import resolve
-
-
-def _lin(a: dict, ca, b: dict, cb) -> dict:
-    """ca·a + cb·b for jets a, b and scalars (or arrays) ca, cb."""
-    out = {m: ca * v for m, v in a.items()}
-    for m, v in b.items():
-        out[m] = out[m] + cb * v if m in out else cb * v
-    return out
-
-
-def _sin_cos(delta: dict, k: int) -> tuple[dict, dict]:
-    """sin and cos of a jet without constant term, to order k."""
-    s: dict = {}
-    c: dict = {(): 1}
-    power: dict = {(): 1}
-    for j in range(1, k + 1):
-        power = S.mul_all(power, delta, k)
-        if not power:
-            break
-        sign = -1 if (j // 2) % 2 else 1
-        target = s if j % 2 else c
-        for m, v in power.items():
-            term = sign * v / math.factorial(j)
-            target[m] = target[m] + term if m in target else term
-    return s, c
 
 
 class JetModel:
@@ -59,37 +30,11 @@ class JetModel:
         if order < 1:
             raise ValueError("order must be >= 1")
         self.machine, self.order = machine, order
-        self.small = [s.sym for s in machine.errors]
-        large = [s for s in machine.symbols if s.role != "error"]
-        self._large = [s.name for s in large]
-        exprs: list[sp.Expr] = []
-        layout = []  # per element: (kind, axis or None, [(monomial, index into exprs)] per part)
-
-        def expand(e: sp.Expr) -> list[tuple[tuple, int]]:
-            out = []
-            for m, c in S.taylor(e, self.small, order).items():
-                out.append((m, len(exprs)))
-                exprs.append(c)
-            return out
-
-        for el in reversed(machine.chain):
-            if isinstance(el, Rotation):
-                layout.append(("rot", el.axis, [expand(el.angle)]))
-            else:
-                layout.append(("trans", None, [expand(v) for v in el.vector]))
-        self._point = [expand(v) for v in machine.tool_point]
-        self._direction = [expand(v) for v in machine.tool_direction] if machine.tool_direction else None
-        frame = machine.tool_frame   # its x and y axes ride along (the orientation error needs them)
-        self._frame = [[expand(v) for v in axis] for axis in frame[:2]] if frame else []
-        self._layout = layout
-        self._exprs = exprs
-        self._fns: dict = {}
-
-    def _fn(self, backend: str):
-        if backend not in self._fns:
-            syms = [self.machine.symbol(n).sym for n in self._large]
-            self._fns[backend] = sp.lambdify(syms, self._exprs, modules=backend, cse=True)
-        return self._fns[backend]
+        self.small = [s.name for s in machine.errors]
+        self._index = {name: i for i, name in enumerate(self.small)}
+        # per element, rightmost first: (kind, axis or None, its expressions)
+        self._layout = [("rot", el.axis, (el.expr,)) if isinstance(el, Rotation) else ("trans", None, el.exprs)
+                        for el in reversed(machine.chain)]
 
     def jets(self, values: dict, backend: str = "numpy") -> tuple[list[dict], list[dict] | None]:
         """The jets of the tool point and direction (3 each) at the large values given."""
@@ -105,7 +50,7 @@ class JetModel:
         if not frame:
             return p, d, None
         k = self.order
-        w = rotation_vector_series(frame + [d], k, lambda a, b: S.mul_all(a, b, k),
+        w = rotation_vector_series(frame + [d], k, lambda a, b: mul_all(a, b, k),
                                    lambda a, ca, b, cb: _lin(a, float(ca), b, float(cb)),
                                    lambda a, c: {m: float(c) * v for m, v in a.items()})
         return p, d, w
@@ -115,25 +60,22 @@ class JetModel:
 
     def _all_jets(self, values: dict, backend: str):
         """Point, direction and frame jets at ``values`` already completed and resolved."""
-        coeff = self._fn(backend)(*[values[n] for n in self._large])
-        return self._propagate(coeff, _lib(backend))
+        lib, k, m = _lib(backend), self.order, self.machine
 
-    def _propagate(self, coeff: list, lib) -> tuple[list[dict], list[dict] | None, list[list[dict]]]:
-        k = self.order
+        def jet(e):
+            return e.jet(values, self._index, k, lib)
 
-        def jet(part):
-            return {m: coeff[i] for m, i in part}
-
-        p = [jet(part) for part in self._point]
-        d = [jet(part) for part in self._direction] if self._direction else None
-        frame = [[jet(part) for part in axis] for axis in self._frame]
-        for kind, axis, parts in self._layout:
+        p = [jet(e) for e in m.point]
+        d = [jet(e) for e in m.direction] if m.direction else None
+        # the frame's x and y axes ride along (the orientation error needs them): constants
+        frame = [[{(): c} for c in axis] for axis in m.frame_numbers[:2]] if m.frame_numbers else []
+        for kind, axis, exprs in self._layout:
             if kind == "trans":
-                for c, part in enumerate(parts):
-                    for m, i in part:
-                        p[c][m] = p[c][m] + coeff[i] if m in p[c] else coeff[i]
+                for c, e in enumerate(exprs):
+                    for mono, v in jet(e).items():
+                        p[c][mono] = p[c][mono] + v if mono in p[c] else v
                 continue
-            angle = jet(parts[0])
+            angle = jet(exprs[0])
             theta0 = angle.pop((), 0)
             c0, s0 = lib.cos(theta0), lib.sin(theta0)
             if angle:
@@ -149,8 +91,8 @@ class JetModel:
                     c, s = cos_t.get((), 0), sin_t.get((), 0)
                     vec[i], vec[j] = _lin(vi, c, vj, -s), _lin(vi, s, vj, c)
                 else:
-                    vec[i] = _lin(S.mul_all(cos_t, vi, k), 1, S.mul_all(sin_t, vj, k), -1)
-                    vec[j] = _lin(S.mul_all(sin_t, vi, k), 1, S.mul_all(cos_t, vj, k), 1)
+                    vec[i] = _lin(mul_all(cos_t, vi, k), 1, mul_all(sin_t, vj, k), -1)
+                    vec[j] = _lin(mul_all(sin_t, vi, k), 1, mul_all(cos_t, vj, k), 1)
         return p, d, frame
 
     def _at_errors(self, jet: dict, eps: list, order: int):

@@ -36,10 +36,9 @@ class Finding:
 
 def _where(machine: Machine, name: str) -> int:
     """The first line of the chain where ``name`` enters (or its declaration)."""
-    sym = machine.symbol(name).sym
     for el in machine.tool_chain + machine.workpiece_chain:
-        exprs = (el.angle,) if isinstance(el, Rotation) else el.vector
-        if any(sym in e.free_symbols for e in exprs) and el.line:
+        exprs = (el.expr,) if isinstance(el, Rotation) else el.exprs
+        if any(name in e.names for e in exprs) and el.line:
             return el.line
     return machine.symbol(name).line
 
@@ -65,8 +64,8 @@ def lint(machine: Machine, model: ExactModel | None = None) -> list[Finding]:
     model = model or ExactModel(machine)
     values = {**_poses(machine), **{s.name: np.zeros(POSES) for s in machine.errors}}
     findings = []
-    what = ("tool frame (point and orientation)" if machine.tool_reference is not None
-            else "tool point or direction" if machine.tool_direction else "tool point")
+    what = ("tool frame (point and orientation)" if machine.reference is not None
+            else "tool point or direction" if machine.direction else "tool point")
     for s in machine.symbols:
         if s.role == "constant":
             continue
@@ -95,10 +94,10 @@ def _parallel_axes(machine: Machine) -> list[Finding]:
     common normal is then barely defined, and a tilt of micro-radians moves it by metres (the
     d values of calibrations that fit it run to hundreds of metres). Hayati's beta, a rotation
     about y, describes the same freedom well."""
-    at = {s.sym: s.reference_value for s in machine.symbols}
+    at = {s.name: s.reference_value for s in machine.symbols}
     # joints are numbered per loop branch: each branch starts again at 1
     branches: list[dict] = []
-    for j in machine.joints:
+    for j in machine.joint_list:
         if j[0] == 1 or not branches:
             branches.append({})
         branches[-1][j[0]] = j
@@ -111,7 +110,7 @@ def _parallel_axes(machine: Machine) -> list[Finding]:
 def _parallel_in_branch(machine: Machine, joints: dict, at: dict) -> list[Finding]:
     out = []
     for number, kind, alpha, _errors, line in joints.values():
-        if abs(math.sin(float(alpha.xreplace(at)))) > 1e-3:
+        if abs(math.sin(alpha.value(at))) > 1e-3:
             continue
         # dh: joint J's alpha turns to joint J+1's axis, whose d is then ill-conditioned;
         # mdh: joint J's alpha is the twist from joint J-1's axis to its own, its own d (joint
@@ -124,7 +123,7 @@ def _parallel_in_branch(machine: Machine, joints: dict, at: dict) -> list[Findin
             continue
         name = target[3]["d"]
         out.append(Finding("warning", f"joint {target[0]}'s axis is (nearly) parallel to joint "
-                                      f"{first}'s (alpha {float(alpha.xreplace(at)):g} "
+                                      f"{first}'s (alpha {alpha.value(at):g} "
                                       f"rad, line {line}): its d error {name} is ill-conditioned; drop it and add "
                                       f"Hayati's {{beta: 0, errors: auto}} after joint {first}",
                            machine.symbol(name).line, f"symbols.{name}"))

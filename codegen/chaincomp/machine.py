@@ -1,17 +1,22 @@
-"""The machine description: loading, validation, and the elementary chain it defines."""
+"""The machine description: loading, validation, and the elementary chain it defines.
+
+Expressions are kept as chaincomp.expressions trees, which the numeric verbs evaluate without
+sympy; their sympy forms (Rotation.angle, Translation.vector, Machine.tool_point, ...) are
+built when a symbolic verb first asks, so only those verbs import sympy."""
 
 from __future__ import annotations
 
 import math
 import re
 from dataclasses import dataclass, field
+from fractions import Fraction
+from functools import cache, cached_property, partial
 from typing import Union
-
-import sympy as sp
 
 from . import units
 from .errors import ChaincompError
-from .expressions import MAX_LITERAL, NAME, RESERVED, ExpressionError, parse
+from .expressions import (MAX_LITERAL, NAME, RESERVED, ZERO, Expr, ExpressionError, check_sympy, constant,
+                          from_sympy, parse_expr, plausible)
 from .yamlsource import describe, line_of, load_yaml, read_text
 
 ROLES = ("axis", "constant", "error")
@@ -36,7 +41,9 @@ class Symbol:
     unobservable: bool = False  # known not to move the tool point or direction (lint stays quiet)
 
     @property
-    def sym(self) -> sp.Symbol:
+    def sym(self):
+        """The sympy symbol (real)."""
+        import sympy as sp
         return sp.Symbol(self.name, real=True)
 
     @property
@@ -65,24 +72,50 @@ class Symbol:
         return value / self.unit.to_internal
 
 
+def _tree(e) -> Expr:
+    """An expression tree, from a tree, a number or a sympy expression (the symbolic verbs
+    build some)."""
+    if isinstance(e, Expr):
+        return e
+    if isinstance(e, int):
+        return Expr(("num", Fraction(e)), repr(e))
+    return constant(e) if isinstance(e, float) else from_sympy(e)
+
+
 @dataclass(frozen=True)
 class Rotation:
-    """Rotation about a coordinate axis by ``angle`` (rad), right-handed after ``sense``."""
+    """Rotation about a coordinate axis by the angle ``expr`` (rad), right-handed after ``sense``."""
     axis: str
-    angle: sp.Expr
+    expr: Expr
     line: int = 0
 
+    def __post_init__(self):
+        object.__setattr__(self, "expr", _tree(self.expr))
+
+    @cached_property
+    def angle(self):
+        """The angle in sympy."""
+        return self.expr.to_sympy()
+
     def inverse(self) -> "Rotation":
-        return Rotation(self.axis, -self.angle, self.line)
+        return Rotation(self.axis, -self.expr, self.line)
 
 
 @dataclass(frozen=True)
 class Translation:
-    vector: tuple[sp.Expr, sp.Expr, sp.Expr]
+    exprs: tuple[Expr, Expr, Expr]
     line: int = 0
 
+    def __post_init__(self):
+        object.__setattr__(self, "exprs", tuple(_tree(e) for e in self.exprs))
+
+    @cached_property
+    def vector(self) -> tuple:
+        """The vector in sympy."""
+        return tuple(e.to_sympy() for e in self.exprs)
+
     def inverse(self) -> "Translation":
-        return Translation(tuple(-v for v in self.vector), self.line)
+        return Translation(tuple(-v for v in self.exprs), self.line)
 
 
 Elementary = Union[Rotation, Translation]
@@ -98,14 +131,49 @@ class Machine:
     symbols: tuple[Symbol, ...]
     tool_chain: tuple[Elementary, ...]       # reference -> tool, leftmost first
     workpiece_chain: tuple[Elementary, ...]  # reference -> workpiece (empty: no loop)
-    tool_point: tuple[sp.Expr, sp.Expr, sp.Expr]
-    tool_direction: tuple[sp.Expr, sp.Expr, sp.Expr] | None
+    point: tuple[Expr, Expr, Expr]           # the tool point
+    direction: tuple[Expr, Expr, Expr] | None  # the unit tool direction (numbers)
     source_text: str = field(repr=False, default="")
-    # dh/mdh joints as written: (number, kind, nominal alpha, {parameter: error name}, line)
-    joints: tuple = field(repr=False, default=())
+    # dh/mdh joints as written: (number, kind, nominal alpha (Expr), {parameter: error name}, line)
+    joint_list: tuple = field(repr=False, default=())
     # With a tool frame: its x axis (unit, orthogonal to the direction, which is its z axis);
     # y = z × x. None: the tool has a point (and maybe a direction) only.
-    tool_reference: tuple[sp.Expr, sp.Expr, sp.Expr] | None = None
+    reference: tuple[Expr, Expr, Expr] | None = None
+
+    def __post_init__(self):
+        for name in ("point", "direction", "reference"):
+            v = getattr(self, name)
+            if v is not None:
+                object.__setattr__(self, name, tuple(_tree(e) for e in v))
+
+    @cached_property
+    def tool_point(self) -> tuple:
+        """The tool point in sympy."""
+        return tuple(e.to_sympy() for e in self.point)
+
+    @cached_property
+    def tool_direction(self) -> tuple | None:
+        """The unit tool direction in sympy."""
+        return None if self.direction is None else tuple(e.to_sympy() for e in self.direction)
+
+    @cached_property
+    def tool_reference(self) -> tuple | None:
+        """The tool frame's x axis in sympy."""
+        return None if self.reference is None else tuple(e.to_sympy() for e in self.reference)
+
+    @cached_property
+    def joints(self) -> tuple:
+        """The dh/mdh joints as written, their nominal alpha in sympy."""
+        return tuple((n, kind, alpha.to_sympy(), errors, line) for n, kind, alpha, errors, line in self.joint_list)
+
+    @cached_property
+    def frame_numbers(self) -> tuple | None:
+        """The tool frame's x, y, z axes as numbers (y = z × x), or None."""
+        if self.reference is None:
+            return None
+        x, z = ([e.value({}) for e in v] for v in (self.reference, self.direction))
+        y = [z[(i + 1) % 3] * x[(i + 2) % 3] - z[(i + 2) % 3] * x[(i + 1) % 3] for i in range(3)]
+        return x, y, z
 
     @property
     def tool_axes(self) -> list[tuple]:
@@ -116,6 +184,7 @@ class Machine:
     @property
     def tool_frame(self) -> tuple[tuple, tuple, tuple] | None:
         """The tool frame's x, y, z axes (constant unit vectors) or None."""
+        import sympy as sp
         if self.tool_reference is None:
             return None
         x, z = self.tool_reference, self.tool_direction
@@ -169,15 +238,15 @@ class _Ctx:
 
     def __init__(self, path: str):
         self.path = path
-        self.at: dict = {}        # every symbol at its nominal value (axes: default position)
-        self.errors: set = set()  # the error symbols
+        self.values: dict = {}    # name -> every symbol's value at the reference (axes: default position)
+        self.errors: set = set()  # the error symbols' names
         self.symbols: list = []   # the declared symbols, and the errors dh/mdh/beta name themselves
-        self.table: dict = {}     # name -> sympy symbol, of the same
+        self.table: dict = {}     # name -> Symbol, of the same
         self.joints: list = []    # the dh/mdh joints, for lint: (number, kind, alpha, error names, line)
         self.joint = 0            # the last dh/mdh joint's number in the chain being read
         self.auto: dict = {}      # error name -> line of the element that auto-named it
 
-    def declare_error(self, name: str, unit: str, meaning: str, line: int, fld: str) -> sp.Symbol:
+    def declare_error(self, name: str, unit: str, meaning: str, line: int, fld: str) -> str:
         """An error named by a dh/mdh/beta element: the declared one of that name, or a new one."""
         if name in self.table:
             sym = next(s for s in self.symbols if s.name == name)
@@ -189,13 +258,13 @@ class _Ctx:
                 raise self.fail(f"{name!r} is declared in {sym.unit.name} on line {sym.line}, but this element "
                                 f"uses it as its {meaning}, which is {'an' if want == 'angle' else 'a'} {want}",
                                 line, fld)
-            return self.table[name]
+            return name
         s = Symbol(name, "error", units.unit(unit), meaning, line=line)
         self.symbols.append(s)
-        self.table[name] = s.sym
-        self.errors.add(s.sym)
-        self.at[s.sym] = sp.Float(0)
-        return s.sym
+        self.table[name] = s
+        self.errors.add(name)
+        self.values[name] = 0.0
+        return name
 
     def fail(self, message: str, line: int | None, fld: str) -> ChaincompError:
         return ChaincompError(message, self.path, line, fld)
@@ -291,17 +360,31 @@ def _parse_symbol(ctx: _Ctx, node, i: int, line) -> Symbol:
     return Symbol(name, role, unit, meaning, nominal, limits, line or 0, unobservable)
 
 
-def _expr(ctx: _Ctx, value, symbols, fld: str, line) -> sp.Expr:
+def _expr(ctx: _Ctx, value, symbols, fld: str, line) -> Expr:
     try:
-        expr = parse(value, symbols)
-        _check_at_nominal(expr, ctx.at, ctx.errors)
+        expr = parse_expr(value, symbols)
+        if not plausible(expr, ctx.values, ctx.errors):
+            expr = _symbolic_check(ctx, expr)
     except ExpressionError as exc:
         raise ctx.fail(str(exc), line, fld) from None
     return expr
 
 
-def _numeric(expr: sp.Expr, at: dict) -> complex | None:
+def _symbolic_check(ctx: _Ctx, expr: Expr) -> Expr:
+    """What the numeric screen doubts, sympy decides (and words): the expression as sympy
+    evaluates it must be finite, real and analytic in the errors at the reference values.
+    What passes is kept in sympy's form (e^2/e is e: no division by zero error)."""
+    import sympy as sp
+    table = {n: sp.Symbol(n, real=True) for n in ctx.table}
+    e = expr.to_sympy(table)
+    check_sympy(e, expr.source)
+    _check_at_nominal(e, {table[n]: sp.Float(v) for n, v in ctx.values.items()}, {table[n] for n in ctx.errors})
+    return from_sympy(e, expr.source)
+
+
+def _numeric(expr, at: dict) -> complex | None:
     """The value of ``expr`` at ``at`` (every symbol), or None where it is not finite."""
+    import sympy as sp
     value = sp.N(expr.xreplace(at), 17)
     if not value.is_number or value.has(sp.zoo, sp.nan, sp.oo, -sp.oo):
         return None
@@ -309,11 +392,12 @@ def _numeric(expr: sp.Expr, at: dict) -> complex | None:
     return c if math.isfinite(c.real) and math.isfinite(c.imag) else None
 
 
-def _check_at_nominal(expr: sp.Expr, at: dict, errors: set) -> None:
+def _check_at_nominal(expr, at: dict, errors: set) -> None:
     """An expression must be finite and real at the nominal values (axes at their default
     positions, errors zero), and analytic in the errors there: the truncated series are its
     Taylor expansion about zero error, which a division by an error or the square root of
     one does not have."""
+    import sympy as sp
     where = ", ".join(f"{s} = {float(at[s]):g}" for s in sorted(expr.free_symbols, key=str) if s not in errors)
     where = f" ({where}, errors zero)" if where else " (errors zero)"
     for node in sp.preorder_traversal(expr):
@@ -354,7 +438,7 @@ def _check_at_nominal(expr: sp.Expr, at: dict, errors: set) -> None:
         raise ExpressionError(f"{expr} is not real at the nominal values{where}")
 
 
-def _vector(ctx: _Ctx, value, symbols, fld: str, line) -> tuple[sp.Expr, sp.Expr, sp.Expr]:
+def _vector(ctx: _Ctx, value, symbols, fld: str, line) -> tuple[Expr, Expr, Expr]:
     if not isinstance(value, list) or len(value) != 3:
         raise ctx.fail(f"expected a list of three expressions [x, y, z], got {describe(value)}", line, fld)
     return tuple(_expr(ctx, v, symbols, f"{fld}[{i}]", line) for i, v in enumerate(value))
@@ -386,7 +470,7 @@ def _parse_element(ctx: _Ctx, node, fld: str, line, symbols, default_sense: int 
                            f"{fld}.rotate")
         sense = _sense(ctx, node, fld, default_sense)
         angle = _expr(ctx, node["angle"], symbols, f"{fld}.angle", line_of(node, "angle"))
-        return [Rotation(axis, sense * angle, line or 0)]
+        return [Rotation(axis, angle.scaled(sense), line or 0)]
     if kind == "translate":
         _require_map(ctx, node, fld, line, common | {"translate"})
         return [Translation(_vector(ctx, node["translate"], symbols, f"{fld}.translate",
@@ -398,7 +482,7 @@ def _parse_element(ctx: _Ctx, node, fld: str, line, symbols, default_sense: int 
     if not block:
         raise ctx.fail(f"an error block needs at least one of {', '.join(_BLOCK_KEYS)}", bline, f"{fld}.errors")
     vals = {k: _expr(ctx, block[k], symbols, f"{fld}.errors.{k}", line_of(block, k)) if k in block
-            else sp.Integer(0) for k in _BLOCK_KEYS}
+            else Expr(ZERO) for k in _BLOCK_KEYS}
     order = node.get("order", default_order)
     if order is None:
         raise ctx.fail("state the order of the error block's factors, e.g. 'order: txyz' "
@@ -409,10 +493,10 @@ def _parse_element(ctx: _Ctx, node, fld: str, line, symbols, default_sense: int 
     out: list[Elementary] = []
     for factor in order:  # factors the block leaves at zero are identities: left out
         if factor == "t":
-            if any(vals[k] != 0 for k in ("dx", "dy", "dz")):
+            if any(not vals[k].is_zero for k in ("dx", "dy", "dz")):
                 out.append(Translation((vals["dx"], vals["dy"], vals["dz"]), line or 0))
-        elif vals["e" + factor] != 0:
-            out.append(Rotation(factor, sense * vals["e" + factor], line or 0))
+        elif not vals["e" + factor].is_zero:
+            out.append(Rotation(factor, vals["e" + factor].scaled(sense), line or 0))
     return out
 
 
@@ -446,7 +530,7 @@ def _parse_joint(ctx: _Ctx, node, kind: str, fld: str, line, symbols) -> list[El
                        eline, f"{fld}.errors")
     _require_map(ctx, raw, f"{fld}.errors", eline, set(names))
     errors: dict[str, str] = {}
-    nominal: dict[str, sp.Expr] = {}
+    nominal: dict[str, Expr] = {}
     out: list[Elementary] = []
     for k in names:
         value = _expr(ctx, values[k], symbols, f"{fld}.{kind}.{k}" if kind != "beta" else f"{fld}.beta", vline[k])
@@ -475,15 +559,15 @@ def _parse_joint(ctx: _Ctx, node, kind: str, fld: str, line, symbols) -> list[El
                                "give each element its own errors", line_of(raw, k), efld)
             if err in RESERVED:
                 raise ctx.fail(f"error name {err!r} is reserved", line_of(raw, k), efld)
-            value = value + ctx.declare_error(err, _AUTO_UNIT[k], f"joint {joint} {k} error ({kind})",
-                                              line_of(raw, k) or line or 0, efld)
+            value = value.plus(ctx.declare_error(err, _AUTO_UNIT[k], f"joint {joint} {k} error ({kind})",
+                                                 line_of(raw, k) or line or 0, efld))
             errors[k] = err
         what, where = _JOINT_FACTOR[k]
         if what == "rot":
-            if value != 0:
+            if not value.is_zero:
                 out.append(Rotation(where, value, line or 0))
-        elif value != 0:
-            vec = [sp.Integer(0)] * 3
+        elif not value.is_zero:
+            vec = [Expr(ZERO)] * 3
             vec[where] = value
             out.append(Translation(tuple(vec), line or 0))
     if kind != "beta":
@@ -569,10 +653,10 @@ def load_machine(path: str) -> Machine:
                            s.line, f"symbols[{i}].name")
         seen[s.name] = s.line
         symbols.append(s)
-    table = {s.name: s.sym for s in symbols}
+    table = {s.name: s for s in symbols}
     ctx.symbols, ctx.table = symbols, table   # dh/mdh/beta elements may add errors to both
-    ctx.errors = {s.sym for s in symbols if s.role == "error"}
-    ctx.at = {s.sym: sp.Float(s.reference_value) for s in symbols}
+    ctx.errors = {s.name for s in symbols if s.role == "error"}
+    ctx.values = {s.name: s.reference_value for s in symbols}
 
     if ("chain" in doc) == ("loop" in doc):
         both = "loop" in doc
@@ -593,59 +677,69 @@ def load_machine(path: str) -> Machine:
                         {"point", "direction", "reference", "rotation"}, {"point"})
     point = _vector(ctx, tool["point"], table, "tool.point", line_of(tool, "point"))
     direction = reference = None
+    written: tuple = ()   # the tool vectors as written, for their exact sympy forms
     if "rotation" in tool:
-        direction, reference = _tool_rotation(ctx, tool, table)
+        direction, reference, rows = _tool_rotation(ctx, tool, table)
+        written = ("rotation", rows)
     elif "direction" in tool:
-        direction = _unit(ctx, tool, "direction", table)
+        d = _constant_vector(ctx, tool, "direction", table)
+        direction = _normalised(ctx, _numbers(d), "direction", line_of(tool, "direction"), "tool.direction")
+        written = ("direction", d, None)
         if "reference" in tool:
-            reference = _orthogonal_part(ctx, tool, direction, table)
+            r = _constant_vector(ctx, tool, "reference", table)
+            reference = _orthogonal_part(ctx, tool, direction, _numbers(r))
+            written = ("direction", d, r)
     elif "reference" in tool:
         raise ctx.fail("a tool reference needs a tool direction (the frame's z axis)", line_of(tool, "reference"),
                        "tool.reference")
     if len(symbols) > MAX_SYMBOLS:
         raise ctx.fail(f"{len(symbols)} symbols with the errors dh/mdh/beta elements name (at most {MAX_SYMBOLS})",
                        line_of(doc, "chain") or line_of(doc, "loop"), "chain" if "chain" in doc else "loop")
+    exact = cache(partial(_tool_sympy, *written))   # both vectors' sympy forms, made once when asked
+
+    def numbers(v, which: int):
+        return None if v is None else tuple(Expr(("num", c), repr(c), partial(lambda i: exact()[which][i], i))
+                                            for i, c in enumerate(v))
     machine = Machine(name, str(doc.get("description", "")), path, length_unit, tuple(symbols),
-                      tool_chain, work_chain, point, direction, read_text(path), tuple(ctx.joints),
-                      tool_reference=reference)
+                      tool_chain, work_chain, point, numbers(direction, 0), read_text(path), tuple(ctx.joints),
+                      reference=numbers(reference, 1))
     _check_usage(ctx, machine)
     return machine
 
 
-def _constant_vector(ctx: _Ctx, tool, key: str, table) -> tuple[sp.Expr, sp.Expr, sp.Expr]:
+def _constant_vector(ctx: _Ctx, tool, key: str, table) -> tuple[Expr, Expr, Expr]:
     v = _vector(ctx, tool[key], table, f"tool.{key}", line_of(tool, key))
-    if any(c.free_symbols for c in v):
+    if any(c.names for c in v):
         raise ctx.fail(f"the tool {key} must be a constant vector", line_of(tool, key), f"tool.{key}")
     return v
 
 
-def _normalised(ctx: _Ctx, v, what: str, line, fld: str):
-    norm = sp.sqrt(sum(c**2 for c in v))
-    if norm == 0 or float(norm) < 1e-12:
+def _numbers(v) -> list[float]:
+    return [float(c.value({})) for c in v]
+
+
+def _normalised(ctx: _Ctx, v: list[float], what: str, line, fld: str) -> list[float]:
+    norm = math.sqrt(sum(c * c for c in v))
+    if norm < 1e-12:
         raise ctx.fail(f"the tool {what} must not be zero", line, fld)
-    return tuple(sp.nsimplify(c / norm) for c in v)
+    return [c / norm for c in v]
 
 
-def _unit(ctx: _Ctx, tool, key: str, table):
-    return _normalised(ctx, _constant_vector(ctx, tool, key, table), key, line_of(tool, key), f"tool.{key}")
-
-
-def _orthogonal_part(ctx: _Ctx, tool, direction, table):
+def _orthogonal_part(ctx: _Ctx, tool, direction: list[float], r: list[float]) -> list[float]:
     """The tool frame's x axis: the part of tool.reference orthogonal to the direction, normalised."""
-    r = _constant_vector(ctx, tool, "reference", table)
-    norm_r = math.sqrt(sum(float(c)**2 for c in r))
+    norm_r = math.sqrt(sum(c * c for c in r))
     along = sum(a * b for a, b in zip(r, direction))
-    x = tuple(sp.nsimplify(sp.expand(a - along * b)) for a, b in zip(r, direction))
-    if norm_r == 0 or math.sqrt(sum(float(c)**2 for c in x)) < 1e-6 * norm_r:
+    x = [a - along * b for a, b in zip(r, direction)]
+    if norm_r == 0 or math.sqrt(sum(c * c for c in x)) < 1e-6 * norm_r:
         raise ctx.fail("the tool reference must not be (nearly) parallel to the tool direction "
-                       f"(its part orthogonal to the direction is the frame's x axis; got {[float(c) for c in r]})",
+                       f"(its part orthogonal to the direction is the frame's x axis; got {r})",
                        line_of(tool, "reference"), "tool.reference")
     return _normalised(ctx, x, "reference", line_of(tool, "reference"), "tool.reference")
 
 
 def _tool_rotation(ctx: _Ctx, tool, table):
     """tool.rotation: the frame's axes as the columns of a rotation matrix (rows written as
-    lists): (direction = z column, reference = x column)."""
+    lists): (direction = z column, reference = x column, the rows as written)."""
     line = line_of(tool, "rotation")
     for key in ("direction", "reference"):
         if key in tool:
@@ -655,9 +749,9 @@ def _tool_rotation(ctx: _Ctx, tool, table):
     if not isinstance(rows, list) or len(rows) != 3:
         raise ctx.fail(f"expected three rows [[...], [...], [...]], got {describe(rows)}", line, "tool.rotation")
     m = [_vector(ctx, row, table, f"tool.rotation[{i}]", line) for i, row in enumerate(rows)]
-    if any(c.free_symbols for row in m for c in row):
+    if any(c.names for row in m for c in row):
         raise ctx.fail("the tool rotation must be constant", line, "tool.rotation")
-    f = [[float(c) for c in row] for row in m]
+    f = [_numbers(row) for row in m]
     for i in range(3):
         for j in range(3):
             dot = sum(f[k][i] * f[k][j] for k in range(3))
@@ -668,22 +762,42 @@ def _tool_rotation(ctx: _Ctx, tool, table):
            + f[0][2] * (f[1][0] * f[2][1] - f[1][1] * f[2][0]))
     if det < 0:
         raise ctx.fail("the tool rotation is a reflection (determinant -1)", line, "tool.rotation")
-    z = _normalised(ctx, tuple(m[k][2] for k in range(3)), "rotation", line, "tool.rotation")
-    x = tuple(m[k][0] for k in range(3))
+    z = _normalised(ctx, [f[k][2] for k in range(3)], "rotation", line, "tool.rotation")
+    x = [f[k][0] for k in range(3)]
     along = sum(a * b for a, b in zip(x, z))
-    return z, _normalised(ctx, tuple(sp.nsimplify(sp.expand(a - along * b)) for a, b in zip(x, z)),
-                          "rotation", line, "tool.rotation")
+    return z, _normalised(ctx, [a - along * b for a, b in zip(x, z)], "rotation", line, "tool.rotation"), m
+
+
+def _tool_sympy(kind: str, *written) -> tuple:
+    """(direction, reference or None) in sympy from the tool vectors as written: exact unit
+    vectors (nsimplify), as the derived formulas and generated code print them."""
+    import sympy as sp
+
+    def normalised(v):
+        norm = sp.sqrt(sum(c**2 for c in v))
+        return tuple(sp.nsimplify(c / norm) for c in v)
+
+    def orthogonal(r, d):
+        along = sum(a * b for a, b in zip(r, d))
+        return normalised(tuple(sp.nsimplify(sp.expand(a - along * b)) for a, b in zip(r, d)))
+
+    if kind == "rotation":
+        m = [[c.to_sympy() for c in row] for row in written[0]]
+        z = normalised(tuple(m[k][2] for k in range(3)))
+        return z, orthogonal(tuple(m[k][0] for k in range(3)), z)
+    d = normalised(tuple(c.to_sympy() for c in written[0]))
+    return d, None if written[1] is None else orthogonal(tuple(c.to_sympy() for c in written[1]), d)
 
 
 def _check_usage(ctx: _Ctx, machine: Machine) -> None:
-    used: set[sp.Symbol] = set()
+    used: set[str] = set()
     for el in machine.chain:
-        exprs = (el.angle,) if isinstance(el, Rotation) else el.vector
+        exprs = (el.expr,) if isinstance(el, Rotation) else el.exprs
         for e in exprs:
-            used |= e.free_symbols
-    for e in machine.tool_point:
-        used |= e.free_symbols
+            used |= e.names
+    for e in machine.point:
+        used |= e.names
     for s in machine.symbols:
-        if s.sym not in used:
+        if s.name not in used:
             raise ctx.fail(f"symbol {s.name!r} is declared but never used in the chain or tool", s.line,
                            f"symbols.{s.name}")

@@ -1,16 +1,19 @@
 """Numeric evaluation: the exact model (the chain multiplied without truncation) and
 the truncated models, with numpy (arrays broadcast) or mpmath (high precision). Errors that
-vary along an axis (chaincomp.varying) are evaluated at the axis values given."""
+vary along an axis (chaincomp.varying) are evaluated at the axis values given. The exact
+model evaluates the machine's expression trees directly: no sympy."""
 
 from __future__ import annotations
 
-import sympy as sp
+from typing import TYPE_CHECKING
 
-from .derive import Derivation
 from .errors import ChaincompError
 from .machine import ROT_PLANE, Machine, Rotation
 from .orientation import rotation_vector
 from .varying import resolve
+
+if TYPE_CHECKING:
+    from .derive import Derivation
 
 BACKENDS = ("numpy", "mpmath")
 
@@ -52,32 +55,22 @@ class ExactModel:
 
     def __init__(self, machine: Machine):
         self.machine = machine
-        self.symbols = [s.sym for s in machine.symbols]
         self._cache: dict[str, tuple] = {}
 
     def _compiled(self, backend: str):
-        """One function of every symbol giving every element's numbers (one lambdify: one per
-        element cost ~14 ms each, a second on a six-joint arm), and where each element's are."""
+        """Each element's expressions as functions of the values (rightmost element first), and
+        the tool point's, direction's and frame x axis's."""
         if backend not in self._cache:
-            exprs, steps = [], []
+            lib = _lib(backend)
+            steps = []
             for el in reversed(self.machine.chain):
                 if isinstance(el, Rotation):
-                    steps.append(("rot", ROT_PLANE[el.axis], len(exprs)))
-                    exprs.append(el.angle)
+                    steps.append(("rot", ROT_PLANE[el.axis], el.expr.function(lib)))
                 else:
-                    steps.append(("trans", len(exprs)))
-                    exprs.extend(el.vector)
-            point = len(exprs)
-            exprs.extend(self.machine.tool_point)
-            direction = reference = None
-            if self.machine.tool_direction:
-                direction = len(exprs)
-                exprs.extend(self.machine.tool_direction)
-            if self.machine.tool_reference:
-                reference = len(exprs)
-                exprs.extend(self.machine.tool_reference)
-            fn = sp.lambdify(self.symbols, exprs, modules=backend)
-            self._cache[backend] = (fn, steps, point, direction, reference)
+                    steps.append(("trans", [e.function(lib) for e in el.exprs]))
+            m = self.machine
+            vectors = [None if v is None else [e.function(lib) for e in v] for v in (m.point, m.direction, m.reference)]
+            self._cache[backend] = (steps, vectors)
         return self._cache[backend]
 
     def pose(self, values: dict, backend: str = "numpy"):
@@ -88,22 +81,19 @@ class ExactModel:
     def frame(self, values: dict, backend: str = "numpy"):
         """(point, direction or None, the tool frame's x axis or None) for ``values``."""
         lib = _lib(backend)
-        fn, steps, point, direction, reference = self._compiled(backend)
+        steps, fns = self._compiled(backend)
         values = resolve(complete(self.machine, values))
-        numbers = fn(*[values[s.name] for s in self.machine.symbols])
-        p = list(numbers[point:point + 3])
-        d = list(numbers[direction:direction + 3]) if direction is not None else None
-        x = list(numbers[reference:reference + 3]) if reference is not None else None
+        p, d, x = (None if v is None else [f(values) for f in v] for v in fns)
         vectors = [v for v in (p, d, x) if v is not None]
         for step in steps:
             if step[0] == "rot":
-                (i, j), angle = step[1], numbers[step[2]]
+                (i, j), angle = step[1], step[2](values)
                 c, s = lib.cos(angle), lib.sin(angle)
                 for v in vectors:
                     v[i], v[j] = c * v[i] - s * v[j], s * v[i] + c * v[j]
             else:
-                for c_ in range(3):
-                    p[c_] = p[c_] + numbers[step[1] + c_]
+                for c_, f in enumerate(step[1]):
+                    p[c_] = p[c_] + f(values)
         return p, d, x
 
     def error(self, values: dict, backend: str = "numpy"):
@@ -128,7 +118,7 @@ class ExactModel:
     def orientation_error(self, values: dict, backend: str = "numpy"):
         """The exact orientation error ω = log(R_actual·R_nominalᵀ) (rad, 3 components; the
         convention of chaincomp.orientation) with a tool frame, else None."""
-        if self.machine.tool_reference is None:
+        if self.machine.reference is None:
             return None
         _, z1, x1 = self.frame(values, backend)
         _, z0, x0 = self.frame(self._nominal(values), backend)
@@ -150,6 +140,7 @@ class TruncatedModel:
         if key not in self._cache:
             vec = {"point": self.d.point, "direction": self.d.direction, "orientation": self.d.orientation}[which]
             exprs = [self.d.error(s, order) for s in vec]
+            import sympy as sp   # the truncated formulas are sympy's: the symbolic verbs' model
             self._cache[key] = [sp.lambdify(self.symbols, e, modules=backend) for e in exprs]
         return self._cache[key]
 

@@ -118,7 +118,7 @@ def shifted_models(machine: Machine) -> list[tuple[Machine, ExactModel]]:
     out = [(machine, ExactModel(machine))]
     for k in range(3):
         shifted = tuple(sp.sympify(v) + (1 if i == k else 0) for i, v in enumerate(machine.tool_point))
-        mk = dataclasses.replace(machine, tool_point=shifted)
+        mk = dataclasses.replace(machine, point=shifted)
         out.append((mk, ExactModel(mk)))
     return out
 

@@ -66,7 +66,7 @@ def random_configurations(machine, n, seed):
 
 
 def with_direction(machine, direction):
-    return dataclasses.replace(machine, tool_direction=direction)
+    return dataclasses.replace(machine, direction=direction)
 
 
 # ---------------------------------------------------------------- against Pinocchio
