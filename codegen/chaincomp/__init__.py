@@ -12,14 +12,34 @@ The Python API (values in internal units: mm, rad)::
     lint(m)                                      # warnings: errors or axes that never move the tool
 """
 
-from .budget import Budget, compute as compute_budget, make_grid
-from .derive import Derivation, derive
-from .errors import ChaincompError
-from .lint import Finding, lint
-from .machine import Machine, Symbol, load_machine
-from .numeric import ExactModel, TruncatedModel
-from .params import load_params
-from .tolerances import load_tolerances
+import importlib
+import sys
+import types
+
+# The API's names, imported when first used: a command line verb imports only what it needs
+# (the symbolic modules pull in sympy, ~0.5 s).
+_WHERE = {"Budget": "budget", "compute_budget": "budget", "make_grid": "budget", "Derivation": "derive",
+          "derive": "derive", "ChaincompError": "errors", "Finding": "lint", "lint": "lint", "Machine": "machine",
+          "Symbol": "machine", "load_machine": "machine", "ExactModel": "numeric", "TruncatedModel": "numeric",
+          "load_params": "params", "load_tolerances": "tolerances"}
+_ORIGINAL = {"compute_budget": "compute"}
+
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module 'chaincomp' has no attribute {name!r}")
+    return getattr(importlib.import_module(f".{_WHERE[name]}", __name__), _ORIGINAL.get(name, name))
+
+
+class _Package(types.ModuleType):
+    """derive and lint name both a module and its function: chaincomp.derive stays the function
+    (importing the module would otherwise bind the module there)."""
+    derive = property(lambda self: __getattr__("derive"), lambda self, value: None)
+    lint = property(lambda self: __getattr__("lint"), lambda self, value: None)
+
+
+sys.modules[__name__].__class__ = _Package
+
 
 __all__ = ["Budget", "ChaincompError", "Derivation", "ExactModel", "Finding", "Machine", "Symbol",
            "TruncatedModel", "compute_budget", "derive", "lint", "load_machine", "load_params",
