@@ -1,3 +1,6 @@
+import contextlib
+import functools
+import io
 import json
 import os
 import subprocess
@@ -16,11 +19,48 @@ def machine_path(name: str) -> str:
     return os.path.join(MACHINES, name + ".yaml")
 
 
+@functools.cache
+def derived(path: str, order: int):
+    """derive(machine, order) of a machine file, once a session: an arm's order 2 takes minutes,
+    and test_gain, test_jets and test_truncation all compare against the same derivations.
+    Shared: only read it, never change it."""
+    from chaincomp import derive, load_machine
+    return derive(load_machine(os.path.abspath(path)), order)
+
+
+@functools.cache
+def truncated(path: str, order: int):
+    """TruncatedModel of derived(path, order), once a session (it keeps its lambdified formulas)."""
+    from chaincomp import TruncatedModel
+    return TruncatedModel(derived(path, order))
+
+
 def run_cli(*args: str, check: bool = True) -> subprocess.CompletedProcess:
     proc = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", *args], capture_output=True,
                           text=True, cwd=ROOT)
     if check and proc.returncode != 0:
         raise AssertionError(f"chaincomp {' '.join(args)} exited {proc.returncode}:\n{proc.stderr}")
+    return proc
+
+
+def cli(*args: str, check: bool = True) -> subprocess.CompletedProcess:
+    """run_cli's result from chaincomp's entry point (cli.main.main) in this process: the same
+    verb, options, output and exit code, without an interpreter's start-up (about 1 s of CPU a
+    call). Keep run_cli, a real process, for at least one test of each verb: the exit path."""
+    from chaincomp.cli.main import main
+    out, err, here = io.StringIO(), io.StringIO(), os.getcwd()
+    os.chdir(ROOT)   # as run_cli's cwd
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = main([str(a) for a in args])
+            except SystemExit as exc:
+                code = exc.code if isinstance(exc.code, int) else 1
+    finally:
+        os.chdir(here)
+    proc = subprocess.CompletedProcess(["chaincomp", *args], code, out.getvalue(), err.getvalue())
+    if check and code != 0:
+        raise AssertionError(f"chaincomp {' '.join(map(str, args))} exited {code}:\n{proc.stderr}")
     return proc
 
 

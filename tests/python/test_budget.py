@@ -9,14 +9,12 @@ numpy.
 import json
 import math
 import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 import yaml
 
-from conftest import PARAMS, ROOT, machine_path, run_cli
+from conftest import PARAMS, ROOT, cli, machine_path, run_cli
 
 from chaincomp import budget as B
 from chaincomp.machine import load_machine
@@ -303,7 +301,7 @@ def test_plot_maps_and_bars(tmp_path):
     (("--map", "X,X", "--plot", "/dev/null"), "--map expects"),
 ])
 def test_bad_options_exit_2(args, word):
-    proc = run_cli("budget", FIVE, "--tolerances", FIVE_TOL, "--samples", "0", *args, check=False)
+    proc = cli("budget", FIVE, "--tolerances", FIVE_TOL, "--samples", "0", *args, check=False)  # exit path: below
     assert proc.returncode == 2 and word in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
 
 
@@ -371,8 +369,7 @@ def test_bad_tolerance_file_exits_2_with_file_line_field(tmp_path, edit, at, fie
     text = GOOD.replace(old, new)
     path = tmp_path / "bad.yaml"
     path.write_text(text)
-    proc = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "budget", MORI, "--tolerances",
-                           str(path), "--samples", "0"], capture_output=True, text=True, cwd=ROOT)
+    proc = cli("budget", MORI, "--tolerances", str(path), "--samples", "0", check=False)
     err = proc.stderr
     assert proc.returncode == 2, err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err

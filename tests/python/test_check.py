@@ -24,7 +24,7 @@ from sympy.parsing.sympy_parser import parse_expr
 from chaincomp import load_machine
 from chaincomp.machine import Rotation
 
-from conftest import ROOT, machine_path, run_cli
+from conftest import ROOT, cli, machine_path, run_cli
 
 CHECKS = os.path.join(ROOT, "configs", "checks")
 BUNDLED = [("angle_head", "paper_table2"), ("me220_xz", "me220_eq17"), ("mori_seiki_nv1500", "mori_seiki_5T6")]
@@ -371,7 +371,7 @@ def test_order_two_compares_products(tmp_path):
 def test_bad_formula_files_exit_2(tmp_path, text, line, fragment):
     path = tmp_path / "bad.yaml"
     path.write_text(text)
-    proc = run_cli("check", machine_path("angle_head"), str(path), check=False)
+    proc = cli("check", machine_path("angle_head"), str(path), check=False)   # in this process
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert proc.stdout == ""
     assert proc.stderr.startswith(f"chaincomp check: error: {path}:{line}: "), proc.stderr

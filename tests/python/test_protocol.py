@@ -16,7 +16,7 @@ import sympy as sp
 from chaincomp import load_machine
 from chaincomp.numeric import ExactModel
 
-from conftest import machine_path, run_cli
+from conftest import cli, machine_path, run_cli
 
 AXES = ("Ap", "Cp")
 COORD = {"x": 0, "y": 1, "z": 2}
@@ -184,7 +184,7 @@ def test_unidentifiable_errors_with_reasons(tmp_path):
     (("--order", "2"), "--order 2: protocol equations are first order"),
 ])
 def test_bad_options_exit_2(args, word):
-    proc = run_cli("protocol", machine_path("angle_head"), *args, check=False)
+    proc = cli("protocol", machine_path("angle_head"), *args, check=False)   # in this process
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr
     assert proc.stderr.strip() == f"chaincomp protocol: error: {word}" or word in proc.stderr, proc.stderr

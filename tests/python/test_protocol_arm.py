@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from arm_models import UR5_A, UR5_ALPHA, UR5_D, dh_chain
-from conftest import ROOT, run_cli
+from conftest import ROOT, cli, run_cli
 
 UR5_FILE = f"{ROOT}/tools/bench_machines/ur5.yaml"
 UR5 = {"d": UR5_D, "a": UR5_A, "alpha": UR5_ALPHA, "tool": [30.0, 0.0, 120.0], "limits": [(-360.0, 360.0)] * 6}
@@ -98,7 +98,7 @@ def indices(arm3):
 
 def design(path, tmp_path, *args):
     out = tmp_path / "poses.csv"
-    doc = json.loads(run_cli("protocol", path, *args, "-o", str(out), "--format", "json").stdout)
+    doc = json.loads(cli("protocol", path, *args, "-o", str(out), "--format", "json").stdout)
     lines = [r for r in out.read_text().splitlines() if not r.startswith("#")]
     header = lines[0].split(",")
     poses = np.array([[float(c) for c in r.split(",")[:len(header) - 3]] for r in lines[1:]])
@@ -170,9 +170,14 @@ def test_same_seed_same_file_and_the_file_feeds_identify(arm3, tmp_path):
     (("--poses", "10", "-o", UR5_FILE), "is also an input"),
 ])
 def test_bad_options_exit_2(args, word):
-    proc = run_cli("protocol", UR5_FILE, *args, check=False)
+    proc = cli("protocol", UR5_FILE, *args, check=False)
     assert proc.returncode == 2 and proc.stdout == "" and "Traceback" not in proc.stderr, proc.stderr
     assert word in proc.stderr and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+
+
+def test_a_bad_option_exits_2_from_a_process():
+    proc = run_cli("protocol", UR5_FILE, "--poses", "2", check=False)   # the others run in this process
+    assert proc.returncode == 2 and proc.stdout == "" and "21 combinations" in proc.stderr, proc.stderr
 
 
 def test_text_report_and_held_joint(tmp_path):

@@ -20,7 +20,7 @@ import sympy as sp
 from chaincomp import load_machine
 from chaincomp.machine import ROT_PLANE, Rotation
 
-from conftest import machine_path, run_cli
+from conftest import cli, machine_path, run_cli
 
 GANTRY = """\
 name: gantry_xyz
@@ -249,7 +249,7 @@ def test_measured_coordinates_and_assumed_zero(gantry):
     (("--assume-zero", "NOPE"), "--assume-zero: unknown error 'NOPE'"),
 ])
 def test_bad_options_exit_2(args, word):
-    proc = run_cli("protocol", machine_path("vmc_xyz"), *args, check=False)
+    proc = cli("protocol", machine_path("vmc_xyz"), *args, check=False)   # in this process
     assert proc.returncode == 2 and proc.stdout == "" and "Traceback" not in proc.stderr
     assert word in proc.stderr and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-from conftest import PARAMS, ROOT, machine_path, needs_netns, run_cli
+from conftest import PARAMS, ROOT, cli, machine_path, needs_netns, run_cli
 
 FIVE = machine_path("five_axis_ac")
 LASER = os.path.join(PARAMS, "five_axis_ac-laser.yaml")
@@ -336,7 +336,7 @@ def _bad_file(tmp_path, i, old, new, marker):
 def test_bad_tables_exit_2_with_file_line_and_key(tmp_path, i):
     old, new, marker, key, words = BAD[i]
     path, line = _bad_file(tmp_path, i, old, new, marker)
-    proc = run_cli("eval", FIVE, "--params", path, check=False)
+    proc = cli("eval", FIVE, "--params", path, check=False)   # in this process; eval's exit path: a test above
     assert proc.returncode == 2, proc.stderr
     assert f"chaincomp eval: error: {path}:{line}: {key}: " in proc.stderr, proc.stderr
     assert words in proc.stderr and "Traceback" not in proc.stderr
