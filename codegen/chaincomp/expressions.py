@@ -1,6 +1,6 @@
 """The math text of machine, check and tolerance files, parsed by a small recursive-descent
 parser that can only build arithmetic: nothing in the text is ever evaluated as Python (no
-``eval``, no ``parse_expr``). It builds a small immutable tree of our own (Expr), which
+``eval``, no sympy ``parse_expr``). It builds a small immutable tree of our own (Expr), which
 evaluates numerically (numbers, numpy arrays, mpmath) and as truncated Taylor series in the
 errors without sympy; ``Expr.to_sympy`` builds the sympy expression, operation by operation,
 for the symbolic verbs, which alone import sympy.
@@ -267,12 +267,16 @@ def from_sympy(expr, source: str = "") -> Expr:
 
 # ----------------------------------------------------------------------------- numbers
 
+_FUNCTIONS_OF: dict = {}
+
+
 def _lib_functions(lib) -> dict:
-    if lib.__name__ == "numpy":
-        names = {"asin": "arcsin", "acos": "arccos", "atan": "arctan", "atan2": "arctan2"}
-    else:
-        names = {}
-    return {f: getattr(lib, names.get(f, f)) for f in FUNCTIONS if f != "pi"}
+    """The grammar's functions in ``lib`` (math, numpy or mpmath), by the grammar's names."""
+    if lib.__name__ not in _FUNCTIONS_OF:
+        names = {"asin": "arcsin", "acos": "arccos", "atan": "arctan", "atan2": "arctan2"} \
+            if lib.__name__ == "numpy" else {}
+        _FUNCTIONS_OF[lib.__name__] = {f: getattr(lib, names.get(f, f)) for f in FUNCTIONS if f != "pi"}
+    return _FUNCTIONS_OF[lib.__name__]
 
 
 def _number(v, lib):
@@ -597,7 +601,7 @@ class _Parser:
         return d
 
 
-def parse_expr(text: object, names) -> Expr:
+def parse_tree(text: object, names) -> Expr:
     """Parse ``text`` (a string or number) using only the declared symbol ``names``.
 
     Decimal numbers become exact fractions. Raises ExpressionError, with the text, for
@@ -642,7 +646,7 @@ def check_sympy(expr, source: str) -> None:
 def parse(text: object, symbols: dict):
     """Parse ``text`` into a sympy expression with the declared ``symbols`` ({name: sympy
     symbol}): the formulas of check and tolerance files, symbolic by nature."""
-    e = parse_expr(text, symbols)
+    e = parse_tree(text, symbols)
     expr = e.to_sympy(symbols)
     check_sympy(expr, e.source)
     return expr

@@ -16,7 +16,7 @@ from typing import Union
 from . import units
 from .errors import ChaincompError
 from .expressions import (MAX_LITERAL, NAME, RESERVED, ZERO, Expr, ExpressionError, check_sympy, constant,
-                          from_sympy, parse_expr, plausible)
+                          from_sympy, parse_tree, plausible)
 from .yamlsource import describe, line_of, load_yaml, read_text
 
 ROLES = ("axis", "constant", "error")
@@ -362,7 +362,7 @@ def _parse_symbol(ctx: _Ctx, node, i: int, line) -> Symbol:
 
 def _expr(ctx: _Ctx, value, symbols, fld: str, line) -> Expr:
     try:
-        expr = parse_expr(value, symbols)
+        expr = parse_tree(value, symbols)
         if not plausible(expr, ctx.values, ctx.errors):
             expr = _symbolic_check(ctx, expr)
     except ExpressionError as exc:
