@@ -94,15 +94,19 @@ class Arm:
 
     def jacobian(self, q, errors=None):
         """6 x n: d(point mm, rotation vector rad x 100 mm) / dq by central differences, numpy."""
+        return self.jacobians(q[None], errors)[0]
+
+    def jacobians(self, q, errors=None):
+        """(poses, 6, n): jacobian at each row of q, the poses at once."""
         h, cols = 1e-6, []
         for j in range(self.n):
             up, down = q.copy(), q.copy()
-            up[j] += h
-            down[j] -= h
-            (Ru, pu), (Rd, pd) = self.numpy(up[None], errors), self.numpy(down[None], errors)
-            dw = Rotation.from_matrix(Ru[0] @ Rd[0].T).as_rotvec()
-            cols.append(np.concatenate([(pu[0] - pd[0]) / (2 * h), 100 * dw / (2 * h)]))
-        return np.array(cols).T
+            up[:, j] += h
+            down[:, j] -= h
+            (Ru, pu), (Rd, pd) = self.numpy(up, errors), self.numpy(down, errors)
+            dw = Rotation.from_matrix(Ru @ np.swapaxes(Rd, -1, -2)).as_rotvec()
+            cols.append(np.concatenate([(pu - pd) / (2 * h), 100 * dw / (2 * h)], axis=1))
+        return np.stack(cols, axis=-1)
 
 
 def _aligned(buf, align):
@@ -117,14 +121,13 @@ def arm(request, tmp_path_factory):
 def regular_poses(arm, rng, count):
     """Random joints within the limits whose weighted 6 x n Jacobian (numpy) has its smallest
     singular value above 20 mm: away from wrist, elbow and shoulder singularities."""
-    out = []
     lo = np.array([a.to_internal(a.limits[0]) for a in arm.machine.axes])
     hi = np.array([a.to_internal(a.limits[1]) for a in arm.machine.axes])
-    while len(out) < count:
-        q = rng.uniform(np.maximum(lo, -math.pi) + BOUND, np.minimum(hi, math.pi) - BOUND)
-        if np.linalg.svd(arm.jacobian(q), compute_uv=False)[-1] > 20:
-            out.append(q)
-    return np.array(out)
+    out = np.zeros((0, arm.n))
+    while len(out) < count:   # candidates in batches, tested at once; kept in the order drawn
+        q = rng.uniform(np.maximum(lo, -math.pi) + BOUND, np.minimum(hi, math.pi) - BOUND, (max(count, 16), arm.n))
+        out = np.concatenate([out, q[np.linalg.svd(arm.jacobians(q), compute_uv=False)[:, -1] > 20]])
+    return out[:count]
 
 
 def test_away_from_singularities_point_to_1_nm_and_orientation_to_1e_9_rad(arm):
