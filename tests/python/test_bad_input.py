@@ -12,6 +12,8 @@ import sys
 
 import pytest
 
+from conftest import cli
+
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 
 # A copy of configs/machines/me220_xz.yaml (kept here so edits and line numbers stay stable).
@@ -75,6 +77,11 @@ def line_of(text: str, at: str) -> int:
 
 
 def run(*args: str) -> subprocess.CompletedProcess:
+    """In this process (cli.main.main): the cases below as a process each cost ~1 s of start-up."""
+    return cli(*args, check=False)
+
+
+def run_process(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "chaincomp.cli.main", *args], capture_output=True,
                           text=True, cwd=ROOT, timeout=300)
 
@@ -231,6 +238,15 @@ def test_bad_machine(tmp_path, edits, at, field, word, verb):
     args = [verb, str(path)] + (["--json"] if verb == "eval" else ["--format", "json"])
     proc = run(*args)
     check(proc, f"{path}:{line_of(text, at)}:", field, word)
+
+
+def test_a_bad_machine_exits_2_from_a_process(tmp_path):
+    """The exit path of a real process, for one case (the others run in this process)."""
+    edits, at, field, word, verb = MACHINE_CASES[0].values
+    text = edit(MACHINE, *edits)
+    path = tmp_path / "bad.yaml"
+    path.write_text(text, encoding="utf-8")
+    check(run_process(verb, str(path), "--json"), f"{path}:{line_of(text, at)}:", field, word)
 
 
 def test_duplicate_symbol_names_first_line(tmp_path):
