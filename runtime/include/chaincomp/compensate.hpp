@@ -48,10 +48,26 @@ constexpr double kDirectionWeight = 100.0;    // mm per rad: a direction error c
 // the correction is bounded and the rest reported as residual.
 constexpr double kMaxLinearCorrection = 1.0;      // mm
 constexpr double kMaxAngularCorrection = 0.0175;  // rad, about 1 degree
-// Steps per call: at µm and arcsec errors two reach the tolerance; near a singular pose the
-// chord converges slowly and takes more. Each axis reaching its bound and the switch to
-// point-only add one; the worst-case cost stays known.
+// Steps per pass: at µm and arcsec errors two reach the tolerance; near a singular pose the
+// chord converges slowly and takes more. A call makes one pass, or two near a singular pose
+// (undamped, then damped: below); the worst-case cost stays known.
 constexpr int kMaxSteps = 6;
+// Near a singular pose the least-squares correction grows without bound. There a second pass
+// from the command damps it (Levenberg-Marquardt on the total correction, each axis' damping
+// scaled by its bound, D = diag(1 / bound^2)) with lambda = h |r|^2 / (4 kTrustRadius^2), r
+// the weighted residual at the command: every singular mode of the damped correction is at
+// most |r| / (2 sqrt(lambda)), so its bound-scaled norm, sqrt(sum (correction_i /
+// bound_i)^2), stays within kTrustRadius, and it shrinks to zero along a mode whose gain
+// does (a trust region of fixed radius would keep its full length there and flip its sign
+// as the gain crosses zero: a jump). h rises smoothly (smoothstep) from 0 to 1 as the
+// undamped correction's norm goes from kDampingStart to twice that: lambda = 0 (the undamped
+// answer, at the undamped cost) wherever that lies within kDampingStart, and the
+// correction is a continuous function of the command throughout.
+constexpr double kTrustRadius = 1.0;
+constexpr double kDampingStart = 0.5 * kTrustRadius;
+// In the damped pass the point keeps priority over the direction (orientation): its rows
+// weigh this much more there (the point residual the damping leaves shrinks with its square).
+constexpr double kPointPriority = 1e3;
 // A step larger than this fraction of the bound (0.25 mm, 0.25 degree) refreshes the
 // Jacobian: below it the chord gains at least two digits per step.
 constexpr double kChordStepLimit = 0.25;
@@ -114,6 +130,9 @@ struct Workspace {
   typename K::Jacobian jacobian;
   Eigen::Matrix<double, kRows, K::kNumAxes> weighted;        // the Jacobian as factorised
   Eigen::Matrix<double, K::kNumAxes, kRows> step_matrix;     // (J^T J)^-1 J^T: a step is step_matrix * r
+  // Where the step pulls the correction towards the command (a redundant machine, a damped
+  // step): the step adds pull * (q - command).
+  Eigen::Matrix<double, K::kNumAxes, K::kNumAxes> pull;
   bool warm = false;  // the last call ended corrected (ok), with every axis free
   const void* warm_model = nullptr;  // the model of that call
   typename K::Axes last_command, last_corrected;
@@ -278,14 +297,44 @@ bool within_bounds(const typename K::Axes& q, const typename K::Axes& command, d
   return true;
 }
 
+// The damping weight of each axis: 1 / bound^2 (the correction's bound-scaled norm).
+template <class K>
+constexpr double damping_weight(int i) noexcept {
+  const double bound = K::kAxisIsAngle[i] ? kMaxAngularCorrection : kMaxLinearCorrection;
+  return 1.0 / (bound * bound);
+}
+
+// The squared bound-scaled norm of a correction: sum (d_i / bound_i)^2.
+template <class K>
+double trust_norm2(const typename K::Axes& d) noexcept {
+  double s = 0;
+  for (int i = 0; i < K::kNumAxes; ++i) {
+    const double bound = K::kAxisIsAngle[i] ? kMaxAngularCorrection : kMaxLinearCorrection;
+    s += (d[i] / bound) * (d[i] / bound);
+  }
+  return s;
+}
+
 // One compensation from `start` (a warm start: the factorisation in ws is used) or, where
 // null, cold from the command (a Jacobian and a factorisation there). `clean`: the call
-// ended with every axis free and the direction corrected.
+// ended undamped with every axis within its bound.
+//
+// Gauss-Newton (chord) steps on |W r(q)|^2 (W the row weights: the direction or orientation
+// rows as at kDirectionWeight mm per rad); near a singular pose a second, damped pass
+// (kTrustRadius above). Where the Jacobian has a null space (a seven-joint arm; a six-joint
+// arm holding point and direction, which leaves the turn about the tool axis free) every
+// step removes the correction's part along it: of all corrections equally good, the one of
+// least bound-scaled norm, i.e. the one closest to the command, whatever the iteration
+// starts from (the null-space rule).
 template <class K>
 Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K::Axes& command,
              const typename K::Axes* start, Result<K>& out, bool& clean) noexcept {
   constexpr int n = K::kNumAxes;
   constexpr int rows = Workspace<K>::kRows;
+  using Square = Eigen::Matrix<double, n, n>;
+  // More axes than the conditions they are to meet (a seven-joint arm; a six-joint arm holding
+  // point and direction only): a set of equally good corrections.
+  constexpr bool kRedundant = n > (kCorrectsOrientation<K>() ? 6 : K::kCorrectsDirection ? 5 : 3);
   clean = false;
   out.corrected = command;
   out.residual_point = out.residual_direction = 0;
@@ -331,17 +380,16 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
   // (near a singular pose) takes a fresh Jacobian.
   auto& J = ws.weighted;
   auto& step_matrix = ws.step_matrix;
-  bool at_bound[n] = {};  // axes whose correction reached its bound stay there
-  // Near a singular pose (the tool along a rotary axis) the direction cannot be corrected
-  // within the trust region: the point alone is corrected then, by the linear axes where
-  // the machine has three, and the direction error is reported.
-  bool point_only = false;
   // With a frame: the target's z and y axes, which the orientation rows are taken against.
   Eigen::Vector3d target_z = Eigen::Vector3d::Zero(), target_y = Eigen::Vector3d::Zero();
   if constexpr (kCorrectsOrientation<K>()) {
     target_z = ws.target.template segment<3>(3);
     target_y = cross3(target_z, ws.target.template segment<3>(6));
   }
+  Square A;  // J^T J (lower triangle, with the tiny Levenberg term) of the last Jacobian
+  SmallLdlt<n> ldlt;
+  bool damping = false;  // the steps are damped ones (the second pass)
+  bool damped_factored = false;  // damped_ldlt holds A + lambda D of this Jacobian
   auto factorise = [&]() {
     J.template topRows<3>() = ws.jacobian.template topRows<3>();
     if constexpr (kCorrectsOrientation<K>()) {
@@ -350,23 +398,52 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
         const Eigen::Vector3d jx = ws.jacobian.col(i).template segment<3>(6);
         J.col(i).template tail<3>() = kDirectionWeight * orientation_residual(target_z, target_y, jz, jx);
       }
-      if (point_only) J.template bottomRows<3>().setZero();
     } else if constexpr (K::kCorrectsDirection) {
       J.template bottomRows<3>() = kDirectionWeight * ws.jacobian.template middleRows<3>(3);
-      if (point_only) J.template bottomRows<3>().setZero();
     }
-    for (int i = 0; i < n; ++i) {
-      if (at_bound[i] || (point_only && K::kAxisIsAngle[i] && kLinearAxes<K>() >= 3)) J.col(i).setZero();
-    }
-    Eigen::Matrix<double, n, n> A;  // J^T J, lower triangle: all SmallLdlt reads
     for (int j = 0; j < n; ++j) {
       for (int i = j; i < n; ++i) A(i, j) = J.col(i).dot(J.col(j));
     }
     // A tiny Levenberg term keeps the step defined where an axis has no effect.
-    A.diagonal().array() += 1e-14 * (1.0 + A.diagonal().maxCoeff());
-    SmallLdlt<n> ldlt;
+    const double levenberg = 1e-14 * (1.0 + A.diagonal().maxCoeff());
+    A.diagonal().array() += levenberg;
+    damped_factored = false;
     if (!ldlt.compute(A)) return false;
     step_matrix = ldlt.solve(Eigen::Matrix<double, n, rows>(J.transpose()));
+    // More axes than conditions: the Levenberg term's pull, (A + l I)^-1 l, removes the
+    // correction's part along the Jacobian's null space, so that the iteration ends on the
+    // correction closest to the command whatever it starts from.
+    if constexpr (kRedundant) ws.pull = ldlt.solve(Square(Square::Identity() * levenberg));
+    return true;
+  };
+  // A damped step: the correction d minimising |P (J (d - (q - c)) + r)|^2 + lambda d^T D d of
+  // the model linearised at q (above), lambda kept for the pass. P weights the point rows by
+  // up to kPointPriority where the axes can hold the whole pose: the damping gives up the
+  // direction (orientation) before the point. (There the undamped answer is the same with
+  // or without P, so the correction stays continuous as lambda leaves 0.)
+  constexpr int dof = kCorrectsOrientation<K>() ? 6 : K::kCorrectsDirection ? 5 : 3;
+  constexpr bool kPrioritised = K::kCorrectsDirection && n >= dof;
+  Eigen::Matrix<double, rows, 1> priority = Eigen::Matrix<double, rows, 1>::Ones();  // set with lambda
+  typename K::Axes dw;  // the diagonal of D
+  for (int i = 0; i < n; ++i) dw[i] = damping_weight<K>(i);
+  Eigen::Matrix<double, rows, n> Jp;  // P J
+  SmallLdlt<n> damped_ldlt;
+  double lambda = 0;
+  auto damped_correction = [&](const typename K::Axes& q, const Eigen::Matrix<double, rows, 1>& r,
+                               typename K::Axes& d) {
+    if (!damped_factored) {
+      Jp = priority.asDiagonal() * J;
+      Square damped;
+      for (int j = 0; j < n; ++j) {
+        for (int i = j; i < n; ++i) damped(i, j) = Jp.col(i).dot(Jp.col(j));
+      }
+      const double levenberg = 1e-14 * (1.0 + damped.diagonal().maxCoeff());
+      damped.diagonal() += (lambda * dw.array() + levenberg).matrix();
+      if (!damped_ldlt.compute(damped)) return false;
+      damped_factored = true;
+    }
+    const typename K::Axes g = Jp.transpose() * (Jp * (q - command) - priority.cwiseProduct(r));
+    d = damped_ldlt.solve(Eigen::Matrix<double, n, 1>(g));
     return true;
   };
   typename K::Axes q = command;
@@ -384,7 +461,7 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
     bool ok = v.template head<3>().squaredNorm() <= point * point;
     if constexpr (K::kCorrectsDirection) {
       const double direction = fraction * kDirectionTolerance * kDirectionWeight;
-      ok = ok && (point_only || v.template tail<3>().squaredNorm() <= direction * direction);
+      ok = ok && v.template tail<3>().squaredNorm() <= direction * direction;
     }
     return ok;
   };
@@ -397,53 +474,89 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
       r.template tail<3>() = kDirectionWeight * (ws.pose.template segment<3>(3) - ws.target.template segment<3>(3));
     }
   };
-  int budget = kMaxSteps;
-  double last_move = std::numeric_limits<double>::infinity();  // the last step's largest axis move, as a fraction of its bound
-  bool slow = false;       // the chord gained less than a digit on the last step
-  for (int step = 0;; ++step) {
-    set_residual();
-    if (step == budget || converged(r, 1.0)) break;
-    if (slow) {  // not converged yet: a fresh Jacobian for the next step
-      jacobian_at(q);
-      if (!factorise()) return Status::kSingular;
+  bool clamped = false;  // an axis was held at its bound
+  bool settled = false;  // the last pass ended within tolerance or on a step too small to matter
+  // One pass of steps from q (ws.pose at q, a factorisation in step_matrix or from the
+  // command), undamped or with `lambda`; kOk, or the failure.
+  auto run = [&]() {
+    double last_move = std::numeric_limits<double>::infinity();  // the last step's largest axis move, as a fraction of its bound
+    bool slow = false;  // the chord gained less than a digit on the last step
+    settled = false;
+    for (int step = 0;; ++step) {
       set_residual();
-    }
-    // In point-only mode J's direction rows are zero, and so are the step's weights on them.
-    typename K::Axes delta = step_matrix * r;
-    if (K::kCorrectsDirection && !point_only && !within_bounds<K>(q - delta, command)) {
-      point_only = true;
-      ++budget;
-      if (!factorise()) return Status::kSingular;
-      delta = step_matrix * r;
-    }
-    // A step that would move the pose by less than a tenth of the tolerance: what is left
-    // cannot be corrected (fewer correctable DOF than errors, or an axis at its bound).
-    if (converged((J * delta).eval(), 0.1)) break;
-    bool clamped = false;
-    double move = 0;
-    for (int i = 0; i < n; ++i) {
-      // Keep the total correction within its bound per axis (a trust region near singular
-      // poses); an axis that reaches it is held there and the others correct what they can.
-      const double bound = K::kAxisIsAngle[i] ? kMaxAngularCorrection : kMaxLinearCorrection;
-      const double wanted = q[i] - delta[i];
-      q[i] = std::clamp(wanted, command[i] - bound, command[i] + bound);
-      if (q[i] != wanted && !at_bound[i]) {
-        at_bound[i] = true;
-        ++budget;
+      if (converged(r, 1.0)) settled = true;
+      if (settled || step == kMaxSteps) break;
+      if (slow) {  // not converged yet: a fresh Jacobian for the next step
+        jacobian_at(q);
+        if (!factorise()) return Status::kSingular;
+        set_residual();
       }
-      clamped = clamped || q[i] != wanted;
-      move = std::max(move, std::abs(delta[i]) * (1.0 / bound));  // constant: no division
+      // The step to the next iterate, q - delta.
+      typename K::Axes delta;
+      if (damping) {
+        typename K::Axes d;
+        if (!damped_correction(q, r, d)) return Status::kSingular;
+        delta = (q - command) - d;
+      } else {
+        delta = step_matrix * r;
+        if constexpr (kRedundant) delta += ws.pull * (q - command);
+      }
+      // A step that would move the pose by less than a tenth of the tolerance: what is left
+      // cannot be corrected (fewer correctable DOF than errors, or a damped singular pose).
+      if (converged((J * delta).eval(), 0.1)) {
+        settled = true;
+        break;
+      }
+      bool held = false;
+      double move = 0;
+      for (int i = 0; i < n; ++i) {
+        // Every correction within its bound per axis (a trust region near singular poses).
+        const double bound = K::kAxisIsAngle[i] ? kMaxAngularCorrection : kMaxLinearCorrection;
+        const double wanted = q[i] - delta[i];
+        q[i] = std::clamp(wanted, command[i] - bound, command[i] + bound);
+        held = held || q[i] != wanted;
+        move = std::max(move, std::abs(delta[i]) * (1.0 / bound));  // constant: no division
+      }
+      clamped = clamped || held;
+      // A fresh Jacobian after a large step.
+      const bool refresh = held || move > kChordStepLimit;
+      slow = !refresh && move > 0.1 * last_move;
+      last_move = move;
+      if (refresh) {
+        jacobian_at(q);
+        if (!factorise()) return Status::kSingular;
+      } else {
+        pose_at(q);
+      }
     }
-    // A fresh Jacobian after a large step.
-    const bool refresh = clamped || move > kChordStepLimit;
-    slow = !refresh && move > 0.1 * last_move;
-    last_move = move;
-    if (refresh) {
-      jacobian_at(q);
-      if (!factorise()) return Status::kSingular;
-    } else {
-      pose_at(q);
-    }
+    return Status::kOk;
+  };
+  Status failed = run();
+  if (failed != Status::kOk) return failed;
+  // The undamped correction beyond kDampingStart (or held at a bound): near a singular pose.
+  // Then a damped pass, lambda from how far beyond: h rises
+  // smoothly from 0 (the undamped answer) as the undamped correction's norm goes from
+  // kDampingStart to twice that, so the correction is a continuous function of the command.
+  const double x = std::sqrt(trust_norm2<K>(q - command)) * (1.0 / kDampingStart) - 1.0;
+  const double h = clamped ? 1.0 : !(x > 0) ? 0.0 : x >= 1 ? 1.0 : x * x * (3 - 2 * x);
+  const bool damped = h > 0;
+  if (damped) {
+    // lambda from the residual at the command. The pass starts from the undamped correction
+    // scaled by 1 - h: where lambda is small it barely moves from there (continuous as h
+    // leaves 0), and from the command where the undamped one lies far off (at a bound).
+    const typename K::Axes undamped = q;
+    pose_at(command);
+    set_residual();
+    lambda = h * r.squaredNorm() * (0.25 / (kTrustRadius * kTrustRadius));
+    // the point's priority grows with h too (the Levenberg term scales with it)
+    if (kPrioritised) priority.template head<3>().setConstant(1 + (kPointPriority - 1) * std::sqrt(h));
+    q = command + (1 - h) * (undamped - command);
+    clamped = false;
+    jacobian_at(q);
+    if (!factorise()) return Status::kSingular;
+    damping = true;
+    failed = run();
+    if (failed != Status::kOk) return failed;
   }
   if (!q.allFinite() || !r.allFinite()) return Status::kNonFiniteOutput;
   out.corrected = q;
@@ -452,7 +565,7 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
     out.residual_direction = r.template tail<3>().norm() / kDirectionWeight;
   }
   const bool ok = out.residual_point <= kPointTolerance && out.residual_direction <= kDirectionTolerance;
-  clean = !point_only && std::none_of(at_bound, at_bound + n, [](bool b) { return b; });
+  clean = !damped && !clamped;
   return ok ? Status::kOk : Status::kResidual;
 }
 
