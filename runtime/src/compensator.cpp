@@ -78,10 +78,11 @@ bool Compensator::seq_ok(const Command& in, const std::array<double, kMaxAxes>& 
 }
 
 // Point (mm) and direction (rad) error left at `target` (axis units) for the command at q
-// (internal units): what a target whose correction was limited or ramped really leaves.
+// (internal units): what a target whose correction was limited or ramped really leaves. With
+// a frame corrected in full, the orientation residual compensate() reports (compensate.hpp).
 void Compensator::residual_at(const double* q, const std::array<double, kMaxAxes>& target,
                               double* residual) const noexcept {
-  double t[kMaxAxes], actual[6], nominal[6];
+  double t[kMaxAxes], actual[9], nominal[9];  // pose_size is 3, 6 or 9
   for (int i = 0; i < n_; ++i) t[i] = target[i] * entry_.info->axes[i].to_internal;
   entry_.pose_exact(model_, t, actual);
   entry_.pose_nominal(model_, q, nominal);
@@ -91,7 +92,30 @@ void Compensator::residual_at(const double* q, const std::array<double, kMaxAxes
     return std::sqrt(s);
   };
   residual[0] = distance(0);
-  residual[1] = entry_.info->corrects_direction ? distance(3) : 0.0;
+  residual[1] = 0.0;
+  if (!entry_.info->corrects_direction) return;
+  int rotary = 0;
+  for (int i = 0; i < n_; ++i) rotary += entry_.info->axes[i].kind == UnitKind::kAngle ? 1 : 0;
+  if (entry_.info->pose_size != 9 || rotary < 3) {
+    residual[1] = distance(3);
+    return;
+  }
+  // zt x za + (yt . xa) zt with yt = zt x xt, as compensate() measures it
+  const double* zt = nominal + 3;
+  const double* xt = nominal + 6;
+  const double* za = actual + 3;
+  const double* xa = actual + 6;
+  const double yt[3] = {zt[1] * xt[2] - zt[2] * xt[1], zt[2] * xt[0] - zt[0] * xt[2], zt[0] * xt[1] - zt[1] * xt[0]};
+  const double about = yt[0] * xa[0] + yt[1] * xa[1] + yt[2] * xa[2];
+  const double w[3] = {zt[1] * za[2] - zt[2] * za[1] + about * zt[0], zt[2] * za[0] - zt[0] * za[2] + about * zt[1],
+                       zt[0] * za[1] - zt[1] * za[0] + about * zt[2]};
+  residual[1] = std::sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+}
+
+// The error a residual stands for, weighted as compensate() weighs it.
+static double weighted_error(const double* residual) noexcept {
+  const double d = kDirectionWeight * residual[1];
+  return residual[0] * residual[0] + d * d;
 }
 
 bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept {
@@ -141,19 +165,40 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
   if (enabled_ || ramp_ > 0) flags |= kFlagCompensating;
   if (ramp_ != goal) flags |= kFlagRamping;
 
-  bool clamped = false;
-  std::array<double, kMaxAxes> correction{};
+  // The limits scale the whole correction (or its change) rather than clamping each axis:
+  // the axes' corrections keep their proportions, which near a singular pose hold the tool
+  // far better than any axis alone (an arm's elbow and wrist corrections cancel each
+  // other's motion of the tool). Each axis stays within its limits all the same.
+  std::array<double, kMaxAxes> wanted{}, prev{};
+  double size_scale = 1.0, rate_scale = 1.0, back_scale = 1.0;
   for (int i = 0; i < n_; ++i) {
     const AxisLimits& lim = config_.axes[i];
-    const double full = (corrected[i] - q[i]) / info[i].to_internal;
-    const double wanted = ramp_ * full;
-    const double sized = std::clamp(wanted, -lim.max_correction, lim.max_correction);
-    const double prev = have_last_ ? last_correction_[i] : 0.0;
-    const double rated = std::clamp(sized, prev - lim.max_correction_step, prev + lim.max_correction_step);
+    wanted[i] = ramp_ * (corrected[i] - q[i]) / info[i].to_internal;
+    prev[i] = have_last_ ? last_correction_[i] : 0.0;
+    if (std::abs(wanted[i]) > lim.max_correction) size_scale = std::min(size_scale, lim.max_correction / std::abs(wanted[i]));
+  }
+  for (int i = 0; i < n_; ++i) {
+    const double step = config_.axes[i].max_correction_step;
+    const double change = std::abs(size_scale * wanted[i] - prev[i]);
+    if (change > step) rate_scale = std::min(rate_scale, step / change);
+    if (std::abs(prev[i]) > step) back_scale = std::min(back_scale, step / std::abs(prev[i]));
+  }
+  bool clamped = size_scale < 1.0 || rate_scale < 1.0;
+  // The correction published, and the one the rate limit allows back towards none.
+  std::array<double, kMaxAxes> correction{}, back{};
+  for (int i = 0; i < n_; ++i) {
+    const AxisLimits& lim = config_.axes[i];
+    const double sized = size_scale * wanted[i];
+    // (the clamps only take the rounding of the scaling off)
+    const double rated = std::clamp(prev[i] + rate_scale * (sized - prev[i]), prev[i] - lim.max_correction_step,
+                                    prev[i] + lim.max_correction_step);
     // the target itself stays within the command limits
     const double target = std::clamp(cmd[i] + rated, lim.lower, lim.upper);
-    clamped = clamped || sized != wanted || rated != sized || target != cmd[i] + rated;
+    clamped = clamped || target != cmd[i] + rated;
     correction[i] = target - cmd[i];
+    const double towards_none = std::clamp(prev[i] * (1.0 - back_scale), prev[i] - lim.max_correction_step,
+                                           prev[i] + lim.max_correction_step);
+    back[i] = std::clamp(cmd[i] + towards_none, lim.lower, lim.upper) - cmd[i];
   }
   if (clamped) {
     flags |= kFlagClamped;
@@ -167,6 +212,27 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
   for (int i = 0; i < n_; ++i) target_axes[i] = cmd[i] + correction[i];
   if (clamped || ramp_ < 1.0) {
     residual_at(q, target_axes, residual);
+    // A limited correction may leave the tool further off than none (the wanted one moved
+    // faster than the rate limit follows): then the better of it and the step back towards
+    // none, both within the rate limit.
+    if (clamped && std::isfinite(residual[0]) && std::isfinite(residual[1])) {
+      std::array<double, kMaxAxes> none{};
+      double none_residual[2], back_residual[2];
+      for (int i = 0; i < n_; ++i) none[i] = cmd[i];
+      residual_at(q, none, none_residual);
+      if (weighted_error(residual) > weighted_error(none_residual)) {
+        std::array<double, kMaxAxes> back_axes{};
+        for (int i = 0; i < n_; ++i) back_axes[i] = cmd[i] + back[i];
+        residual_at(q, back_axes, back_residual);
+        if (weighted_error(back_residual) < weighted_error(residual)) {
+          correction = back;
+          target_axes = back_axes;
+          residual[0] = back_residual[0];
+          residual[1] = back_residual[1];
+          ++counters_.held_back;
+        }
+      }
+    }
     if (!std::isfinite(residual[0]) || !std::isfinite(residual[1])) return reject(Reject::kCompensationFailed, why);
     published = residual[0] <= kPointTolerance && residual[1] <= kDirectionTolerance ? Status::kOk : Status::kResidual;
   }

@@ -4,9 +4,12 @@
 #include <algorithm>
 #include <climits>
 #include <cmath>
+#include <functional>
+#include <string>
 #include <string_view>
 #include <vector>
 
+#include "chaincomp/compensate.hpp"
 #include "chaincomp/compensator.hpp"
 #include "chaincomp/daemon_config.hpp"
 
@@ -316,4 +319,99 @@ TEST_CASE("a clamped or ramped target carries its own residual and status, not t
   for (int i = 0; i < n; ++i) CHECK(t.correction[i] == 0.0);
   CHECK(t.status == 1);
   CHECK(t.residual_point == Approx(linear_residual(t)).epsilon(1e-3));
+}
+
+namespace {
+
+// The weighted error (point^2 + (kDirectionWeight angle)^2, mm^2) the pose at `axes` (axis
+// units) leaves against the nominal pose at `command`: computed here from pose_exact and
+// pose_nominal, the direction as the angle between the tool directions, or with a frame the
+// angle between the frames (|Ra - Rt|_F = 2 sqrt2 sin(angle / 2)).
+double weighted_error(const chaincomp::ModelEntry& e, const void* model, const double* command, const double* axes) {
+  const int n = e.info->num_axes, ps = e.info->pose_size;
+  double c[8], a[8], target[9], actual[9];
+  for (int i = 0; i < n; ++i) {
+    c[i] = command[i] * e.info->axes[i].to_internal;
+    a[i] = axes[i] * e.info->axes[i].to_internal;
+  }
+  e.pose_nominal(model, c, target);
+  e.pose_exact(model, a, actual);
+  double point = 0, d2 = 0;
+  for (int k = 0; k < 3; ++k) point += (actual[k] - target[k]) * (actual[k] - target[k]);
+  for (int k = 3; k < ps; ++k) d2 += (actual[k] - target[k]) * (actual[k] - target[k]);
+  double angle = 0;
+  if (ps == 6) angle = 2 * std::asin(std::sqrt(d2) / 2);
+  if (ps == 9) {  // the y axes too: y = z x x
+    const double* za = actual + 3; const double* xa = actual + 6;
+    const double* zt = target + 3; const double* xt = target + 6;
+    const double ya[3] = {za[1] * xa[2] - za[2] * xa[1], za[2] * xa[0] - za[0] * xa[2], za[0] * xa[1] - za[1] * xa[0]};
+    const double yt[3] = {zt[1] * xt[2] - zt[2] * xt[1], zt[2] * xt[0] - zt[0] * xt[2], zt[0] * xt[1] - zt[1] * xt[0]};
+    for (int k = 0; k < 3; ++k) d2 += (ya[k] - yt[k]) * (ya[k] - yt[k]);
+    angle = 2 * std::asin(std::sqrt(d2 / 8));
+  }
+  const double w = chaincomp::kDirectionWeight * angle;
+  return point + w * w;
+}
+
+}  // namespace
+
+TEST_CASE("near a singular pose the rate-limited target is never further off than no correction",
+          "[compensator][singular]") {
+  struct Case {
+    const char* name;
+    std::function<void(double, double*)> path;  // axis units at t in [0, 1]
+  };
+  const Case cases[] = {
+      // five_axis_ac: A through 0 (the tool along C) while C turns
+      {"five_axis_ac", [](double t, double* q) {
+         const double v[5] = {100 + 20 * t, -20, -150, -2 + 4 * t, 30 + 200 * t};
+         std::copy(v, v + 5, q);
+       }},
+      // the UR5: q2 .. q6 together through 0 (the stretched elbow, the wrist), as tools/demo-arm
+      {"ur5", [](double t, double* q) {
+         q[0] = 30;
+         for (int i = 1; i < 6; ++i) q[i] = -6 + 12 * t;
+       }},
+  };
+  for (const Case& c : cases) {
+    INFO("machine " << c.name);
+    const chaincomp::ModelEntry& entry = *chaincomp::find_model(c.name);
+    alignas(64) static unsigned char model[1 << 15];
+    REQUIRE(entry.model_size <= sizeof model);
+    std::vector<double> params(entry.info->num_params);
+    for (int i = 0; i < entry.info->num_params; ++i) {  // 20 um and 20 arcsec, alternating signs
+      const auto& p = entry.info->params[i];
+      const double sign = i % 2 ? -1.0 : 1.0;
+      params[i] = p.role == chaincomp::ParamRole::kError
+                      ? sign * (p.kind == chaincomp::UnitKind::kLength ? 20e-3 : 20.0 * M_PI / 648000.0)
+                      : p.nominal;
+    }
+    entry.prepare(params.data(), model);
+    chaincomp::DaemonConfig config;
+    std::string error;
+    REQUIRE(chaincomp::load_daemon_config(*entry.info, "", config, error));
+    config.compensator.ramp_time_s = 0;  // every command compensating in full
+    chaincomp::Compensator comp(entry, model, config.compensator);
+    const int n = entry.info->num_axes, steps = 4000;
+    std::vector<double> last(n, 0.0);
+    for (int k = 0; k <= steps; ++k) {
+      chaincomp::Command cmd;
+      cmd.seq = k + 1;
+      cmd.utime = 1000 * (k + 1);
+      cmd.machine = c.name;
+      cmd.num_axes = n;
+      c.path(double(k) / steps, cmd.axes.data());
+      chaincomp::Target t;
+      INFO("command " << k);
+      REQUIRE(comp.process(cmd, t));
+      const double published = weighted_error(entry, model, cmd.axes.data(), t.axes.data());
+      const double none = weighted_error(entry, model, cmd.axes.data(), cmd.axes.data());
+      CHECK(published <= none * (1 + 1e-6) + 1e-18);
+      for (int i = 0; i < n; ++i) {
+        CHECK(std::abs(t.correction[i] - last[i]) <= config.compensator.axes[i].max_correction_step * (1 + 1e-9));
+        last[i] = t.correction[i];
+      }
+    }
+    CHECK(comp.counters().clamped > 0);  // the rate limit did engage
+  }
 }

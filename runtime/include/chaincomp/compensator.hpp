@@ -80,6 +80,7 @@ struct Counters {
   std::int64_t seq_missing = 0;      // the seq values those jumps skipped (saturates at 2^63-1)
   std::int64_t stream_restarts = 0;  // restarts taken by the kRestartRun rule
   std::int64_t resets = 0;           // restarts asked for by reset()
+  std::int64_t held_back = 0;        // limited corrections worse than none, stepped back towards none instead
   std::array<std::int64_t, kNumReasons> rejected{};
 };
 
