@@ -19,20 +19,28 @@ def machine_path(name: str) -> str:
     return os.path.join(MACHINES, name + ".yaml")
 
 
-@functools.cache
 def derived(path: str, order: int):
     """derive(machine, order) of a machine file, once a session: an arm's order 2 takes minutes,
     and test_gain, test_jets and test_truncation all compare against the same derivations.
     Shared: only read it, never change it."""
-    from chaincomp import derive, load_machine
-    return derive(load_machine(os.path.abspath(path)), order)
+    return _derived(os.path.abspath(path), order)
+
+
+def truncated(path: str, order: int):
+    """TruncatedModel of derived(path, order), once a session (it keeps its lambdified formulas)."""
+    return _truncated(os.path.abspath(path), order)
 
 
 @functools.cache
-def truncated(path: str, order: int):
-    """TruncatedModel of derived(path, order), once a session (it keeps its lambdified formulas)."""
+def _derived(path: str, order: int):
+    from chaincomp import derive, load_machine
+    return derive(load_machine(path), order)
+
+
+@functools.cache
+def _truncated(path: str, order: int):
     from chaincomp import TruncatedModel
-    return TruncatedModel(derived(path, order))
+    return TruncatedModel(_derived(path, order))
 
 
 def run_cli(*args: str, check: bool = True) -> subprocess.CompletedProcess:

@@ -10,10 +10,11 @@ import os
 import numpy as np
 import pytest
 
-from chaincomp import ExactModel, TruncatedModel, derive, load_machine
+from chaincomp import ExactModel, load_machine
 from chaincomp.jets import JetModel
 
 from arm_models import UR5_A, UR5_D, ur5 as ur5_frame
+from conftest import truncated
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 BUNDLED = sorted(glob.glob(os.path.join(ROOT, "configs", "machines", "*.yaml")))
@@ -60,7 +61,7 @@ def random_values(m, rng, scale):
 def test_jets_equal_the_symbolic_truncated_models(path):
     m = load_machine(path)
     rng = np.random.default_rng(7)
-    symbolic, jets = TruncatedModel(derive(m, 2)), JetModel(m, 2)
+    symbolic, jets = truncated(path, 2), JetModel(m, 2)
     for _ in range(3):
         v = random_values(m, rng, 1e-3)
         for k in (1, 2):
