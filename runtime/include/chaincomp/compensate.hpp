@@ -60,11 +60,11 @@ constexpr int kMaxSteps = 6;
 // bound_i)^2), stays within kTrustRadius, and it shrinks to zero along a mode whose gain
 // does (a trust region of fixed radius would keep its full length there and flip its sign
 // as the gain crosses zero: a jump). h rises smoothly (smoothstep) from 0 to 1 as the
-// undamped correction's norm goes from kDampingStart to twice that: lambda = 0 (the undamped
-// answer, at the undamped cost) wherever that lies within kDampingStart, and the
-// correction is a continuous function of the command throughout.
+// undamped correction's largest axis goes from kDampingStart to the bound (fractions of
+// the bounds; beyond it the bound would hold the axis): lambda = 0 (the undamped answer, at the undamped cost) wherever every axis
+// lies within kDampingStart, and the correction is a continuous function of the command.
 constexpr double kTrustRadius = 1.0;
-constexpr double kDampingStart = 0.5 * kTrustRadius;
+constexpr double kDampingStart = 0.75;
 // In the damped pass the point keeps priority over the direction (orientation): its rows
 // weigh this much more there (the point residual the damping leaves shrinks with its square).
 constexpr double kPointPriority = 1e3;
@@ -304,17 +304,6 @@ constexpr double damping_weight(int i) noexcept {
   return 1.0 / (bound * bound);
 }
 
-// The squared bound-scaled norm of a correction: sum (d_i / bound_i)^2.
-template <class K>
-double trust_norm2(const typename K::Axes& d) noexcept {
-  double s = 0;
-  for (int i = 0; i < K::kNumAxes; ++i) {
-    const double bound = K::kAxisIsAngle[i] ? kMaxAngularCorrection : kMaxLinearCorrection;
-    s += (d[i] / bound) * (d[i] / bound);
-  }
-  return s;
-}
-
 // One compensation from `start` (a warm start: the factorisation in ws is used) or, where
 // null, cold from the command (a Jacobian and a factorisation there). `clean`: the call
 // ended undamped with every axis within its bound.
@@ -533,11 +522,14 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
   };
   Status failed = run();
   if (failed != Status::kOk) return failed;
-  // The undamped correction beyond kDampingStart (or held at a bound): near a singular pose.
-  // Then a damped pass, lambda from how far beyond: h rises
-  // smoothly from 0 (the undamped answer) as the undamped correction's norm goes from
-  // kDampingStart to twice that, so the correction is a continuous function of the command.
-  const double x = std::sqrt(trust_norm2<K>(q - command)) * (1.0 / kDampingStart) - 1.0;
+  // An axis of the undamped correction beyond kDampingStart of its bound (or held at it):
+  // near a singular pose. Then a damped pass, lambda from how far beyond (h above).
+  double largest = 0;  // of the undamped correction's axes, as fractions of their bounds
+  for (int i = 0; i < n; ++i) {
+    const double bound = K::kAxisIsAngle[i] ? kMaxAngularCorrection : kMaxLinearCorrection;
+    largest = std::max(largest, std::abs(q[i] - command[i]) * (1.0 / bound));
+  }
+  const double x = (largest - kDampingStart) * (1.0 / (1.0 - kDampingStart));
   const double h = clamped ? 1.0 : !(x > 0) ? 0.0 : x >= 1 ? 1.0 : x * x * (3 - 2 * x);
   const bool damped = h > 0;
   if (damped) {
