@@ -108,10 +108,13 @@ class JetModel:
     def _evaluation(self, values: dict, order: int | None) -> tuple[int, dict, list]:
         """(the order asked, the values completed and resolved, the errors' values)."""
         order = self.order if order is None else order
-        if not 1 <= order <= self.order:
-            raise ValueError(f"order {order}: this model has orders 1..{self.order}")
+        self._check_order(order)
         values = self._resolved(values)
         return order, values, [values[s.name] for s in self.machine.errors]
+
+    def _check_order(self, order: int) -> None:
+        if not 1 <= order <= self.order:
+            raise ValueError(f"order {order}: this model has orders 1..{self.order}")
 
     def error(self, values: dict, order: int | None = None, backend: str = "numpy"):
         """(point error, direction error or None): the terms of degree 1..order."""
@@ -137,9 +140,19 @@ class JetModel:
 
     def all_errors(self, values: dict, order: int | None = None, backend: str = "numpy"):
         """(point error, direction error or None, ω or None) of degree 1..order, one pass."""
-        order, values, eps = self._evaluation(values, order)
-        return tuple(None if v is None else [self._at_errors(j, eps, order) for j in v]
-                     for v in self._pose_jets(values, backend))
+        order = self.order if order is None else order
+        return self.errors_by_order(values, (order,), backend)[order]
+
+    def errors_by_order(self, values: dict, orders: tuple = (1, 2), backend: str = "numpy") -> dict:
+        """{order: (point error, direction error or None, ω or None)} for each of ``orders``,
+        from one pass of the jets through the chain."""
+        for order in orders:
+            self._check_order(order)
+        values = self._resolved(values)
+        eps = [values[s.name] for s in self.machine.errors]
+        jets = self._pose_jets(values, backend)
+        return {order: tuple(None if v is None else [self._at_errors(j, eps, order) for j in v] for v in jets)
+                for order in orders}
 
     def gains(self, values: dict, backend: str = "numpy") -> dict[str, list]:
         """The first-order error gain matrix at the large values: {dx: [gain per error], ...}."""

@@ -401,6 +401,9 @@ def test_ur5_exact_and_jet_models_against_its_dh_table_in_numpy():
             true_dp = ur5_frame(scaled, point, direction, reference)[0] - base[0]
             dp1 = np.array(jets.error(scaled, 1)[0], float)
             dp2 = np.array(jets.error(scaled, 2)[0], float)
+            both = jets.errors_by_order(scaled, (1, 2))   # eval's one pass for both orders
+            np.testing.assert_array_equal(np.array(both[1][0], float), dp1)
+            np.testing.assert_array_equal(np.array(both[2][0], float), dp2)
             assert np.abs(dp2 - true_dp).max() < 0.05 * np.abs(dp1 - true_dp).max() + 1e-12
             assert np.abs(dp2 - true_dp).max() < 1e-4 * t**3
         # first-order gains against central differences of the numpy chain
