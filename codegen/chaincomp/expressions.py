@@ -404,6 +404,8 @@ def _screen(node, values, errors):
         v = -x[0]
     elif op in ("add", "sub", "mul"):
         v = x[0] + x[1] if op == "add" else x[0] - x[1] if op == "sub" else x[0] * x[1]
+        if op != "mul" and abs(v) <= 1e-12 * max(abs(x[0]), abs(x[1])):
+            v = 0.0   # cancelled to rounding: perhaps a symbolic zero (1e15*sqrt(2)^2 - 2e15), doubted as one
     elif op == "div":
         if abs(x[1]) < _NEAR:
             raise _Doubtful

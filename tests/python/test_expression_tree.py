@@ -206,7 +206,9 @@ def test_the_jets_of_every_function_are_sympys(text):
 # Where an expression is not analytic in the errors at zero, or not finite or real there.
 SINGULAR = ["sqrt(e^2)", "sqrt(e)", "(e)^(1/3)", "1/e", "asin(cos(e))", "acos(1 + e)", "tan(pi/2 + e)",
             "atan2(e, 0)", "atan2(e, -1)", "atan2(e*f, 0*x)", "(e*f)^(-1)", "sqrt(-1 + e)", "1/(x - 0.7 + e)",
-            "x/(e - e)", "asin(2 + e)", "sqrt((0.5 - e)^2 - 0.25)"]
+            "x/(e - e)", "asin(2 + e)", "sqrt((0.5 - e)^2 - 0.25)",
+            # zero symbolically, 0.03 in floats (2.0000000000000004e14 - 2e14): cancellation is doubted
+            "x/(1e14*sqrt(2)^2 - 2e14) + e"]
 
 
 @pytest.mark.parametrize("text", SINGULAR)
