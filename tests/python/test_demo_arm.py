@@ -141,7 +141,8 @@ def test_compensation_with_the_identified_values(demo):
     the nominal one (1e-6 mm), so the true arm is off only by what calibration left (within
     3 sigma of the noise, 20x less than without); every other command carries the residual
     the identified model leaves. Without the ramp and the rate limit, that holds for every
-    command's point."""
+    command's point; and with the default config no command is further off than without
+    compensation."""
     work, _ = demo
     true = read_values(PARAMS)
     identified = read_values(work / "ur5-identified.yaml")
@@ -167,6 +168,19 @@ def test_compensation_with_the_identified_values(demo):
     assert with_[ok].max() < 3 * NOISE and without.max() >= 20 * with_[ok].max()
     free, _ = miss["replay-no-rate-limit.csv"]
     assert free.max() < 3 * NOISE
+    # Near the singular passes the daemon publishes, of what the rate limit allows, a target
+    # never further off than no correction (issue #17): at every command, against the truth.
+    assert np.all(with_ <= without)
+    assert fig["default_worse_than_without"] == 0
+    # Without the rate limit the correction is continuous (tests/cpp/test_singular.cpp: its
+    # change shrinks with the command step), if steep where the damping sets in: here within
+    # 15 command steps (0.72 of 0.057 deg; the switch to point-only jumped by 0.98 deg).
+    with open(work / "replay-no-rate-limit.csv") as f:
+        rows = list(csv.DictReader(f))
+    change = np.abs(np.diff(joints(rows, "corrected_q{}_deg") - joints(rows, "commanded_q{}_deg"), axis=0)).max()
+    step = np.abs(np.diff(joints(rows, "commanded_q{}_deg"), axis=0)).max()
+    assert np.isclose(fig["no_rate_limit_largest_change_deg"], math.degrees(change), rtol=1e-6)
+    assert change < 15 * step
     assert fig["corrected"] == ok.sum()
     for key, e in (("without", without), ("default_ok", with_[ok]), ("default_residual", with_[~ok]),
                    ("default_all", with_), ("no_rate_limit_all", free)):
