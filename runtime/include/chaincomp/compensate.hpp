@@ -52,21 +52,22 @@ constexpr double kMaxAngularCorrection = 0.0175;  // rad, about 1 degree
 // chord converges slowly and takes more. A call makes one pass, or two near a singular pose
 // (undamped, then damped: below); the worst-case cost stays known.
 constexpr int kMaxSteps = 6;
-// Near a singular pose the least-squares correction grows without bound. There a second pass
-// from the command damps it (Levenberg-Marquardt on the total correction, each axis' damping
+// Near a singular pose the least-squares correction grows without bound. There a second,
+// damped pass follows (Levenberg-Marquardt on the total correction, each axis' damping
 // scaled by its bound, D = diag(1 / bound^2)) with lambda = h |r|^2 / (4 kTrustRadius^2), r
 // the weighted residual at the command: every singular mode of the damped correction is at
-// most |r| / (2 sqrt(lambda)), so its bound-scaled norm, sqrt(sum (correction_i /
-// bound_i)^2), stays within kTrustRadius, and it shrinks to zero along a mode whose gain
-// does (a trust region of fixed radius would keep its full length there and flip its sign
-// as the gain crosses zero: a jump). h rises smoothly (smoothstep) from 0 to 1 as the
-// undamped correction's largest axis goes from kDampingStart to the bound (fractions of
-// the bounds; beyond it the bound would hold the axis): lambda = 0 (the undamped answer, at the undamped cost) wherever every axis
-// lies within kDampingStart, and the correction is a continuous function of the command.
+// most |r| / (2 sqrt(lambda)), so its bound-scaled norm, sqrt(sum (correction_i / bound_i)^2),
+// stays within kTrustRadius, and it shrinks to zero along a mode whose gain does (a trust
+// region of fixed radius would keep its full length there and flip its sign as the gain
+// crosses zero: a jump). h rises smoothly (smoothstep) from 0 to 1 as the undamped
+// correction's largest axis goes from kDampingStart of its bound to the bound: lambda = 0
+// (the undamped answer, at the undamped cost) wherever every axis lies within
+// kDampingStart, and the correction is a continuous function of the command.
 constexpr double kTrustRadius = 1.0;
 constexpr double kDampingStart = 0.75;
 // In the damped pass the point keeps priority over the direction (orientation): its rows
-// weigh this much more there (the point residual the damping leaves shrinks with its square).
+// weigh up to this much more there (1 + (kPointPriority - 1) sqrt(h)); the point residual
+// the damping leaves shrinks with the square of the weight.
 constexpr double kPointPriority = 1e3;
 // A step larger than this fraction of the bound (0.25 mm, 0.25 degree) refreshes the
 // Jacobian: below it the chord gains at least two digits per step.
