@@ -23,17 +23,23 @@ def rotation_vector_series(axes: list[list[dict]], k: int, mul, lin, scale) -> l
     """ω to order k from the frame's three axes (x, y, z: 3 series each, monomial -> coefficient).
 
     ``mul(a, b)``: the product truncated at k; ``lin(a, ca, b, cb)``: ca·a + cb·b with
-    Fraction coefficients; ``scale(a, c)``: c·a."""
+    Fraction coefficients; ``scale(a, c)``: c·a.
+
+    To order 2, ω is the skew part of E alone: E's degree-1 part is [ω₁]× exactly, so the
+    degree-2 part of E²/2 is [ω₁]×²/2, symmetric. Skipping E² (and E's diagonal) saves the
+    products of the big series of long chains: the framed Panda's order 2 derives in about a
+    second instead of minutes."""
     E = [[{} for _ in range(3)] for _ in range(3)]
     for v in axes:
         delta = [{m: c for m, c in comp.items() if m} for comp in v]
         nominal = [{(): comp[()]} if () in comp else {} for comp in v]
         for a in range(3):
             for b in range(3):
-                E[a][b] = lin(E[a][b], 1, mul(delta[a], nominal[b]), 1)
+                if a != b or k > 2:
+                    E[a][b] = lin(E[a][b], 1, mul(delta[a], nominal[b]), 1)
     log = [[dict(e) for e in row] for row in E]
     power = E
-    for n in range(2, k + 1):
+    for n in range(3 if k <= 2 else 2, k + 1):
         power = [[_dot(power, E, a, b, mul, lin) for b in range(3)] for a in range(3)]
         sign = -1 if n % 2 == 0 else 1
         log = [[lin(log[a][b], 1, power[a][b], Fraction(sign, n)) for b in range(3)] for a in range(3)]
