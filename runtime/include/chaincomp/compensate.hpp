@@ -508,6 +508,9 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
         move = std::max(move, std::abs(delta[i]) * (1.0 / bound));  // constant: no division
       }
       clamped = clamped || held;
+      // Held at a bound undamped: h = 1 whatever the pass would do next, and the damped pass
+      // starts from the command, so the rest of this pass is not needed.
+      if (!damping && clamped) return Status::kOk;
       // A fresh Jacobian after a large step.
       const bool refresh = held || move > kChordStepLimit;
       slow = !refresh && move > 0.1 * last_move;
