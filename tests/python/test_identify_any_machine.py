@@ -361,8 +361,8 @@ def test_a_single_measured_coordinate_identifies_nothing_and_writes_nothing(tmp_
     (("--sigma", "0um"), "--sigma: must be positive, got '0um'"),
     (("--sigma=-1um",), "--sigma: must be positive, got '-1um'"),
     (("--sigma", "nan"), "--sigma: "),
-    (("--sigma", "1 deg"), "--sigma gives an angle, the standard uncertainty of the measured tool direction, "
-                           "but the measurements have no kx, ky, kz column"),
+    (("--sigma", "1 deg"), "--sigma gives an angle, the standard uncertainty of the measured tool direction "
+                           "or orientation, but the measurements have no kx, ky, kz (or qw, qx, qy, qz) column"),
     (("--sigma", "1 ppm"), "--sigma: unit 'ppm' is a ratio unit"),
     (("--assume-zero", "X"), "--assume-zero: 'X' is an axis, not an error"),
 ])
