@@ -71,6 +71,19 @@ def with_direction(machine, direction):
 
 # ---------------------------------------------------------------- against Pinocchio
 
+def pinocchio_tips(model, data, machine, q, base, tip):
+    """At each configuration k of ``q``: k, Pinocchio's tip frame in the base link's frame
+    (pin.SE3) and the TOOL point there (mm)."""
+    base_id, tip_id = model.getFrameId(base), model.getFrameId(tip)
+    for k in range(len(next(iter(q.values())))):
+        qk = pin.neutral(model)
+        for a in machine.axes:
+            qk[model.joints[model.getJointId(a.name)].idx_q] = q[a.name][k]
+        pin.framesForwardKinematics(model, data, qk)
+        rel = data.oMf[base_id].inverse() * data.oMf[tip_id]
+        yield k, rel, 1000.0 * (rel.translation + rel.rotation @ (np.array(TOOL) / 1000.0))
+
+
 @pytest.mark.parametrize("arm", sorted(ARMS))
 def test_forward_kinematics_equals_pinocchio(arm, tmp_path):
     urdf, base, tip = ARMS[arm]
@@ -85,15 +98,8 @@ def test_forward_kinematics_equals_pinocchio(arm, tmp_path):
         assert lo - 1e-10 <= q[a.name].min() and q[a.name].max() <= hi + 1e-10, a.name
     point, _ = ExactModel(m).pose(q)
     frames = [ExactModel(with_direction(m, d)).pose(q)[1] for d in ((1, 0, 0), (0, 1, 0), (0, 0, 1))]
-    base_id, tip_id = model.getFrameId(base), model.getFrameId(tip)
     worst_point = worst_angle = 0.0
-    for k in range(1000):
-        qk = pin.neutral(model)
-        for a in m.axes:
-            qk[model.joints[model.getJointId(a.name)].idx_q] = q[a.name][k]
-        pin.framesForwardKinematics(model, data, qk)
-        rel = data.oMf[base_id].inverse() * data.oMf[tip_id]   # the tip in the base link's frame
-        want_point = 1000.0 * (rel.translation + rel.rotation @ (np.array(TOOL) / 1000.0))
+    for k, rel, want_point in pinocchio_tips(model, data, m, q, base, tip):
         got_point = np.array([c[k] for c in point])
         worst_point = max(worst_point, np.abs(got_point - want_point).max())
         got_rotation = np.array([[c[k] for c in axis] for axis in frames]).T   # columns: the tip's x, y, z
@@ -483,15 +489,8 @@ def test_tool_reference_gives_the_full_orientation_of_the_tip_frame_as_pinocchio
     data = model.createData()
     q = random_configurations(m, 300, seed=11)
     point, direction, x_axis = ExactModel(m).frame(q)
-    base_id, tip_id = model.getFrameId(base), model.getFrameId(tip)
     worst_point = worst_angle = 0.0
-    for k in range(300):
-        qk = pin.neutral(model)
-        for a in m.axes:
-            qk[model.joints[model.getJointId(a.name)].idx_q] = q[a.name][k]
-        pin.framesForwardKinematics(model, data, qk)
-        rel = data.oMf[base_id].inverse() * data.oMf[tip_id]
-        want_point = 1000.0 * (rel.translation + rel.rotation @ (np.array(TOOL) / 1000.0))
+    for k, rel, want_point in pinocchio_tips(model, data, m, q, base, tip):
         worst_point = max(worst_point, np.abs(np.array([c[k] for c in point]) - want_point).max())
         z, x = np.array([c[k] for c in direction]), np.array([c[k] for c in x_axis])
         got = np.column_stack([x, np.cross(z, x), z])
