@@ -100,16 +100,10 @@ void Compensator::residual_at(const double* q, const std::array<double, kMaxAxes
     residual[1] = distance(3);
     return;
   }
-  // zt x za + (yt . xa) zt with yt = zt x xt, as compensate() measures it
-  const double* zt = nominal + 3;
-  const double* xt = nominal + 6;
-  const double* za = actual + 3;
-  const double* xa = actual + 6;
-  const double yt[3] = {zt[1] * xt[2] - zt[2] * xt[1], zt[2] * xt[0] - zt[0] * xt[2], zt[0] * xt[1] - zt[1] * xt[0]};
-  const double about = yt[0] * xa[0] + yt[1] * xa[1] + yt[2] * xa[2];
-  const double w[3] = {zt[1] * za[2] - zt[2] * za[1] + about * zt[0], zt[2] * za[0] - zt[0] * za[2] + about * zt[1],
-                       zt[0] * za[1] - zt[1] * za[0] + about * zt[2]};
-  residual[1] = std::sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+  // the residual compensate() measures (compensate.hpp), with yt = zt x xt
+  using V = Eigen::Map<const Eigen::Vector3d>;
+  const Eigen::Vector3d zt = V(nominal + 3);
+  residual[1] = orientation_residual(zt, cross3(zt, V(nominal + 6)), V(actual + 3), V(actual + 6)).norm();
 }
 
 // The error a residual stands for, weighted as compensate() weighs it.
