@@ -257,6 +257,7 @@ void LcmNode::publish_status(bool final) {
   s.own_targets_heard = own_heard_;
   s.foreign_targets = foreign_;
   s.foreign_instance = foreign_instance_;
+  s.held_back = k.held_back;
   const int n = s.encode(status_buf_.data(), 0, static_cast<int>(status_buf_.size()));
   if (n > 0) lcm_publish(lcm_, config_.status_channel.c_str(), status_buf_.data(), n);
 }

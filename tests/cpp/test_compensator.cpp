@@ -12,6 +12,7 @@
 #include "chaincomp/compensate.hpp"
 #include "chaincomp/compensator.hpp"
 #include "chaincomp/daemon_config.hpp"
+#include "held_back_case.hpp"
 
 namespace {
 
@@ -414,4 +415,95 @@ TEST_CASE("near a singular pose the rate-limited target is never further off tha
     }
     CHECK(comp.counters().clamped > 0);  // the rate limit did engage
   }
+}
+
+namespace {
+
+// The wanted correction, the correction published before, and what the limits make of it, as
+// the README's "Truthful targets" states the rule: the size limit scales the whole wanted
+// correction, the rate limit the whole change from the one before; where that target is
+// further off than the command itself, the step back towards none (the one before, scaled
+// down by the rate limit) is published instead if it is better.
+struct Limited {
+  std::vector<double> candidate, back;
+  bool clamped = false;
+};
+
+Limited limit(const chaincomp::CompensatorConfig& config, const std::vector<double>& wanted,
+              const std::vector<double>& prev) {
+  const int n = static_cast<int>(wanted.size());
+  double size = 1, rate = 1, back = 1;
+  for (int i = 0; i < n; ++i) {
+    if (std::abs(wanted[i]) > config.axes[i].max_correction) size = std::min(size, config.axes[i].max_correction / std::abs(wanted[i]));
+  }
+  for (int i = 0; i < n; ++i) {
+    const double step = config.axes[i].max_correction_step, change = std::abs(size * wanted[i] - prev[i]);
+    if (change > step) rate = std::min(rate, step / change);
+    if (std::abs(prev[i]) > step) back = std::min(back, step / std::abs(prev[i]));
+  }
+  Limited l;
+  l.clamped = size < 1 || rate < 1;
+  for (int i = 0; i < n; ++i) {
+    l.candidate.push_back(prev[i] + rate * (size * wanted[i] - prev[i]));
+    l.back.push_back(prev[i] * (1 - back));
+  }
+  return l;
+}
+
+}  // namespace
+
+TEST_CASE("a rate-limited correction that would leave the tool further off than none is held back, and counted",
+          "[compensator][singular][held_back]") {
+  // the stream and why it must hold corrections back: held_back_case.hpp
+  const chaincomp::ModelEntry& entry = *chaincomp::find_model(held_back_case::kMachine);
+  alignas(64) static unsigned char model[1 << 15];
+  REQUIRE(entry.model_size <= sizeof model);
+  held_back_case::prepare(entry, model);
+  chaincomp::DaemonConfig config;
+  std::string error;
+  REQUIRE(held_back_case::config(entry, config, error));
+  chaincomp::CompensatorConfig loose = config.compensator;  // the wanted correction: no size or rate limit
+  for (auto& a : loose.axes) a.max_correction = a.max_correction_step = 1e9;
+  chaincomp::Compensator comp(entry, model, config.compensator), ref(entry, model, loose);
+  const int n = entry.info->num_axes;
+  std::vector<double> prev(n, 0.0);
+  long long held = 0, uncertain = 0, clamped = 0;
+  for (int k = 0; k < held_back_case::kCommands; ++k) {
+    const chaincomp::Command cmd = held_back_case::command(k);
+    chaincomp::Target full, out;
+    INFO("command " << k);
+    REQUIRE(ref.process(cmd, full));
+    REQUIRE((full.flags & chaincomp::kFlagClamped) == 0);
+    REQUIRE(comp.process(cmd, out));
+    const std::vector<double> wanted(full.correction.begin(), full.correction.begin() + n);
+    const Limited l = limit(config.compensator, wanted, prev);
+    auto error_of = [&](const std::vector<double>& correction) {
+      double axes[8];
+      for (int i = 0; i < n; ++i) axes[i] = cmd.axes[i] + correction[i];
+      return weighted_error(entry, model, cmd.axes.data(), axes);
+    };
+    const double e_candidate = error_of(l.candidate), e_none = error_of(std::vector<double>(n, 0.0)),
+                 e_back = error_of(l.back);
+    // the daemon measures the direction as a chord, this test as the angle: decisions within
+    // a part in 1e6 of a tie are left open
+    const double tie = 1e-6 * std::max({e_candidate, e_none, e_back}) + 1e-20;
+    const bool open = l.clamped && (std::abs(e_candidate - e_none) < tie || std::abs(e_back - e_candidate) < tie);
+    const bool hold = l.clamped && e_candidate > e_none && e_back < e_candidate;
+    clamped += l.clamped;
+    if (open) {
+      ++uncertain;
+    } else {
+      held += hold;
+      // the target published is the one the rule chose (to the rounding of command + correction)
+      const std::vector<double>& chosen = hold ? l.back : l.candidate;
+      for (int i = 0; i < n; ++i) CHECK(std::abs(out.correction[i] - chosen[i]) <= 1e-9);
+    }
+    for (int i = 0; i < n; ++i) prev[i] = out.correction[i];
+  }
+  INFO("clamped " << clamped << ", held back " << held << " (" << uncertain << " too close to call)");
+  CHECK(comp.counters().clamped == clamped);
+  REQUIRE(held > 0);  // the case does hold corrections back
+  CHECK(comp.counters().held_back >= held);
+  CHECK(comp.counters().held_back <= held + uncertain);
+  CHECK(ref.counters().held_back == 0);
 }

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "chaincomp/lcm_node.hpp"
+#include "held_back_case.hpp"
 
 namespace {
 
@@ -195,6 +196,58 @@ TEST_CASE("targets and status carry the instance; another instance's targets for
     CHECK(s.rejected[static_cast<int>(chaincomp::Reject::kWrongMachine)] == 1);
     CHECK(s.kernel_drops == -1);  // memq: no socket
     CHECK(s.recv_buf_bytes == -1);
+  }
+  lcm_destroy(lcm);
+}
+
+TEST_CASE("the status message carries the corrections held back, as the compensator counts them", "[lcm][held_back]") {
+  // a stream on which the limits must hold corrections back (held_back_case.hpp; the
+  // compensator test predicts each one)
+  const chaincomp::ModelEntry& entry = *chaincomp::find_model(held_back_case::kMachine);
+  alignas(64) static unsigned char model[1 << 15];
+  REQUIRE(entry.model_size <= sizeof model);
+  held_back_case::prepare(entry, model);
+  chaincomp::DaemonConfig config;
+  std::string error;
+  REQUIRE(held_back_case::config(entry, config, error));
+  chaincomp::Compensator alone(entry, model, config.compensator);  // the same stream without LCM
+  lcm_t* lcm = lcm_create("memq://");
+  REQUIRE(lcm != nullptr);
+  Inbox inbox;
+  lcm_subscribe(lcm, "CHAINCOMP_STATUS", on_status, &inbox);
+  {
+    chaincomp::LcmNode node(lcm, entry, model, config, "p.yaml", "0", {});
+    chaincomp_lcm::lcmt_axis_command c;
+    c.machine = held_back_case::kMachine;
+    for (int k = 0; k < held_back_case::kCommands; ++k) {
+      const chaincomp::Command cmd = held_back_case::command(k);
+      chaincomp::Target t;
+      REQUIRE(alone.process(cmd, t));
+      c.utime = cmd.utime;
+      c.seq = cmd.seq;
+      c.num_axes = cmd.num_axes;
+      std::copy(cmd.axes.begin(), cmd.axes.end(), c.axes);
+      const auto b = encode(c);
+      lcm_publish(lcm, "CHAINCOMP_COMMAND", b.data(), static_cast<unsigned>(b.size()));
+      drain(lcm);
+      if (k == 1000) {  // before the first command that is held back: none on the status either
+        REQUIRE(alone.counters().held_back == 0);
+        node.publish_status(false);
+        drain(lcm);
+        REQUIRE(!inbox.status.empty());
+        CHECK(inbox.status.back().held_back == 0);
+        CHECK(inbox.status.back().clamped == node.counters().clamped);
+      }
+    }
+    node.publish_status(true);
+    drain(lcm);
+    const auto& s = inbox.status.back();
+    CHECK(s.final);
+    CHECK(s.published == held_back_case::kCommands);
+    CHECK(node.counters().held_back == alone.counters().held_back);
+    CHECK(s.held_back == node.counters().held_back);
+    CHECK(s.held_back > 100);
+    CHECK(s.clamped == alone.counters().clamped);
   }
   lcm_destroy(lcm);
 }
