@@ -245,6 +245,12 @@ int main(int argc, char** argv) {
                  static_cast<long long>(k.seq_gaps), static_cast<long long>(k.seq_missing),
                  static_cast<long long>(k.stream_restarts));
   }
+  // the limits (max_correction, max_correction_step, out_of_limits: clamp), counted as the daemon's status counts them
+  if (k.clamped || k.held_back || k.clamped_input) {
+    std::fprintf(stderr, "  clamped %lld (%lld held back towards none), commands clamped into limits %lld\n",
+                 static_cast<long long>(k.clamped), static_cast<long long>(k.held_back),
+                 static_cast<long long>(k.clamped_input));
+  }
   for (int r = 0; r < chaincomp::kNumReasons; ++r) {
     if (k.rejected[r]) {
       std::fprintf(stderr, "  rejected %-20s %lld\n", chaincomp::reject_name(static_cast<chaincomp::Reject>(r)),
