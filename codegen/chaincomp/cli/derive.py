@@ -6,6 +6,8 @@ import sympy as sp
 
 from ..derive import COMPONENTS, EXPANDED_TERMS_LIMIT, Derivation, Progress, derive
 from ..machine import Rotation
+from ..orientation import ROWS as ORIENTATION_ROWS
+from ..polyprint import RingPrinter, shown_collected, shown_plain, shown_sympy
 from .common import add_format_argument, add_machine_argument, add_order_argument, load, to_json
 
 
@@ -43,16 +45,93 @@ def _collect(expr: sp.Expr, small: list[sp.Symbol]) -> sp.Expr:
 TRIGSIMP_MAX_OPS = 150
 
 
-def _simplifier(d: Derivation):
-    short = sum(d.term_count(s, k) for s in d.point + (d.direction or []) for k in range(1, d.order + 1)) \
+def _short(d: Derivation) -> bool:
+    return sum(d.term_count(s, k) for s in d.point + (d.direction or []) for k in range(1, d.order + 1)) \
         <= EXPANDED_TERMS_LIMIT
+
+
+def _simplifier(d: Derivation):
+    short = _short(d)
     return lambda e: sp.trigsimp(e) if short and sp.count_ops(e) <= TRIGSIMP_MAX_OPS else e
 
 
+def _ring(d: Derivation):
+    for vec in (d.point, d.direction or [], d.reference or [], d.orientation or []):
+        for s in vec:
+            for c in s.values():
+                return c.ring
+    return None
+
+
 def report(d: Derivation, progress: bool = False) -> dict:
-    """Every derived formula, as sympy expressions, keyed like the JSON output. Collecting the
-    terms takes most of a high order's time (30 s at order 4 on five_axis_ac): progress on
-    stderr once it takes over a second."""
+    """Every derived formula, keyed like the JSON output: each a polyprint.Shown (its text,
+    its LaTeX), printed on demand straight from the derivation's series (chaincomp.polyprint)
+    as sympy would print the collected expressions. Machines whose atoms polyprint does not
+    take build the sympy expressions instead (_report_sympy). Progress on stderr once it
+    takes over a second."""
+    ring = _ring(d)
+    pr = RingPrinter(ring, d._restore, d.small) if ring is not None else None
+    if pr is None or not pr.supported:
+        return _report_sympy(d, progress)
+    m = d.machine
+    prog = Progress(f"derive {m.name}: formulas", progress)
+    names = [s.name for s in m.errors]
+    short = _short(d)
+
+    def trig_simplified(terms, build):
+        """The orientation's formulas as before: trigsimp where the chain is short and the
+        formula takes at most TRIGSIMP_MAX_OPS operations (a sum of n terms takes n - 1 at
+        least, so the long ones are never built as sympy expressions)."""
+        if short and terms and len(terms) - 1 <= TRIGSIMP_MAX_OPS:
+            e = build()
+            if sp.count_ops(e) <= TRIGSIMP_MAX_OPS:
+                return sp.trigsimp(e)
+        return None
+
+    def plain(s: dict):
+        return shown_plain(pr, pr.terms(s[()]) if () in s else [])
+
+    out: dict = {"nominal": {}, "direction": {}, "reference": {}, "error": {}, "direction_error": {},
+                 "orientation_error": {}, "gain": {}, "jacobian": {}}
+    for i, c in enumerate(COMPONENTS):
+        prog.step(f"{c} ({i + 1}/{len(COMPONENTS)})")
+        out["nominal"][c] = plain(d.point[i])
+        for k in range(1, d.order + 1):
+            out["error"].setdefault(f"order{k}", {})[f"d{c}"] = shown_collected(pr, pr.series_terms(d.point[i], k))
+        nominal = d.nominal(d.point[i])
+        out["jacobian"][c] = {a.name: shown_sympy(sp.diff(nominal, a.sym)) for a in m.axes}
+        if d.direction is not None:
+            out["direction"][f"k{c}"] = plain(d.direction[i])
+            for k in range(1, d.order + 1):
+                out["direction_error"].setdefault(f"order{k}", {})[f"dk{c}"] = shown_collected(
+                    pr, pr.series_terms(d.direction[i], k))
+        if d.orientation is not None:
+            out["reference"][f"x{c}"] = plain(d.reference[i])
+            for k in range(1, d.order + 1):
+                w, terms = d.orientation[i], pr.series_terms(d.orientation[i], k)
+                simple = trig_simplified(terms, lambda: d.degree_part(w, k))
+                out["orientation_error"].setdefault(f"order{k}", {})[f"w{c}"] = (
+                    shown_collected(pr, terms) if simple is None else shown_sympy(_collect(simple, d.small)))
+    prog.step("error gain matrix")
+    rows = {f"d{c}": s for c, s in zip(COMPONENTS, d.point)}
+    if d.direction is not None:
+        rows.update({f"dk{c}": s for c, s in zip(COMPONENTS, d.direction)})
+    if d.orientation is not None:
+        rows.update(dict(zip(ORIENTATION_ROWS, d.orientation)))
+    for comp, s in rows.items():
+        row = {}
+        for j, name in enumerate(names):
+            c = s.get((j,))
+            terms = pr.terms(c) if c else []
+            simple = trig_simplified(terms, lambda: d.expr(c)) if comp.startswith("w") else None
+            row[name] = shown_plain(pr, terms) if simple is None else shown_sympy(simple)
+        out["gain"][comp] = row
+    prog.done()
+    return {k: v for k, v in out.items() if v}
+
+
+def _report_sympy(d: Derivation, progress: bool = False) -> dict:
+    """report() through sympy expressions: collect(expand(...)) of each formula."""
     m = d.machine
     prog = Progress(f"derive {m.name}: formulas", progress)
     names = [s.name for s in m.errors]
@@ -81,7 +160,7 @@ def report(d: Derivation, progress: bool = False) -> dict:
             row = [_trig_simplified(e) for e in row]
         out["gain"][comp] = dict(zip(names, row))
     prog.done()
-    return {k: v for k, v in out.items() if v}
+    return _walk({k: v for k, v in out.items() if v}, shown_sympy)
 
 
 def _walk(obj, fn):
@@ -134,7 +213,7 @@ def _text(machine, d: Derivation, rep: dict) -> str:
         lines.append(_TITLES[key])
         for comp, v in value.items():
             if isinstance(v, dict):
-                lines += [f"  {comp} / {n}: {e}" for n, e in v.items() if e != 0]
+                lines += [f"  {comp} / {n}: {e}" for n, e in v.items() if not e.is_zero]
             else:
                 lines.append(f"  {comp} = {v}")
         lines.append("")
@@ -147,9 +226,9 @@ def _latex(machine, rep: dict) -> str:
         for comp, v in value.items():
             if isinstance(v, dict):
                 for n, e in v.items():
-                    if e != 0:
-                        out.append(rf"\text{{{key} {comp}}}/{sp.latex(sp.Symbol(n))} &= {sp.latex(e)} \\")
+                    if not e.is_zero:
+                        out.append(rf"\text{{{key} {comp}}}/{sp.latex(sp.Symbol(n))} &= {e.latex()} \\")
             else:
-                out.append(rf"\text{{{key}}}\ {comp} &= {sp.latex(v)} \\")
+                out.append(rf"\text{{{key}}}\ {comp} &= {v.latex()} \\")
     out.append(r"\end{align*}")
     return "\n".join(out)
