@@ -18,7 +18,7 @@ import lcm_harness as h
 from common import HERE, MACHINE, PARAMS, toolpath
 
 CHAINCOMP = os.path.join(h.ROOT, ".venv", "bin", "chaincomp")
-COUNTERS = ("received", "published", "clamped", "clamped_input", "seq_gaps", "seq_missing",
+COUNTERS = ("received", "published", "clamped", "held_back", "clamped_input", "seq_gaps", "seq_missing",
             "stream_restarts", "resets", "kernel_drops", "own_targets_heard", "foreign_targets")
 REASONS = ("undecodable", "wrong machine", "wrong axis count", "non-finite", "out of limits",
            "step too large", "duplicate seq", "out-of-order seq", "compensation failed")

@@ -82,7 +82,7 @@ def test_the_view_of_one_daemon():
     text = status.render_text(doc)
     assert text.startswith("1 chaincompd on memq://\n")
     assert "five_axis_ac  instance 0000000000001234  enabled  up 12.5 s  status 0.5 s ago" in text
-    assert "rejected 3 (out of limits 2, step too large 1)" in text
+    assert "rejected 3 (out of limits 2, step too large 1)  clamped 0 (held back 0)  clamped input 0" in text
     assert "p50 12.3 µs  p99 45.0 µs  p99.9 2.50 ms  max 2.60 ms  (last 97 commands)" in text
     assert "correction X +1.000 µm  Y -2.500 µm  Z +0.000 µm  Ap +36.000 arcsec  Cp -1.000 arcsec" in text
     assert "last command seq 97, 0.25 s ago [compensating]" in text
@@ -191,3 +191,15 @@ def test_status_against_daemons_in_a_namespace():
     print(proc.stdout)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert proc.stdout.count("status --once shows the final counters") == 2
+
+
+def test_the_limits_counters():
+    # clamped targets, those of them held back towards none (README, "Truthful targets"), and
+    # commands clamped into limits: each field of the status message in its place
+    s = _status(clamped=12, held_back=5, clamped_input=3)
+    d = _doc(s, None)["daemons"][0]
+    assert (d["counters"]["clamped"], d["counters"]["held_back"], d["counters"]["clamped_input"]) == (12, 5, 3)
+    assert "  clamped 12 (held back 5)  clamped input 3\n" in status.render_text(_doc(s, None))
+    # the message carries it on the wire: encoded, decoded, shown
+    again = T.lcmt_chaincomp_status.decode(s.encode())
+    assert again.held_back == 5 and _doc(again, None)["daemons"][0]["counters"]["held_back"] == 5

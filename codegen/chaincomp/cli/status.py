@@ -22,7 +22,7 @@ DEFAULT_TIMEOUT = 1.5      # the default status period (1 s) and a margin
 # lcmt_chaincomp_status.rejected[i], in the order the .lcm file lists them
 REASONS = ("undecodable", "wrong machine", "wrong axis count", "non-finite", "out of limits",
            "step too large", "duplicate seq", "out-of-order seq", "compensation failed")
-COUNTERS = ("received", "published", "clamped", "clamped_input", "seq_gaps", "seq_missing",
+COUNTERS = ("received", "published", "clamped", "held_back", "clamped_input", "seq_gaps", "seq_missing",
             "stream_restarts", "resets", "kernel_drops", "own_targets_heard", "foreign_targets")
 FLAGS = ((1, "compensating"), (2, "ramping"), (4, "clamped"), (8, "residual"), (16, "clamped input"))
 
@@ -219,7 +219,7 @@ def render_text(doc: dict) -> str:
             f"status {d['status_age_s']:.1f} s ago",
             f"  commands  received {c['received']}  published {c['published']}  rejected {rejected}"
             + (f" ({reasons})" if reasons else "")
-            + f"  clamped {c['clamped']}  clamped input {c['clamped_input']}",
+            + f"  clamped {c['clamped']} (held back {c['held_back']})  clamped input {c['clamped_input']}",
             f"  stream    seq gaps {c['seq_gaps']} ({c['seq_missing']} missing)  restarts {c['stream_restarts']}  "
             f"resets {c['resets']}  kernel drops {c['kernel_drops']}",
             f"  targets   own heard back {c['own_targets_heard']}  foreign {c['foreign_targets']}"
