@@ -434,7 +434,8 @@ Limited limit(const chaincomp::CompensatorConfig& config, const std::vector<doub
   const int n = static_cast<int>(wanted.size());
   double size = 1, rate = 1, back = 1;
   for (int i = 0; i < n; ++i) {
-    if (std::abs(wanted[i]) > config.axes[i].max_correction) size = std::min(size, config.axes[i].max_correction / std::abs(wanted[i]));
+    const double most = config.axes[i].max_correction;
+    if (std::abs(wanted[i]) > most) size = std::min(size, most / std::abs(wanted[i]));
   }
   for (int i = 0; i < n; ++i) {
     const double step = config.axes[i].max_correction_step, change = std::abs(size * wanted[i] - prev[i]);
