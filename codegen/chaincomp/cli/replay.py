@@ -17,7 +17,9 @@ def add_parser(sub) -> None:
                                    "rejections), and write a corrected log (the original records plus "
                                    "the corrected targets, original timestamps kept) and/or a CSV of "
                                    "event, utime, seq, result, commanded, corrected, correction, residuals, "
-                                   "flags, status. Rejected records are listed and counted by reason.")
+                                   "flags, status. Rejected records are listed and counted by reason; targets "
+                                   "the limits clamped, those of them held back towards no correction, and "
+                                   "commands clamped into limits are counted.")
     add_machine_argument(p, alias=True)
     p.add_argument("input", metavar="IN.lcmlog", help="lcm-logger log of commands")
     p.add_argument("--model", metavar="LIB.so", help="a model library made by chaincomp build for this machine file")
