@@ -126,6 +126,31 @@ def _names(node, out: set) -> set:
     return out
 
 
+def linear_names(node) -> list[str] | None:
+    """The symbols of ``node`` if it is a sum of symbols, each times a constant (no symbol in
+    the constant), plus constants: ``-X``, ``j1 + j1_zero``, ``(j2 + j2_zero)/sqrt(2)``; else None
+    (a product of symbols, a function of one: ``L*EBX``, ``Y*sin(EC0Y)``). Such a sum has the
+    dimension of each of its symbols, which the machine loader holds against where it stands."""
+    op = node[0]
+    if op == "sym":
+        return [node[1]]
+    if op in ("num", "pi") or not _names(node, set()):
+        return []
+    if op == "neg":
+        return linear_names(node[1])
+    if op in ("add", "sub"):
+        a, b = linear_names(node[1]), linear_names(node[2])
+        return None if a is None or b is None else a + b
+    if op == "mul":
+        a_const, b_const = not _names(node[1], set()), not _names(node[2], set())
+        if a_const or b_const:
+            return linear_names(node[2] if a_const else node[1])
+        return None
+    if op == "div" and not _names(node[2], set()):
+        return linear_names(node[1])
+    return None
+
+
 def _real_symbols(names) -> dict:
     import sympy as sp
     return {n: sp.Symbol(n, real=True) for n in names}

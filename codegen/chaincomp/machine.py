@@ -16,7 +16,7 @@ from typing import Union
 from . import units
 from .errors import ChaincompError
 from .expressions import (MAX_LITERAL, NAME, RESERVED, ZERO, Expr, ExpressionError, check_sympy, constant,
-                          from_sympy, parse_tree, plausible)
+                          from_sympy, linear_names, parse_tree, plausible)
 from .yamlsource import describe, line_of, load_yaml, read_text
 
 ROLES = ("axis", "constant", "error")
@@ -330,6 +330,10 @@ def _parse_symbol(ctx: _Ctx, node, i: int, line) -> Symbol:
         if role == "error":
             raise ctx.fail("an error symbol has no nominal value (its value comes from a params file)",
                            line_of(node, "nominal"), f"{fld}.nominal")
+        if role == "axis":   # nothing would read it: an axis stands at 0 (or mid-range) unless set
+            raise ctx.fail("an axis has no nominal value: it stands at 0 (or mid-range where 0 is outside its "
+                           "limits) unless a verb sets it (--set AXIS=VALUE)", line_of(node, "nominal"),
+                           f"{fld}.nominal")
     elif role == "constant":
         raise ctx.fail("a constant needs a 'nominal' value", line_of(node), fld)
     limits = None
@@ -360,13 +364,15 @@ def _parse_symbol(ctx: _Ctx, node, i: int, line) -> Symbol:
     return Symbol(name, role, unit, meaning, nominal, limits, line or 0, unobservable)
 
 
-def _expr(ctx: _Ctx, value, symbols, fld: str, line) -> Expr:
+def _expr(ctx: _Ctx, value, symbols, fld: str, line, want: str | None = None) -> Expr:
     try:
         expr = parse_tree(value, symbols)
         if not plausible(expr, ctx.values, ctx.errors):
             expr = _symbolic_check(ctx, expr)
     except ExpressionError as exc:
         raise ctx.fail(str(exc), line, fld) from None
+    if want is not None:
+        _check_kind(ctx, expr, want, fld, line)
     return expr
 
 
@@ -438,10 +444,33 @@ def _check_at_nominal(expr, at: dict, errors: set) -> None:
         raise ExpressionError(f"{expr} is not real at the nominal values{where}")
 
 
-def _vector(ctx: _Ctx, value, symbols, fld: str, line) -> tuple[Expr, Expr, Expr]:
+def _vector(ctx: _Ctx, value, symbols, fld: str, line, want: str | None = None) -> tuple[Expr, Expr, Expr]:
     if not isinstance(value, list) or len(value) != 3:
         raise ctx.fail(f"expected a list of three expressions [x, y, z], got {describe(value)}", line, fld)
-    return tuple(_expr(ctx, v, symbols, f"{fld}[{i}]", line) for i, v in enumerate(value))
+    return tuple(_expr(ctx, v, symbols, f"{fld}[{i}]", line, want) for i, v in enumerate(value))
+
+
+def _check_kind(ctx: _Ctx, expr: Expr, want: str, fld: str, line) -> None:
+    """A translation reads its expressions as lengths (mm), a rotation as an angle (rad). A
+    symbol that stands there as a term of its own (times a number) must be of that kind: an
+    error declared in arcsec as an error block's dx, or an axis in mm as a rotation's angle,
+    would be read in the wrong unit without a word (4 arcsec as 19 nm). A ratio (ppm) is an
+    angle to first order (a squareness in um/m), but never a length."""
+    names = linear_names(expr.node)
+    for n in names or ():
+        s = ctx.table.get(n)
+        if s is None:
+            continue
+        kind = s.unit.kind
+        if (want == "length" and kind != "length") or (want == "angle" and kind == "length"):
+            if want == "length":
+                where, fix = "a translation, which reads it as a length (mm)", \
+                    "declare it in a length unit, or multiply it by its lever arm or travel"
+            else:
+                where, fix = "a rotation, which reads it as an angle (rad)", \
+                    "declare it in an angle unit, or divide it by its lever arm"
+            raise ctx.fail(f"{s.role} {n!r} is declared in {s.unit.name} (a{'n' if kind == 'angle' else ''} {kind}) "
+                           f"{f'on line {s.line} ' if s.line else ''}but stands in {where}: {fix}", line, fld)
 
 
 _BLOCK_KEYS = ("dx", "dy", "dz", "ex", "ey", "ez")
@@ -469,19 +498,20 @@ def _parse_element(ctx: _Ctx, node, fld: str, line, symbols, default_sense: int 
             raise ctx.fail(f"rotation axis must be x, y or z, got {axis!r}", line_of(node, "rotate"),
                            f"{fld}.rotate")
         sense = _sense(ctx, node, fld, default_sense)
-        angle = _expr(ctx, node["angle"], symbols, f"{fld}.angle", line_of(node, "angle"))
+        angle = _expr(ctx, node["angle"], symbols, f"{fld}.angle", line_of(node, "angle"), "angle")
         return [Rotation(axis, angle.scaled(sense), line or 0)]
     if kind == "translate":
         _require_map(ctx, node, fld, line, common | {"translate"})
         return [Translation(_vector(ctx, node["translate"], symbols, f"{fld}.translate",
-                                    line_of(node, "translate")), line or 0)]
+                                    line_of(node, "translate"), "length"), line or 0)]
     _require_map(ctx, node, fld, line, common | {"errors", "order", "sense"})
     block = node["errors"]
     bline = line_of(node, "errors")
     _require_map(ctx, block, f"{fld}.errors", bline, set(_BLOCK_KEYS))
     if not block:
         raise ctx.fail(f"an error block needs at least one of {', '.join(_BLOCK_KEYS)}", bline, f"{fld}.errors")
-    vals = {k: _expr(ctx, block[k], symbols, f"{fld}.errors.{k}", line_of(block, k)) if k in block
+    vals = {k: _expr(ctx, block[k], symbols, f"{fld}.errors.{k}", line_of(block, k),
+                     "length" if k.startswith("d") else "angle") if k in block
             else Expr(ZERO) for k in _BLOCK_KEYS}
     order = node.get("order", default_order)
     if order is None:
@@ -533,7 +563,8 @@ def _parse_joint(ctx: _Ctx, node, kind: str, fld: str, line, symbols) -> list[El
     nominal: dict[str, Expr] = {}
     out: list[Elementary] = []
     for k in names:
-        value = _expr(ctx, values[k], symbols, f"{fld}.{kind}.{k}" if kind != "beta" else f"{fld}.beta", vline[k])
+        value = _expr(ctx, values[k], symbols, f"{fld}.{kind}.{k}" if kind != "beta" else f"{fld}.beta", vline[k],
+                      "angle" if _JOINT_FACTOR[k][0] == "rot" else "length")
         nominal[k] = value
         if k in raw:
             err = raw[k]
@@ -675,7 +706,7 @@ def load_machine(path: str) -> Machine:
 
     tool = _require_map(ctx, doc["tool"], "tool", line_of(doc, "tool"),
                         {"point", "direction", "reference", "rotation"}, {"point"})
-    point = _vector(ctx, tool["point"], table, "tool.point", line_of(tool, "point"))
+    point = _vector(ctx, tool["point"], table, "tool.point", line_of(tool, "point"), "length")
     direction = reference = None
     written: tuple = ()   # the tool vectors as written, for their exact sympy forms
     if "rotation" in tool:
