@@ -115,12 +115,22 @@ def _named(src: _Source, root, tag: str) -> dict:
     return out
 
 
+# a joint's children that URDF allows once
+_SINGLE = ("parent", "child", "origin", "axis", "limit", "mimic", "calibration", "dynamics", "safety_controller")
+
+
 def _read_model(src: _Source, root):
     """yourdfpy's links and joints of the tree, each element read on its own so that a
     value it cannot read is reported with the element's line."""
     import yourdfpy
     links, joints = _named(src, root, "link"), _named(src, root, "joint")
     for name, el in joints.items():
+        for part in _SINGLE:   # yourdfpy (and this reader) would take the first and drop the others
+            found = el.findall(part)
+            if len(found) > 1:
+                raise src.fail(f"joint {name!r} has {len(found)} <{part}> elements (first on line "
+                               f"{found[0].sourceline}): a joint has at most one", found[1].sourceline,
+                               f"joint {name}.{part}")
         for part in ("parent", "child"):
             sub = el.find(part)
             if sub is None or not sub.get("link"):
@@ -220,6 +230,18 @@ def kinematic_path(path: str, base: str, tip: str) -> tuple[str, list[PathJoint]
         seen.add(link)
     if not names:
         raise src.fail(f"--base and --tip are the same link {base!r}: no joint between them", robot_line)
+    # a tree has a root: going up from --base must end at a link that no joint moves, not come
+    # back round (a cycle through --base would make every link of it its own ancestor)
+    link, above = base, {base}
+    while link in parent_joint:
+        name = parent_joint[link]
+        link = joints[name].parent
+        if link in above:
+            first = parent_joint[base]
+            raise src.fail(f"--base {base!r} is the child of joint {first!r}, and the joints above it come back "
+                           f"round to link {link!r} (through joint {name!r}, line {joint_el[name].sourceline}): a "
+                           "cycle, which a URDF tree cannot hold", joint_el[first].sourceline, f"joint {first}.child")
+        above.add(link)
     out = [_path_joint(src, joints[n], joint_el[n]) for n in reversed(names)]
     return root.get("name") or "robot", out, src.text
 
