@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -217,6 +218,25 @@ def read_table(path: str, machine: Machine, coords_required: bool = True) -> Tab
     return table
 
 
+def outside_limits(machine: Machine, table: Table, skip=()) -> list[str]:
+    """'FILE:LINE: AXIS: ...' for each axis whose values in ``table`` leave its limits: the first
+    such row and how many. Not refused (a file may hold set-ups from beyond soft limits), but a
+    value far outside is often one written in another unit (rad for deg, m for mm)."""
+    out = []
+    for s in machine.axes:
+        if s.name in skip:
+            continue
+        lo, hi = s.limits
+        v = s.from_internal(table.axes[s.name])
+        bad = np.flatnonzero((v < lo) | (v > hi))
+        if bad.size:
+            i = int(bad[0])
+            out.append(f"{table.file}:{table.lines[i]}: {s.name}: {v[i]:g} {s.unit.name} is outside its limits "
+                       f"[{lo:g}, {hi:g}] ({_count(bad.size, 'row')} of {len(v)}; "
+                       f"{'is it' if bad.size == 1 else 'are they'} in {s.unit.name}?)")
+    return out
+
+
 def _check_quaternion(row: dict, header: list[str], path, lineno) -> None:
     """A measured quaternion: all four components or none, a unit one to _QUAT_TOL."""
     given = [c for c in QUATERNION if c in header and not math.isnan(row.get(c, math.nan))]
@@ -239,7 +259,20 @@ def _header(cells, machine, coords_required, path, lineno) -> list[str]:
     axes = [s.name for s in machine.axes]
     columns = measured_columns(machine)
     header = []
+    if len(cells) == 1 and any(sep in cells[0] for sep in ";\t|"):
+        sep = next(sep for sep in ";\t|" if sep in cells[0])
+        raise ChaincompError(f"the header is one cell {cells[0]!r}: columns are separated by commas, not "
+                             f"{'tabs' if sep == chr(9) else repr(sep)} (export the sheet as comma-separated CSV)",
+                             path, lineno, "header")
     for cell in cells:
+        named = re.fullmatch(r"(\S+)\s*[\[(].*[\])]", cell)
+        if named and named.group(1) in axes + list(columns):
+            n = named.group(1)
+            read = (f"in its declared unit ({machine.symbol(n).unit.name})" if n in axes else
+                    f"in the machine's length unit ({machine.length_unit})" if n in COMPONENTS else
+                    "as a component of a unit vector or quaternion (no unit)")
+            raise ChaincompError(f"column {cell!r}: the header holds names only, no units; {n} is read {read}: "
+                                 f"write {n!r} and its values in that unit", path, lineno, "header")
         if cell in DIRECTIONS and cell not in columns and cell not in axes:
             raise ChaincompError(f"column {cell!r} is a measured tool direction, but {machine.name} has no tool "
                                  f"direction (tool: direction in {machine.file})", path, lineno, "header")

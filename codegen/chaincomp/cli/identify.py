@@ -8,8 +8,8 @@ import sys
 from ..calibration import _write_loadable, slide_axis
 from ..display import add_units_argument
 from ..errors import ChaincompError
-from ..identify import (COMPONENTS, DIRECTIONS, MAX_SMOOTH, ROTATION, Vary, identify, params_yaml, read_table,
-                        to_json, to_text)
+from ..identify import (COMPONENTS, DIRECTIONS, MAX_SMOOTH, ROTATION, Vary, identify, outside_limits, params_yaml,
+                        read_table, to_json, to_text)
 from ..machine import Symbol
 from ..params import parse_value
 from ..protocol import check_errors
@@ -189,6 +189,8 @@ def run(args) -> int:
     prefer = check_errors(machine, names(",".join(args.prefer)), "--prefer")
     vary = [vary_spec(machine, v) for v in args.vary]
     table = read_table(args.measurements, machine)
+    for text in outside_limits(machine, table):
+        print(f"chaincomp identify: warning: {text}", file=sys.stderr)
     fit = identify(machine, table, assume, sigma, vary=vary, smooth=args.smooth, minimal=args.minimal,
                    prefer=prefer, progress=lambda text: print(f"chaincomp identify: {text}", file=sys.stderr))
     if not fit.converged:

@@ -11,8 +11,8 @@ import numpy as np
 
 from ..errors import ChaincompError
 from ..expressions import MAX_LITERAL
-from ..identify import (MAX_ROWS, QUATERNION, coordinate_named_axes, read_table, simulate, simulate_orientations,
-                        write_table)
+from ..identify import (MAX_ROWS, QUATERNION, coordinate_named_axes, outside_limits, read_table, simulate,
+                        simulate_orientations, write_table)
 from ..machine import Symbol
 from ..params import load_params, parse_sets, parse_value
 from ..protocol import check_measure
@@ -104,7 +104,10 @@ def setups(machine, spec: str, sets: list[str], rng) -> dict[str, np.ndarray]:
     elif kind in ("auto", "grid", "random"):
         raise ChaincompError(f"--setups: expected {_SPECS}, got {spec!r}")
     else:
-        out = read_table(spec, machine, coords_required=False).axes
+        table = read_table(spec, machine, coords_required=False)
+        for text in outside_limits(machine, table, skip=fixed):
+            print(f"chaincomp simulate-measurements: warning: {text}", file=sys.stderr)
+        out = table.axes
         out = {k: v for k, v in out.items() if k not in fixed}
     if levels is not None:
         count = math.prod(len(v) for v in levels.values())
