@@ -52,10 +52,13 @@ def _moves_tool(model: ExactModel, values: dict, name: str) -> bool:
     """Whether ``name`` moves the tool point, direction or frame (its x axis: a turn about the
     tool axis moves only that)."""
     up, down = dict(values), dict(values)
-    up[name] = values[name] + _STEP
-    down[name] = values[name] - _STEP
+    # _STEP, or a step a value of its size can resolve: beyond about 1e6 (an axis of travel 1e11 m
+    # at 1e14 mm), 1e14 + 1e-6 is 1e14 and every gain would read zero
+    step = np.maximum(_STEP, np.abs(values[name]) * 1e-12)
+    up[name] = values[name] + step
+    down[name] = values[name] - step
     plus, minus = model.frame(up), model.frame(down)
-    return any(np.max(np.abs((np.asarray(a) - np.asarray(b)) / (2 * _STEP))) > _ZERO
+    return any(np.max(np.abs((np.asarray(a) - np.asarray(b)) / (2 * step))) > _ZERO
                for u, v in zip(plus, minus) if u is not None for a, b in zip(u, v))
 
 
