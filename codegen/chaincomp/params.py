@@ -105,7 +105,7 @@ def load_params(path: str, machine: Machine) -> dict[str, float | Varying]:
 
 def parse_sets(items: list[str], machine: Machine) -> dict[str, float]:
     """``NAME=VALUE`` items from the command line, in internal units."""
-    out = {}
+    out, given = {}, {}
     for item in items:
         name, sep, raw = item.partition("=")
         name = name.strip()
@@ -116,8 +116,15 @@ def parse_sets(items: list[str], machine: Machine) -> dict[str, float]:
         except KeyError:
             raise ChaincompError(f"--set: unknown symbol {name!r} for machine {machine.name!r} "
                                  f"(known: {', '.join(s.name for s in machine.symbols)})") from None
+        if name in out:   # which of the two was meant? (--params, then --set, is the override)
+            raise ChaincompError(f"--set {name} given twice ({given[name]!r}, then {raw.strip()!r}): set each "
+                                 "symbol once")
+        if re.search(r",\s*[A-Za-z_][A-Za-z0-9_]*\s*=", raw):
+            raise ChaincompError(f"--set {name}: {raw!r} sets more than one symbol: give one --set per symbol "
+                                 f"(--set {item.split(',')[0].strip()} --set {item.split(',', 1)[1].strip()})")
         try:
             out[name] = parse_value(sym, raw)
         except ValueError as exc:
             raise ChaincompError(f"--set {name}: {exc}") from None
+        given[name] = raw.strip()
     return out

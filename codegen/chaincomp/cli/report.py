@@ -32,7 +32,7 @@ def run(args) -> int:
         raise ChaincompError("--assume-zero goes with --protocol")
     machine = load(args.machine)
     d = derive(machine, args.order, progress=True)
-    fmt = args.format or ("latex" if (args.output or "").endswith(".tex") else "markdown")
+    fmt = args.format or ("latex" if (args.output or "").lower().endswith(".tex") else "markdown")
     proto = None
     if args.protocol:
         from ..protocol import plan_text
