@@ -196,8 +196,9 @@ def derive(machine: Machine, order: int = 1, htm: bool = False, progress: bool =
         x, y = vectors[n_tool][0], vectors[n_tool + 1][0]
         reference = x
         orientation = rotation_vector_series(
-            [x, y, direction], k, lambda a, b: S.mul(a, b, k),
-            lambda a, ca, b, cb: S.add(_scale(a, ca), _scale(b, cb)), _scale)
+            [x, y, direction], k, S.mul,
+            lambda a, ca, b, cb: S.add(_scale(a, ca), _scale(b, cb)), _scale,
+            S.pythagoras(R, atoms.restore()))
     return Derivation(machine, k, small, point, direction, columns, atoms.restore(), reference, orientation)
 
 

@@ -50,7 +50,7 @@ class JetModel:
         if not frame:
             return p, d, None
         k = self.order
-        w = rotation_vector_series(frame + [d], k, lambda a, b: mul_all(a, b, k),
+        w = rotation_vector_series(frame + [d], k, mul_all,
                                    lambda a, ca, b, cb: _lin(a, float(ca), b, float(cb)),
                                    lambda a, c: {m: float(c) * v for m, v in a.items()})
         return p, d, w

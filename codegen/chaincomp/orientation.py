@@ -6,53 +6,68 @@ the errors (actual) and without (nominal). The orientation error is the rotation
 rotation about the base frame's x, y and z axes (not the tool's). To first order
 δv = ω × v for each axis v of the frame.
 
-As series in the errors (derive, jets): E = (R − R₀)·R₀ᵀ has no term of degree 0
-(R₀·R₀ᵀ = I), so log(I + E) = E − E²/2 + E³/3 − … truncates after the order, and ω is the
-skew part of it. The same function serves the symbolic ring series and the numeric jets:
-only their product and linear combination differ.
+As series in the errors (derive, jets): s, the skew part of E = (R − R₀)·R₀ᵀ, is sin θ
+times ω's axis (θ = |ω|), so ω = s·arcsin|s|/|s|, a series in n = s·s that truncates after
+the order (rotation_vector_series). The same function serves the symbolic ring series and
+the numeric jets: only their product and linear combination differ.
 """
 
 from __future__ import annotations
 
+import math
 from fractions import Fraction
 
 ROWS = ("wx", "wy", "wz")
 
 
-def rotation_vector_series(axes: list[list[dict]], k: int, mul, lin, scale) -> list[dict]:
+def rotation_vector_series(axes: list[list[dict]], k: int, mul, lin, scale, reduce=None) -> list[dict]:
     """ω to order k from the frame's three axes (x, y, z: 3 series each, monomial -> coefficient).
 
-    ``mul(a, b)``: the product truncated at k; ``lin(a, ca, b, cb)``: ca·a + cb·b with
-    Fraction coefficients; ``scale(a, c)``: c·a.
+    ``mul(a, b, order)``: the product truncated at ``order``; ``lin(a, ca, b, cb)``: ca·a + cb·b
+    with Fraction coefficients; ``scale(a, c)``: c·a; ``reduce(a)``: optional, the same
+    function of the errors in a shorter form (the symbolic series modulo sin² + cos² = 1),
+    taken for the factors of the terms of degree 3 and above.
 
-    To order 2, ω is the skew part of E alone: E's degree-1 part is [ω₁]× exactly, so the
-    degree-2 part of E²/2 is [ω₁]×²/2, symmetric. Skipping E² (and E's diagonal) saves the
-    products of the big series of long chains: the framed Panda's order 2 derives in about a
-    second instead of minutes."""
-    E = [[{} for _ in range(3)] for _ in range(3)]
-    for v in axes:
-        delta = [{m: c for m, c in comp.items() if m} for comp in v]
-        nominal = [{(): comp[()]} if () in comp else {} for comp in v]
-        for a in range(3):
-            for b in range(3):
-                if a != b or k > 2:
-                    E[a][b] = lin(E[a][b], 1, mul(delta[a], nominal[b]), 1)
-    log = [[dict(e) for e in row] for row in E]
-    power = E
-    for n in range(3 if k <= 2 else 2, k + 1):
-        power = [[_dot(power, E, a, b, mul, lin) for b in range(3)] for a in range(3)]
-        sign = -1 if n % 2 == 0 else 1
-        log = [[lin(log[a][b], 1, power[a][b], Fraction(sign, n)) for b in range(3)] for a in range(3)]
-    return [scale(lin(log[2][1], 1, log[1][2], -1), Fraction(1, 2)),
-            scale(lin(log[0][2], 1, log[2][0], -1), Fraction(1, 2)),
-            scale(lin(log[1][0], 1, log[0][1], -1), Fraction(1, 2))]
+    The skew part of R·R₀ᵀ = exp([ω]×) is sin θ·u (θ = |ω|, u its axis), so with
+    s = vec(skew E), E = (R − R₀)·R₀ᵀ (the same skew part: I is symmetric), |s| = sin θ and
+    ω = s·arcsin(|s|)/|s| = s·(1 + n/6 + 3n²/40 + …), n = s·s. n starts at degree 2: to order
+    2, ω is s alone; to order 3, ω = s + n₂·s₁/6. This needs only E's off-diagonal entries (each
+    axis' error times a nominal component, no products of series) and n's low degrees: the
+    products of log(I + E) = E − E²/2 + E³/3 − … took the framed UR5's order 3 past 15 minutes.
+    The same function of the errors as the log series (both are its Taylor series), so the
+    same values; as polynomials in sin and cos of the axes they may differ by sin² + cos² − 1."""
+    def entry(a: int, b: int) -> dict:
+        out: dict = {}
+        for v in axes:
+            delta = {m: c for m, c in v[a].items() if m}
+            nominal = {(): v[b][()]} if () in v[b] else {}
+            out = lin(out, 1, mul(delta, nominal, k), 1)
+        return out
+    s = [scale(lin(entry(2, 1), 1, entry(1, 2), -1), Fraction(1, 2)),
+         scale(lin(entry(0, 2), 1, entry(2, 0), -1), Fraction(1, 2)),
+         scale(lin(entry(1, 0), 1, entry(0, 1), -1), Fraction(1, 2))]
+    if k < 3:
+        return s
 
-
-def _dot(A, B, a, b, mul, lin):
-    out: dict = {}
-    for j in range(3):
-        out = lin(out, 1, mul(A[a][j], B[j][b]), 1)
-    return out
+    def low(a: dict, degree: int) -> dict:
+        part = {m: c for m, c in a.items() if len(m) <= degree}
+        return reduce(part) if reduce is not None else part
+    n: dict = {}
+    for si in s:   # n = s·s to degree k - 1 (ω takes it times s, of degree 1 at least)
+        part = low(si, k - 2)
+        n = lin(n, 1, mul(part, part, k - 1), 1)
+    if reduce is not None:
+        n = reduce(n)
+    omega = s
+    term = s
+    for j in range(1, (k - 1) // 2 + 1):
+        # n^j·s, and arcsin(x)/x = Σ (2j)!/(4^j (j!)² (2j + 1)) x^(2j)
+        term = [mul(n, low(t, k - 2), k) for t in term]
+        if reduce is not None:
+            term = [reduce(t) for t in term]
+        c = Fraction(math.factorial(2 * j), 4 ** j * math.factorial(j) ** 2 * (2 * j + 1))
+        omega = [lin(w, 1, t, c) for w, t in zip(omega, term)]
+    return omega
 
 
 def cross(u, v):

@@ -66,6 +66,7 @@ class RingPrinter:
         self._small_pos = [pos[s] for s in self.small]
         # the machine's order of the errors (collect takes the first one a term holds)
         self._small_rank = {p: r for r, p in enumerate(self._small_pos)}
+        self._function_pos = [p for p, b in enumerate(bases) if not b.is_Symbol]
         self._str: dict = {}
         self._tex: dict = {}
 
@@ -94,6 +95,45 @@ class RingPrinter:
             if len(mono) == degree:
                 for coeff, v in self.terms(c, mono):
                     out[v] = out.get(v, 0) + coeff
+        return [(c, v) for v, c in out.items() if c]
+
+    def op_lower_bound(self, terms: list[Term]) -> int:
+        """At most sympy.count_ops of the expanded sum of ``terms``: one ADD or SUB between
+        terms and one operation per function in each."""
+        return len(terms) - 1 + sum(1 for _c, v in terms for p in self._function_pos if v[p])
+
+    def derivative(self, terms: list[Term], sym: sp.Symbol) -> list[Term] | None:
+        """d/d``sym`` of the sum of ``terms`` where every base holding ``sym`` is sym, sin(sym)
+        or cos(sym) (else None): the expanded sum sympy.diff gives."""
+        at = {}
+        for p, b in enumerate(self.bases):
+            if sym in b.free_symbols:
+                kind = "x" if b == sym else "sin" if b == sp.sin(sym) else "cos" if b == sp.cos(sym) else None
+                if kind is None:
+                    return None
+                at[kind] = p
+        out: dict = {}
+
+        def add(c, v, p, e, q=None):
+            w = list(v)
+            w[p] -= 1
+            if q is not None:
+                w[q] += 1
+            key = tuple(w)
+            out[key] = out.get(key, 0) + c * e
+        for c, v in terms:
+            if "x" in at and v[at["x"]]:
+                add(c, v, at["x"], v[at["x"]])
+            if "sin" in at and v[at["sin"]]:
+                p = at["sin"]
+                if "cos" not in at:
+                    return None
+                add(c, v, p, v[p], at["cos"])
+            if "cos" in at and v[at["cos"]]:
+                p = at["cos"]
+                if "sin" not in at:
+                    return None
+                add(-c, v, p, v[p], at["sin"])
         return [(c, v) for v, c in out.items() if c]
 
     # ------------------------------------------------------------------ sympy's order

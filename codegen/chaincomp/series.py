@@ -99,3 +99,40 @@ def sin_cos(delta: dict, k: int, one) -> tuple[dict, dict]:
         else:
             c = add(c, term, -1 if (j // 2) % 2 else 1)
     return s, c
+
+
+def pythagoras(ring, restore: dict):
+    """A function reducing ring series modulo sin² + cos² = 1 (every sin(x)² of an atom
+    pair sin(x), cos(x) as 1 − cos(x)²): a unique, usually much shorter, form of the same
+    function. None when the ring has no such pair."""
+    index = {restore.get(g, g): i for i, g in enumerate(ring.symbols)}
+    pairs = [(i, index[sp.cos(v.args[0])]) for v, i in index.items()
+             if isinstance(v, sp.sin) and sp.cos(v.args[0]) in index]
+    if not pairs:
+        return None
+
+    def reduce_poly(p):
+        out: dict = {}
+        work = list(p.items())
+        while work:
+            exps, c = work.pop()
+            for i_s, i_c in pairs:
+                if exps[i_s] >= 2:
+                    e = list(exps)
+                    e[i_s] -= 2
+                    work.append((tuple(e), c))
+                    e[i_c] += 2
+                    work.append((tuple(e), -c))
+                    break
+            else:
+                out[exps] = out.get(exps, 0) + c
+        return ring.from_dict({e: c for e, c in out.items() if c})
+
+    def reduce_series(a: dict) -> dict:
+        out = {}
+        for m, c in a.items():
+            r = reduce_poly(c)
+            if r:
+                out[m] = r
+        return out
+    return reduce_series

@@ -82,11 +82,19 @@ def report(d: Derivation, progress: bool = False) -> dict:
         """The orientation's formulas as before: trigsimp where the chain is short and the
         formula takes at most TRIGSIMP_MAX_OPS operations (a sum of n terms takes n - 1 at
         least, so the long ones are never built as sympy expressions)."""
-        if short and terms and len(terms) - 1 <= TRIGSIMP_MAX_OPS:
+        if short and terms and pr.op_lower_bound(terms) <= TRIGSIMP_MAX_OPS:
             e = build()
             if sp.count_ops(e) <= TRIGSIMP_MAX_OPS:
                 return sp.trigsimp(e)
         return None
+
+    def jacobian(s: dict) -> dict:
+        terms = pr.terms(s[()]) if () in s else []
+        out = {}
+        for a in m.axes:
+            dt = pr.derivative(terms, a.sym)
+            out[a.name] = shown_sympy(sp.diff(d.nominal(s), a.sym)) if dt is None else shown_plain(pr, dt)
+        return out
 
     def plain(s: dict):
         return shown_plain(pr, pr.terms(s[()]) if () in s else [])
@@ -98,8 +106,7 @@ def report(d: Derivation, progress: bool = False) -> dict:
         out["nominal"][c] = plain(d.point[i])
         for k in range(1, d.order + 1):
             out["error"].setdefault(f"order{k}", {})[f"d{c}"] = shown_collected(pr, pr.series_terms(d.point[i], k))
-        nominal = d.nominal(d.point[i])
-        out["jacobian"][c] = {a.name: shown_sympy(sp.diff(nominal, a.sym)) for a in m.axes}
+        out["jacobian"][c] = jacobian(d.point[i])
         if d.direction is not None:
             out["direction"][f"k{c}"] = plain(d.direction[i])
             for k in range(1, d.order + 1):
