@@ -22,7 +22,7 @@ import time
 from dataclasses import dataclass
 
 from .buildtree import build_dir
-from .emit import fnv1a64, generate, library
+from .emit import fnv1a64, generate, library, solver_shape, solvers
 from .errors import ChaincompError
 from .machine import load_machine
 
@@ -133,6 +133,50 @@ def _try_lock(lock) -> bool:
         return False
 
 
+def _solver_object(machine, tc: Toolchain, root: str) -> str:
+    """The compensation solver of the machine's shape, compiled once per shape, toolchain and
+    runtime headers (ROOT/solvers-HASH/core_N_P_R_O.o) and linked into every model of that
+    shape: a model's own compile leaves it out (CHAINCOMP_PREBUILT_CORE). Built under a
+    lock and renamed into place, as the models."""
+    shape = solver_shape(machine)
+    include = next(d for d in tc.include_dirs if d.endswith(os.path.join("runtime", "include")))
+    headers = os.path.join(include, "chaincomp")
+    key = tc.key().encode("utf-8")
+    for fname in sorted(os.listdir(headers)):
+        with open(os.path.join(headers, fname), "rb") as f:
+            key += b"\0" + fname.encode("utf-8") + b"\0" + f.read()
+    folder = os.path.join(root, f"solvers-{fnv1a64(key):016x}")
+    n, p, r, o = shape
+    path = os.path.join(folder, f"core_{n}_{p}_{r}_{int(o)}.o")
+    if os.path.exists(path):
+        return path
+    try:
+        os.makedirs(folder, exist_ok=True)
+        lock = open(path + ".lock", "w")
+    except OSError as exc:
+        raise ChaincompError(f"cannot write the model cache {root}: {exc.strerror}") from None
+    with lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if os.path.exists(path):
+            return path
+        start = time.monotonic()
+        _say(f"{machine.name}: compiling the compensation solver for its shape ({n} axes, pose {p}, "
+             f"{r} rows), once for every model of that shape")
+        source = path[:-2] + ".cpp"
+        with open(source, "w", encoding="utf-8", newline="\n") as f:
+            f.write(solvers([shape]))
+        tmp = path + ".tmp"
+        proc = subprocess.run([tc.compiler, *tc.flags, *(f"-I{d}" for d in tc.include_dirs), "-c", source, "-o", tmp],
+                              capture_output=True, text=True)
+        if proc.returncode != 0:
+            lines = proc.stderr.splitlines()
+            first = next((ln for ln in lines if "error" in ln), lines[0] if lines else "no message")
+            raise ChaincompError(f"{tc.compiler} failed on the compensation solver: {first}")
+        os.rename(tmp, path)
+        _say(f"{machine.name}: solver built in {time.monotonic() - start:.1f} s")
+    return path
+
+
 def _compile(machine, source: bytes, tc: Toolchain, folder: str) -> None:
     name = machine.name
     _say(f"{name}: no cached model for {os.path.basename(machine.file)} (hash {fnv1a64(source):016x}): "
@@ -143,16 +187,18 @@ def _compile(machine, source: bytes, tc: Toolchain, folder: str) -> None:
     for fname, text in files.items():
         with open(os.path.join(folder, fname), "w", encoding="utf-8", newline="\n") as f:
             f.write(text)
-    generated = time.monotonic() - start
-    _say(f"{name}: generated in {generated:.1f} s; compiling with {tc.compiler} {' '.join(tc.flags)}")
-    cmd = [tc.compiler, *tc.flags, *(f"-I{d}" for d in tc.include_dirs), f"-I{folder}",
-           f"{name}.cpp", "library.cpp", *tc.link_flags, "-o", f"{name}.so"]
+    _say(f"{name}: generated in {time.monotonic() - start:.1f} s")
+    solver = _solver_object(machine, tc, os.path.dirname(folder))
+    start = time.monotonic()
+    _say(f"{name}: compiling with {tc.compiler} {' '.join(tc.flags)}")
+    cmd = [tc.compiler, *tc.flags, "-DCHAINCOMP_PREBUILT_CORE", *(f"-I{d}" for d in tc.include_dirs), f"-I{folder}",
+           f"{name}.cpp", "library.cpp", solver, *tc.link_flags, "-o", f"{name}.so"]
     proc = subprocess.run(cmd, cwd=folder, capture_output=True, text=True)
     if proc.returncode != 0:
         lines = proc.stderr.splitlines()
         first = next((ln for ln in lines if "error" in ln), lines[0] if lines else "no message")
         raise ChaincompError(f"{tc.compiler} failed on the generated code of {name}: {first}")
-    _say(f"{name}: compiled in {time.monotonic() - start - generated:.1f} s")
+    _say(f"{name}: compiled in {time.monotonic() - start:.1f} s")
 
 
 def copy_to(path: str, folder: str) -> str:

@@ -19,7 +19,7 @@ def test_generate_is_byte_identical_across_runs(tmp_path):
     # Different hash seeds change set and dict iteration orders that could leak into output.
     first = _generate(tmp_path / "a", 1)
     second = _generate(tmp_path / "b", 12345)
-    assert sorted(first) == sorted([f"{n}.{ext}" for n in BUNDLED for ext in ("hpp", "cpp")] + ["registry.cpp"])
+    assert sorted(first) == sorted([f"{n}.{ext}" for n in BUNDLED for ext in ("hpp", "cpp")] + ["registry.cpp", "solvers.cpp"])
     for name in first:
         assert first[name] == second[name], name
 

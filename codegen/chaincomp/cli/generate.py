@@ -6,7 +6,7 @@ import os
 import sys
 import time
 
-from ..emit import generate, registry
+from ..emit import generate, registry, solver_shape, solvers
 from ..errors import ChaincompError
 from .common import add_order_argument, check_output, load
 
@@ -21,9 +21,12 @@ def add_parser(sub) -> None:
     add_order_argument(p, 2, "highest error_order<k> function")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder (created)")
     p.add_argument("--registry", action="store_true",
-                   help="also write registry.cpp mapping each machine name to its functions")
+                   help="also write registry.cpp mapping each machine name to its functions, and "
+                        "solvers.cpp: the compensation solver of each machine shape, once (for models "
+                        "compiled with -DCHAINCOMP_PREBUILT_CORE)")
     p.add_argument("--registry-only", action="store_true",
-                   help="write registry.cpp only (the build generates each machine separately)")
+                   help="write registry.cpp and solvers.cpp only (the build generates each machine "
+                        "separately)")
     p.set_defaults(run=run)
 
 
@@ -37,7 +40,7 @@ def run(args) -> int:
     if dup:
         raise ChaincompError(f"two machine files share the name {sorted(dup)[0]!r}")
     written = [] if args.registry_only else [f"{n}.{ext}" for n in names for ext in ("hpp", "cpp")]
-    written += ["registry.cpp"] if args.registry or args.registry_only else []
+    written += ["registry.cpp", "solvers.cpp"] if args.registry or args.registry_only else []
     for fname in written:   # before anything is written: no machine file is overwritten
         path = os.path.join(args.output, fname)
         if os.path.exists(path):
@@ -54,6 +57,7 @@ def run(args) -> int:
         print(f"generate: {m.name}: {', '.join(files)} ({time.monotonic() - start:.1f} s)", file=sys.stderr)
     if args.registry or args.registry_only:
         _write(os.path.join(args.output, "registry.cpp"), registry(names))
+        _write(os.path.join(args.output, "solvers.cpp"), solvers(solver_shape(m) for m in machines))
     return 0
 
 

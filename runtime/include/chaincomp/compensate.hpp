@@ -83,10 +83,10 @@ struct AxisTrig {
   double c[N];
 };
 
-template <class K>
-void axis_trig(const typename K::Axes& q, AxisTrig<K::kNumAxes>& t) noexcept {
-  for (int i = 0; i < K::kNumAxes; ++i) {
-    if (K::kAxisIsAngle[i]) {
+template <int N>
+void axis_trig(const bool* axis_is_angle, const Eigen::Matrix<double, N, 1>& q, AxisTrig<N>& t) noexcept {
+  for (int i = 0; i < N; ++i) {
+    if (axis_is_angle[i]) {
       // One argument reduction for both (gcc merges the pair into sincos only when they
       // share a local).
       const double a = q[i];
@@ -97,57 +97,25 @@ void axis_trig(const typename K::Axes& q, AxisTrig<K::kNumAxes>& t) noexcept {
   }
 }
 
+template <class K>
+void axis_trig(const typename K::Axes& q, AxisTrig<K::kNumAxes>& t) noexcept {
+  axis_trig<K::kNumAxes>(K::kAxisIsAngle, q, t);
+}
+
 // sin and cos at q from those at `base` (the angle-sum formulas): a Newton iterate differs
 // from the command by at most the correction bound, where sin_small and cos_small are a
 // short series and cost less than the library's sin and cos.
-template <class K>
-void axis_trig_near(const typename K::Axes& base, const AxisTrig<K::kNumAxes>& base_trig,
-                    const typename K::Axes& q, AxisTrig<K::kNumAxes>& t) noexcept {
-  for (int i = 0; i < K::kNumAxes; ++i) {
-    if (K::kAxisIsAngle[i]) {
+template <int N>
+void axis_trig_near(const bool* axis_is_angle, const Eigen::Matrix<double, N, 1>& base,
+                    const AxisTrig<N>& base_trig, const Eigen::Matrix<double, N, 1>& q, AxisTrig<N>& t) noexcept {
+  for (int i = 0; i < N; ++i) {
+    if (axis_is_angle[i]) {
       const double d = q[i] - base[i], sd = sin_small(d), cd = cos_small(d);
       t.s[i] = base_trig.s[i] * cd + base_trig.c[i] * sd;
       t.c[i] = base_trig.c[i] * cd - base_trig.s[i] * sd;
     }
   }
 }
-
-template <class K>
-struct Result {
-  typename K::Axes corrected;
-  double residual_point = 0;      // mm
-  double residual_direction = 0;  // rad: the direction (with a frame: orientation) residual; 0 where not corrected
-};
-
-// Kept by a caller across the commands of a stream (of one model): a command near the last
-// one starts from the last correction with the last factorisation (a warm start), which
-// usually leaves one or two model evaluations. A fresh workspace, a command far from the
-// last, or another model starts cold. Trivially destructible: the type-erased entry points
-// construct it in the caller's storage and never destroy it.
-template <class K>
-struct Workspace {
-  static constexpr int kRows = K::kCorrectsDirection ? 6 : 3;
-  typename K::Pose target, pose;
-  typename K::Jacobian jacobian;
-  Eigen::Matrix<double, kRows, K::kNumAxes> weighted;        // the Jacobian as factorised
-  Eigen::Matrix<double, K::kNumAxes, kRows> step_matrix;     // (J^T J)^-1 J^T: a step is step_matrix * r
-  // Where the step pulls the correction towards the command (a redundant machine, a damped
-  // step): the step adds pull * (q - command).
-  Eigen::Matrix<double, K::kNumAxes, K::kNumAxes> pull;
-  bool warm = false;  // the last call ended corrected (ok), with every axis free
-  const void* warm_model = nullptr;  // the model of that call
-  typename K::Axes last_command, last_corrected;
-  typename K::Axes last_correction_change = K::Axes::Zero();  // from the command before
-  typename K::Axes jacobian_axes;  // where the factorised Jacobian was taken
-  AxisTrig<K::kNumAxes> command_trig, trig;  // at the command, at the current axes
-  // With varying errors: the model with their values at the current axes, the error gain
-  // matrix, and per varying error its table interval and slope at the current axes.
-  typename K::Model model;
-  typename K::Gain gain;
-  int hint[kMaxVaryingErrors];
-  double slope[kMaxVaryingErrors];
-  double values[K::kNumParams];  // the varying errors' values; NaN for the others
-};
 
 // Sets every varying error of `m` (a copy of the model) to its value at `q` and its slope
 // into `slope`; false where an axis lies outside a range whose `outside` is reject (the
@@ -255,60 +223,99 @@ class SmallLdlt {
   double d_[N], inv_d_[N];
 };
 
-// K: the generated Kinematics of one machine (sizes, Model, pose_nominal, pose_jacobian).
-// The number of linear axes.
-template <class K>
-constexpr int kLinearAxes() noexcept {
-  int count = 0;
-  for (int i = 0; i < K::kNumAxes; ++i) count += K::kAxisIsAngle[i] ? 0 : 1;
-  return count;
-}
-
-// With a tool frame (Pose: point, direction z, the frame's x axis) and at least three rotary
-// axes, the orientation is corrected in full: rows 3..5 are then the rotation-vector
-// residual, not the change of the direction.
-template <class K>
-constexpr bool kCorrectsOrientation() noexcept {
-  return K::Pose::RowsAtCompileTime == 9 && K::kCorrectsDirection && K::kNumAxes - kLinearAxes<K>() >= 3;
-}
-
-// The orientation residual of an actual frame (za, xa) against the target (zt, xt, yt = zt x
-// xt): zt x za (the rotation vector's part orthogonal to zt) + (yt . xa) zt (its part about
-// zt). It equals the rotation vector omega of R_actual R_target^T to first order and is zero
-// exactly where the frames agree; its Jacobian is [zt]x Jz + zt (yt^T Jx).
 // a x b (Eigen's cross needs the Geometry module).
 template <class A, class B>
 Eigen::Vector3d cross3(const A& a, const B& b) noexcept {
   return Eigen::Vector3d(a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]);
 }
 
+// The orientation residual of an actual frame (za, xa) against the target (zt, xt, yt = zt x
+// xt): zt x za (the rotation vector's part orthogonal to zt) + (yt . xa) zt (its part about
+// zt). It equals the rotation vector omega of R_actual R_target^T to first order and is zero
+// exactly where the frames agree; its Jacobian is [zt]x Jz + zt (yt^T Jx).
 template <class Z, class X>
 Eigen::Vector3d orientation_residual(const Eigen::Vector3d& zt, const Eigen::Vector3d& yt, const Z& za,
                                      const X& xa) noexcept {
   return cross3(zt, za) + yt.dot(xa) * zt;
 }
 
+// The compensation solver, on a machine's shape alone: N axes; pose size P (3: the tool point;
+// 6: and the tool direction; 9: and a frame's x axis); R residual rows (3: the point; 6: and the
+// direction, or with O the orientation, corrected). The model enters through three functions
+// (Machine), so one compiled solver serves every machine of a shape: chaincomp's own builds
+// compile it once per shape (emit.py's solvers(), chaincomp build's cached object) and
+// declare it extern in each model (CHAINCOMP_PREBUILT_CORE): a model's compile no longer
+// includes it. Without that macro a model instantiates it here, self-contained.
+template <int N, int P, int R, bool O>
+struct Core {
+  static_assert(R == 3 || R == 6, "rows: the point, or the point and the direction/orientation");
+  static_assert(!O || (P == 9 && R == 6), "the orientation needs a frame (pose size 9)");
+  using Axes = Eigen::Matrix<double, N, 1>;
+  using Pose = Eigen::Matrix<double, P, 1>;
+  using Jacobian = Eigen::Matrix<double, P, N>;
+  using Trig = AxisTrig<N>;
+  using Eval = void (*)(void* context, const Axes& q, const Trig& t, Pose& out) noexcept;
+  using EvalJacobian = void (*)(void* context, const Axes& q, const Trig& t, Pose& out, Jacobian& J) noexcept;
+
+  // The model as the solver sees it: its pose (and Jacobian) at q from the axes' sin and cos.
+  struct Machine {
+    const void* identity;        // the model: a warm start only follows a call on the same one
+    const bool* axis_is_angle;   // N entries
+    void* context;               // passed to the functions below
+    Eval pose_nominal, pose_exact;
+    EvalJacobian pose_jacobian;
+  };
+
+  struct Result {
+    Axes corrected;
+    double residual_point = 0;      // mm
+    double residual_direction = 0;  // rad: the direction (with a frame: orientation) residual; 0 where not corrected
+  };
+
+  // Kept by a caller across the commands of a stream (of one model): a command near the last
+  // one starts from the last correction with the last factorisation (a warm start), which
+  // usually leaves one or two model evaluations. A fresh state, a command far from the last,
+  // or another model starts cold. Trivially destructible.
+  struct State {
+    Pose target, pose;
+    Jacobian jacobian;
+    Eigen::Matrix<double, R, N> weighted;     // the Jacobian as factorised
+    Eigen::Matrix<double, N, R> step_matrix;  // (J^T J)^-1 J^T: a step is step_matrix * r
+    // Where the step pulls the correction towards the command (a redundant machine, a damped
+    // step): the step adds pull * (q - command).
+    Eigen::Matrix<double, N, N> pull;
+    bool warm = false;  // the last call ended corrected (ok), with every axis free
+    const void* warm_model = nullptr;  // the model of that call
+    Axes last_command, last_corrected;
+    Axes last_correction_change = Axes::Zero();  // from the command before
+    Axes jacobian_axes;  // where the factorised Jacobian was taken
+    Trig command_trig, trig;  // at the command, at the current axes
+  };
+
+  // The warm start's rules, then solve(); see compensate<K> below.
+  static Status compensate(const Machine& m, State& ws, const Axes& command, Result& out) noexcept;
+  // One compensation from `start` (a warm start: the factorisation in ws is used) or, where
+  // null, cold from the command. `clean`: the call ended undamped with every axis within
+  // its bound.
+  static Status solve(const Machine& m, State& ws, const Axes& command, const Axes* start, Result& out,
+                      bool& clean) noexcept;
+};
+
+// The correction bound of an axis: per axis kind.
+inline double correction_bound(bool is_angle) noexcept {
+  return is_angle ? kMaxAngularCorrection : kMaxLinearCorrection;
+}
+
 // Whether every axis of q lies within `fraction` of its correction bound around `command`.
-template <class K>
-bool within_bounds(const typename K::Axes& q, const typename K::Axes& command, double fraction = 1.0) noexcept {
-  for (int i = 0; i < K::kNumAxes; ++i) {
-    const double bound = K::kAxisIsAngle[i] ? kMaxAngularCorrection : kMaxLinearCorrection;
-    if (!(std::abs(q[i] - command[i]) <= fraction * bound)) return false;
+template <int N>
+bool within_bounds(const bool* axis_is_angle, const Eigen::Matrix<double, N, 1>& q,
+                   const Eigen::Matrix<double, N, 1>& command, double fraction = 1.0) noexcept {
+  for (int i = 0; i < N; ++i) {
+    if (!(std::abs(q[i] - command[i]) <= fraction * correction_bound(axis_is_angle[i]))) return false;
   }
   return true;
 }
 
-// The damping weight of each axis: 1 / bound^2 (the correction's bound-scaled norm).
-template <class K>
-constexpr double damping_weight(int i) noexcept {
-  const double bound = K::kAxisIsAngle[i] ? kMaxAngularCorrection : kMaxLinearCorrection;
-  return 1.0 / (bound * bound);
-}
-
-// One compensation from `start` (a warm start: the factorisation in ws is used) or, where
-// null, cold from the command (a Jacobian and a factorisation there). `clean`: the call
-// ended undamped with every axis within its bound.
-//
 // Gauss-Newton (chord) steps on |W r(q)|^2 (W the row weights: the direction or orientation
 // rows as at kDirectionWeight mm per rad); near a singular pose a second, damped pass
 // (kTrustRadius above). Where the Jacobian has a null space (a seven-joint arm; a six-joint
@@ -316,53 +323,42 @@ constexpr double damping_weight(int i) noexcept {
 // step removes the correction's part along it: of all corrections equally good, the one of
 // least bound-scaled norm, i.e. the one closest to the command, whatever the iteration
 // starts from (the null-space rule).
-template <class K>
-Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K::Axes& command,
-             const typename K::Axes* start, Result<K>& out, bool& clean) noexcept {
-  constexpr int n = K::kNumAxes;
-  constexpr int rows = Workspace<K>::kRows;
+template <int N, int P, int R, bool O>
+Status Core<N, P, R, O>::solve(const Machine& m, State& ws, const Axes& command, const Axes* start, Result& out,
+                               bool& clean) noexcept {
+  constexpr int n = N;
+  constexpr int rows = R;
+  constexpr bool kDirection = R == 6;  // the direction (or orientation) rows are corrected
   using Square = Eigen::Matrix<double, n, n>;
   // More axes than the conditions they are to meet (a seven-joint arm; a six-joint arm holding
   // point and direction only): a set of equally good corrections.
-  constexpr bool kRedundant = n > (kCorrectsOrientation<K>() ? 6 : K::kCorrectsDirection ? 5 : 3);
+  constexpr int dof = O ? 6 : kDirection ? 5 : 3;
+  constexpr bool kRedundant = n > dof;
   clean = false;
   out.corrected = command;
   out.residual_point = out.residual_direction = 0;
   if (!command.allFinite()) return Status::kNonFiniteInput;
-  const VaryingErrors* varying = model.varying;
-  if (varying != nullptr) {
-    if (!within_ranges(*varying, command.data())) return Status::kOutsideTable;
-    ws.model = model;
-    for (int i = 0; i < varying->count; ++i) ws.hint[i] = -1;
-    clear_values<K>(ws.values);
+  const bool* is_angle = m.axis_is_angle;
+  // per axis: the correction bound and its inverse (constants: no division)
+  double bound[n], inv_bound[n];
+  for (int i = 0; i < n; ++i) {
+    bound[i] = correction_bound(is_angle[i]);
+    inv_bound[i] = is_angle[i] ? 1.0 / kMaxAngularCorrection : 1.0 / kMaxLinearCorrection;
   }
-  // The actual pose (and its Jacobian) at q, varying errors evaluated at q. Newton iterates
-  // that step past the end of a rejecting table by the correction are evaluated held there.
-  // sin and cos of the angular axes at the command: the library's once per call, the
-  // iterates' from them.
-  axis_trig<K>(command, ws.command_trig);
-  auto pose_at = [&](const typename K::Axes& q) {
-    axis_trig_near<K>(command, ws.command_trig, q, ws.trig);
-    if (varying == nullptr) {
-      K::pose_exact(model, q, ws.trig, ws.pose);
-    } else {
-      set_varying<K, false>(*varying, ws.model, q, ws.hint, ws.slope, ws.values);
-      K::pose_exact(ws.model, q, ws.trig, ws.pose);
-    }
+  // The actual pose (and its Jacobian) at q. sin and cos of the angular axes at the command:
+  // the library's once per call, the iterates' from them.
+  axis_trig<N>(is_angle, command, ws.command_trig);
+  auto pose_at = [&](const Axes& q) {
+    axis_trig_near<N>(is_angle, command, ws.command_trig, q, ws.trig);
+    m.pose_exact(m.context, q, ws.trig, ws.pose);
   };
-  auto jacobian_at = [&](const typename K::Axes& q) {
+  auto jacobian_at = [&](const Axes& q) {
     ws.jacobian_axes = q;
-    axis_trig_near<K>(command, ws.command_trig, q, ws.trig);
-    if (varying == nullptr) {
-      K::pose_jacobian(model, q, ws.trig, ws.pose, ws.jacobian);
-    } else {
-      set_varying<K>(*varying, ws.model, q, ws.hint, ws.slope, ws.values);
-      K::pose_jacobian_gain(ws.model, q, ws.trig, ws.pose, ws.jacobian, ws.gain);
-      add_slopes<K>(*varying, ws.gain, ws.slope, ws.jacobian);
-    }
+    axis_trig_near<N>(is_angle, command, ws.command_trig, q, ws.trig);
+    m.pose_jacobian(m.context, q, ws.trig, ws.pose, ws.jacobian);
   };
 
-  K::pose_nominal(model, command, ws.command_trig, ws.target);
+  m.pose_nominal(m.context, command, ws.command_trig, ws.target);
   // Chord Newton: the Jacobian at the command (or, warm, at the last command) serves the
   // following steps as long as they stay small (µm, arcsec: it then differs from the one at
   // the solution by about the correction in rad, ~1e-3 relative, so each step gains about
@@ -372,7 +368,7 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
   auto& step_matrix = ws.step_matrix;
   // With a frame: the target's z and y axes, which the orientation rows are taken against.
   Eigen::Vector3d target_z = Eigen::Vector3d::Zero(), target_y = Eigen::Vector3d::Zero();
-  if constexpr (kCorrectsOrientation<K>()) {
+  if constexpr (O) {
     target_z = ws.target.template segment<3>(3);
     target_y = cross3(target_z, ws.target.template segment<3>(6));
   }
@@ -382,13 +378,13 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
   bool damped_factored = false;  // damped_ldlt holds A + lambda D of this Jacobian
   auto factorise = [&]() {
     J.template topRows<3>() = ws.jacobian.template topRows<3>();
-    if constexpr (kCorrectsOrientation<K>()) {
+    if constexpr (O) {
       for (int i = 0; i < n; ++i) {
         const Eigen::Vector3d jz = ws.jacobian.col(i).template segment<3>(3);
         const Eigen::Vector3d jx = ws.jacobian.col(i).template segment<3>(6);
         J.col(i).template tail<3>() = kDirectionWeight * orientation_residual(target_z, target_y, jz, jx);
       }
-    } else if constexpr (K::kCorrectsDirection) {
+    } else if constexpr (kDirection) {
       J.template bottomRows<3>() = kDirectionWeight * ws.jacobian.template middleRows<3>(3);
     }
     for (int j = 0; j < n; ++j) {
@@ -411,16 +407,14 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
   // up to kPointPriority where the axes can hold the whole pose: the damping gives up the
   // direction (orientation) before the point. (There the undamped answer is the same with
   // or without P, so the correction stays continuous as lambda leaves 0.)
-  constexpr int dof = kCorrectsOrientation<K>() ? 6 : K::kCorrectsDirection ? 5 : 3;
-  constexpr bool kPrioritised = K::kCorrectsDirection && n >= dof;
+  constexpr bool kPrioritised = kDirection && n >= dof;
   Eigen::Matrix<double, rows, 1> priority = Eigen::Matrix<double, rows, 1>::Ones();  // set with lambda
-  typename K::Axes dw;  // the diagonal of D
-  for (int i = 0; i < n; ++i) dw[i] = damping_weight<K>(i);
+  Axes dw;  // the diagonal of D: 1 / bound^2 (the correction's bound-scaled norm)
+  for (int i = 0; i < n; ++i) dw[i] = inv_bound[i] * inv_bound[i];
   Eigen::Matrix<double, rows, n> Jp;  // P J
   SmallLdlt<n> damped_ldlt;
   double lambda = 0;
-  auto damped_correction = [&](const typename K::Axes& q, const Eigen::Matrix<double, rows, 1>& r,
-                               typename K::Axes& d) {
+  auto damped_correction = [&](const Axes& q, const Eigen::Matrix<double, rows, 1>& r, Axes& d) {
     if (!damped_factored) {
       Jp = priority.asDiagonal() * J;
       Square damped;
@@ -432,11 +426,11 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
       if (!damped_ldlt.compute(damped)) return false;
       damped_factored = true;
     }
-    const typename K::Axes g = Jp.transpose() * (Jp * (q - command) - priority.cwiseProduct(r));
+    const Axes g = Jp.transpose() * (Jp * (q - command) - priority.cwiseProduct(r));
     d = damped_ldlt.solve(Eigen::Matrix<double, n, 1>(g));
     return true;
   };
-  typename K::Axes q = command;
+  Axes q = command;
   if (start != nullptr) {
     q = *start;
     pose_at(q);
@@ -449,7 +443,7 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
   auto converged = [&](const Eigen::Matrix<double, rows, 1>& v, double fraction) {
     const double point = fraction * kPointTolerance;
     bool ok = v.template head<3>().squaredNorm() <= point * point;
-    if constexpr (K::kCorrectsDirection) {
+    if constexpr (kDirection) {
       const double direction = fraction * kDirectionTolerance * kDirectionWeight;
       ok = ok && v.template tail<3>().squaredNorm() <= direction * direction;
     }
@@ -457,10 +451,10 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
   };
   auto set_residual = [&]() {
     r.template head<3>() = ws.pose.template head<3>() - ws.target.template head<3>();
-    if constexpr (kCorrectsOrientation<K>()) {
+    if constexpr (O) {
       r.template tail<3>() = kDirectionWeight * orientation_residual(target_z, target_y, ws.pose.template segment<3>(3),
                                                                       ws.pose.template segment<3>(6));
-    } else if constexpr (K::kCorrectsDirection) {
+    } else if constexpr (kDirection) {
       r.template tail<3>() = kDirectionWeight * (ws.pose.template segment<3>(3) - ws.target.template segment<3>(3));
     }
   };
@@ -482,9 +476,9 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
         set_residual();
       }
       // The step to the next iterate, q - delta.
-      typename K::Axes delta;
+      Axes delta;
       if (damping) {
-        typename K::Axes d;
+        Axes d;
         if (!damped_correction(q, r, d)) return Status::kSingular;
         delta = (q - command) - d;
       } else {
@@ -501,11 +495,10 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
       double move = 0;
       for (int i = 0; i < n; ++i) {
         // Every correction within its bound per axis (a trust region near singular poses).
-        const double bound = K::kAxisIsAngle[i] ? kMaxAngularCorrection : kMaxLinearCorrection;
         const double wanted = q[i] - delta[i];
-        q[i] = std::clamp(wanted, command[i] - bound, command[i] + bound);
+        q[i] = std::clamp(wanted, command[i] - bound[i], command[i] + bound[i]);
         held = held || q[i] != wanted;
-        move = std::max(move, std::abs(delta[i]) * (1.0 / bound));  // constant: no division
+        move = std::max(move, std::abs(delta[i]) * inv_bound[i]);
       }
       clamped = clamped || held;
       // Held at a bound undamped: h = 1 whatever the pass would do next, and the damped pass
@@ -529,10 +522,7 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
   // An axis of the undamped correction beyond kDampingStart of its bound (or held at it):
   // near a singular pose. Then a damped pass, lambda from how far beyond (h above).
   double largest = 0;  // of the undamped correction's axes, as fractions of their bounds
-  for (int i = 0; i < n; ++i) {
-    const double bound = K::kAxisIsAngle[i] ? kMaxAngularCorrection : kMaxLinearCorrection;
-    largest = std::max(largest, std::abs(q[i] - command[i]) * (1.0 / bound));
-  }
+  for (int i = 0; i < n; ++i) largest = std::max(largest, std::abs(q[i] - command[i]) * inv_bound[i]);
   const double x = (largest - kDampingStart) * (1.0 / (1.0 - kDampingStart));
   const double h = clamped ? 1.0 : !(x > 0) ? 0.0 : x >= 1 ? 1.0 : x * x * (3 - 2 * x);
   const bool damped = h > 0;
@@ -540,7 +530,7 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
     // lambda from the residual at the command. The pass starts from the undamped correction
     // scaled by 1 - h: where lambda is small it barely moves from there (continuous as h
     // leaves 0), and from the command where the undamped one lies far off (at a bound).
-    const typename K::Axes undamped = q;
+    const Axes undamped = q;
     pose_at(command);
     set_residual();
     lambda = h * r.squaredNorm() * (0.25 / (kTrustRadius * kTrustRadius));
@@ -557,7 +547,7 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
   if (!q.allFinite() || !r.allFinite()) return Status::kNonFiniteOutput;
   out.corrected = q;
   out.residual_point = r.template head<3>().norm();
-  if constexpr (K::kCorrectsDirection) {
+  if constexpr (kDirection) {
     out.residual_direction = r.template tail<3>().norm() / kDirectionWeight;
   }
   const bool ok = out.residual_point <= kPointTolerance && out.residual_direction <= kDirectionTolerance;
@@ -565,32 +555,33 @@ Status solve(const typename K::Model& model, Workspace<K>& ws, const typename K:
   return ok ? Status::kOk : Status::kResidual;
 }
 
-template <class K>
-Status compensate(const typename K::Model& model, Workspace<K>& ws, const typename K::Axes& command,
-                  Result<K>& out) noexcept {
+template <int N, int P, int R, bool O>
+Status Core<N, P, R, O>::compensate(const Machine& m, State& ws, const Axes& command, Result& out) noexcept {
   // Warm: the same model, near the last command, within the correction bound of where the
   // factorised Jacobian was taken (the chord still gains about two digits per step), and the
   // last correction extrapolated linearly (the start) within kWarmCorrectionLimit of the
   // bound. A command holding NaN fails these tests and is refused by solve().
-  typename K::Axes start;
-  bool warm = ws.warm && ws.warm_model == &model && within_bounds<K>(command, ws.last_command, kChordStepLimit) &&
-              within_bounds<K>(command, ws.jacobian_axes);
+  const bool* is_angle = m.axis_is_angle;
+  Axes start;
+  bool warm = ws.warm && ws.warm_model == m.identity &&
+              within_bounds<N>(is_angle, command, ws.last_command, kChordStepLimit) &&
+              within_bounds<N>(is_angle, command, ws.jacobian_axes);
   if (warm) {
     start = command + (ws.last_corrected - ws.last_command) + ws.last_correction_change;
-    warm = within_bounds<K>(start, command, kWarmCorrectionLimit);
+    warm = within_bounds<N>(is_angle, start, command, kWarmCorrectionLimit);
   }
   ws.warm = false;
   bool clean = false;
-  Status s = solve<K>(model, ws, command, warm ? &start : nullptr, out, clean);
+  Status s = solve(m, ws, command, warm ? &start : nullptr, out, clean);
   // A warm start that ends short of the tolerance is redone cold: a residual (fewer DOF than
   // errors, a singular pose) or a failure never depends on the commands before.
   const bool warm_result = warm && s == Status::kOk;
-  if (warm && !warm_result) s = solve<K>(model, ws, command, nullptr, out, clean);
+  if (warm && !warm_result) s = solve(m, ws, command, nullptr, out, clean);
   // The next call may start warm from a unique solution (none where a residual is left: the
   // chord's fixed point there depends on where its Jacobian was taken) of the whole problem.
   if (s != Status::kOk || !clean) return s;
   ws.warm = true;
-  ws.warm_model = &model;
+  ws.warm_model = m.identity;
   if (warm_result) {
     ws.last_correction_change = (out.corrected - command) - (ws.last_corrected - ws.last_command);
   } else {
@@ -599,6 +590,107 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
   ws.last_command = command;
   ws.last_corrected = out.corrected;
   return s;
+}
+
+// ---- A generated model on the solver (K: its Kinematics: sizes, Model, pose functions) ----
+
+// The number of linear axes.
+template <class K>
+constexpr int kLinearAxes() noexcept {
+  int count = 0;
+  for (int i = 0; i < K::kNumAxes; ++i) count += K::kAxisIsAngle[i] ? 0 : 1;
+  return count;
+}
+
+// With a tool frame (Pose: point, direction z, the frame's x axis) and at least three rotary
+// axes, the orientation is corrected in full: rows 3..5 are then the rotation-vector
+// residual, not the change of the direction.
+template <class K>
+constexpr bool kCorrectsOrientation() noexcept {
+  return K::Pose::RowsAtCompileTime == 9 && K::kCorrectsDirection && K::kNumAxes - kLinearAxes<K>() >= 3;
+}
+
+// The solver of K's shape.
+template <class K>
+using CoreOf = Core<K::kNumAxes, K::Pose::RowsAtCompileTime, K::kCorrectsDirection ? 6 : 3, kCorrectsOrientation<K>()>;
+
+template <class K>
+using Result = typename CoreOf<K>::Result;
+
+// The solver's state and, with varying errors, the model with their values at the current
+// axes, the error gain matrix, and per varying error its table interval and slope there.
+template <class K>
+struct Workspace {
+  typename CoreOf<K>::State core;
+  typename K::Model model;
+  typename K::Gain gain;
+  int hint[kMaxVaryingErrors];
+  double slope[kMaxVaryingErrors];
+  double values[K::kNumParams];  // the varying errors' values; NaN for the others
+};
+
+// K's pose functions as the solver calls them; varying errors evaluated at every q (and
+// their slopes entering the Jacobian).
+template <class K>
+struct ModelCalls {
+  using C = CoreOf<K>;
+  struct Context {
+    const typename K::Model* model;
+    Workspace<K>* ws;
+  };
+  static void pose_nominal(void* context, const typename C::Axes& q, const typename C::Trig& t,
+                           typename C::Pose& out) noexcept {
+    K::pose_nominal(*static_cast<Context*>(context)->model, q, t, out);
+  }
+  static void pose_exact(void* context, const typename C::Axes& q, const typename C::Trig& t,
+                         typename C::Pose& out) noexcept {
+    const Context& c = *static_cast<Context*>(context);
+    if (c.model->varying == nullptr) {
+      K::pose_exact(*c.model, q, t, out);
+      return;
+    }
+    // Newton iterates that step past the end of a rejecting table by the correction are
+    // evaluated held there.
+    Workspace<K>& ws = *c.ws;
+    set_varying<K, false>(*c.model->varying, ws.model, q, ws.hint, ws.slope, ws.values);
+    K::pose_exact(ws.model, q, t, out);
+  }
+  static void pose_jacobian(void* context, const typename C::Axes& q, const typename C::Trig& t,
+                            typename C::Pose& out, typename C::Jacobian& J) noexcept {
+    const Context& c = *static_cast<Context*>(context);
+    if (c.model->varying == nullptr) {
+      K::pose_jacobian(*c.model, q, t, out, J);
+      return;
+    }
+    Workspace<K>& ws = *c.ws;
+    set_varying<K>(*c.model->varying, ws.model, q, ws.hint, ws.slope, ws.values);
+    K::pose_jacobian_gain(ws.model, q, t, out, J, ws.gain);
+    add_slopes<K>(*c.model->varying, ws.gain, ws.slope, J);
+  }
+};
+
+// Corrected axis commands such that the actual tool pose equals the nominal one at `command`
+// (the file's first lines); warm from the last call on `ws` where the rules in Core allow.
+template <class K>
+Status compensate(const typename K::Model& model, Workspace<K>& ws, const typename K::Axes& command,
+                  Result<K>& out) noexcept {
+  using C = CoreOf<K>;
+  const VaryingErrors* varying = model.varying;
+  if (varying != nullptr && command.allFinite()) {
+    if (!within_ranges(*varying, command.data())) {
+      ws.core.warm = false;
+      out.corrected = command;
+      out.residual_point = out.residual_direction = 0;
+      return Status::kOutsideTable;
+    }
+    ws.model = model;
+    for (int i = 0; i < varying->count; ++i) ws.hint[i] = -1;
+    clear_values<K>(ws.values);
+  }
+  typename ModelCalls<K>::Context context{&model, &ws};
+  const typename C::Machine machine{&model, K::kAxisIsAngle, &context, &ModelCalls<K>::pose_nominal,
+                                    &ModelCalls<K>::pose_exact, &ModelCalls<K>::pose_jacobian};
+  return C::compensate(machine, ws.core, command, out);
 }
 
 }  // namespace chaincomp
