@@ -186,19 +186,20 @@ def derive(machine: Machine, order: int = 1, htm: bool = False, progress: bool =
         if max_terms is not None and _terms(vectors[:n_tool]) > max_terms:
             return None
         prog.step(f"element {n - idx}/{n}")
-    prog.done()
 
     point = vectors[0][0]
     direction = vectors[1][0] if dir0 else None
     columns = [v for v, _ in vectors[-4:]] if htm else None
     reference = orientation = None
     if frame:
+        prog.step("orientation error")
         x, y = vectors[n_tool][0], vectors[n_tool + 1][0]
         reference = x
         orientation = rotation_vector_series(
             [x, y, direction], k, S.mul,
             lambda a, ca, b, cb: S.add(_scale(a, ca), _scale(b, cb)), _scale,
             S.pythagoras(R, atoms.restore()))
+    prog.done()
     return Derivation(machine, k, small, point, direction, columns, atoms.restore(), reference, orientation)
 
 
