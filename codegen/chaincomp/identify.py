@@ -704,6 +704,16 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
 
     report(f"{n} parameters, {data}: the Jacobian and its rank")
     p = np.zeros(n)
+    zero = {e: np.zeros((1, n))[:, idx] @ basis.T for e, (idx, basis) in bases.items()}
+    with np.errstate(all="ignore"):
+        start = np.broadcast_to(pose_frames(machine, model, table.axes, zero), (1, rows, 9))[0]
+    bad = np.flatnonzero(~np.isfinite(start).all(axis=1))
+    if bad.size:   # the model itself, before any fit: name the set-up rather than blame the fit
+        r = int(bad[0])
+        at = ", ".join(f"{s.name} = {s.from_internal(table.axes[s.name][r]):g} {s.unit.name}" for s in machine.axes)
+        raise ChaincompError(f"the model's tool pose is not finite at this set-up ({at}) with every error zero "
+                             f"({_count(bad.size, 'set-up')} of {rows}): the machine's expressions leave their domain "
+                             "there (e.g. sqrt or acos of an axis beyond its limits)", table.file, table.lines[r])
     j0 = jacobian(p)                                      # first-order gains at these set-ups
     rank, basis, unidentifiable, redundant, carried, suggested = _analyse(j0, params, measured, prefer, minimal)
     report(f"rank {rank}; Gauss-Newton on the exact model")

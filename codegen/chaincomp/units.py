@@ -38,4 +38,8 @@ def unit(name: str) -> Unit:
     try:
         return UNITS[name]
     except KeyError:
-        raise KeyError(f"unknown unit {name!r} (expected one of: {', '.join(UNITS)})") from None
+        hint = ""
+        if isinstance(name, str) and "\u03bc" in name:   # Greek mu: looks the same as the micro sign
+            hint = ("; it is written with the Greek letter mu (U+03BC): write the micro sign \u00b5 (U+00B5) "
+                    f"or u, e.g. {name.replace(chr(0x3bc), 'u')!r}")
+        raise KeyError(f"unknown unit {name!r} (expected one of: {', '.join(UNITS)}){hint}") from None

@@ -386,3 +386,92 @@ def test_identify_units_in_the_header_are_refused_with_the_unit_it_reads(tmp_pat
     _refused("identify", _write(tmp_path, "m.yaml", M4), _write(tmp_path, "meas.csv", text),
              match="column 'x (mm)': the header holds names only, no units; x is read in the machine's length "
                    "unit (mm)")
+
+
+# ----------------------------------------------------------------------------- units: the Greek mu
+
+@pytest.mark.parametrize("where", ["params", "set", "machine"])
+def test_a_unit_written_with_the_greek_mu_says_which_letter_to_use(tmp_path, where):
+    """'μm' (U+03BC) and 'µm' (U+00B5) look the same; the refusal listed 'µm' among the units it
+    expected, which read as nonsense."""
+    machine = _write(tmp_path, "m.yaml", M4 if where != "machine" else
+                     _edited(M4, "{name: EXX, role: error, unit: um}", "{name: EXX, role: error, unit: \u03bcm}"))
+    argv = {"params": ("--params", _write(tmp_path, "p.yaml", "machine: m4\nvalues:\n  EXX: 5 \u03bcm\n")),
+            "set": ("--set", "EXX=5 \u03bcm"), "machine": ()}[where]
+    _refused("eval", machine, *argv, match="unknown unit '\u03bcm' (expected one of: mm, m, um, \u00b5m, nm, in, rad, "
+             "deg, mrad, urad, \u00b5rad, arcsec, 1, ppm); it is written with the Greek letter mu (U+03BC): write "
+             "the micro sign \u00b5 (U+00B5) or u, e.g. 'um'")
+
+
+# ----------------------------------------------------------------------------- protocol of an imported arm
+
+def test_protocol_of_an_imported_urdf_arm_is_bounded(tmp_path):
+    """A three-joint URDF (revolute, prismatic, revolute about an oblique axis, origins with rpy
+    0.1 -0.2 0.3) with --errors all: 21 errors at two set-ups. trigsimp of its coefficients
+    took 24 s of CPU (48 s on the shared machine) for an answer that no error is identifiable;
+    the coefficients are now only factored past a size. CPU time, not wall time: other jobs share
+    the machine. The answer stays the same: every error but j3_ex is in one test of 6 equations."""
+    import time
+    text = _edited(URDF, '  <joint name="f" type="fixed">\n    <parent link="l2"/><child link="tip"/>',
+                   '  <joint name="f" type="fixed">\n    <parent link="l2"/><child link="l3"/>')
+    text = _edited(text, '  <link name="tip"/>', '  <link name="tip"/>\n  <link name="l3"/>')
+    text = _edited(text, "</robot>", """  <joint name="j3" type="revolute">
+    <parent link="l3"/><child link="tip"/>
+    <origin xyz="0.2 0 0"/>
+    <axis xyz="0.3 -0.4 0.5"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/>
+  </joint>
+</robot>""")
+    src = _write(tmp_path, "r.urdf", text)
+    out = str(tmp_path / "r.yaml")
+    cli("import-urdf", src, "--base", "base", "--tip", "tip", "--errors", "all", "-o", out)
+    start = time.process_time()
+    proc = cli("protocol", out)
+    assert time.process_time() - start < 15
+    assert "j3_ex: does not move the tool point at any set-up of the grid" in proc.stdout
+    assert "from 6 simultaneous equations" in proc.stdout
+
+
+# ----------------------------------------------------------------------------- identify --sigma
+
+def test_identify_a_sigma_whose_weight_overflows_is_refused(tmp_path):
+    """--sigma 1e-200um: 1/sigma^2 is beyond a double, and the fit said 'none of the 6 parameters
+    fitted moves the 15 coordinates: nothing to identify', which is false (they all do)."""
+    machine = _write(tmp_path, "m.yaml", M4)
+    meas = _write(tmp_path, "meas.csv", "X,Y,Z,B,x,y,z\n" + "".join(",".join(r) + "\n" for r in _nominal_rows()))
+    _refused("identify", machine, meas, "--sigma", "1e-200um",
+             match="--sigma: '1e-200um' is below 1e-30 mm: the weights 1/sigma^2 would leave a double's range")
+    _refused("identify", machine, meas, "--sigma", "1um,x=1e-40m", match="--sigma: '1e-40m' is below 1e-30 mm")
+
+
+# ----------------------------------------------------------------------------- a model outside its domain
+
+# m4 with a tool length that needs X above -400 mm (sqrt): finite within X's limits, as the loader
+# checks, but not at a set-up written beyond them
+M4_SQRT = _edited(M4, "{translate: [0, 0, -L]}", "{translate: [0, 0, -L + sqrt(X + 400)]}")
+
+
+def test_simulate_measurements_refuses_set_ups_where_the_model_is_not_finite(tmp_path):
+    """Before: exit 0 and a row 'nan,nan,nan' in the CSV, which identify then refused."""
+    machine = _write(tmp_path, "m.yaml", M4_SQRT)
+    setups = _write(tmp_path, "s.csv", "X,Y,Z,B\n0,0,0,0\n-500,0,0,0\n")
+    out = tmp_path / "o.csv"
+    _refused_any = cli("simulate-measurements", machine, "--setups", setups, "-o", str(out), check=False)
+    assert _refused_any.returncode == 2
+    assert ("error: set-up 2 (X = -500 mm, Y = 0 mm, Z = 0 mm, B = 0 deg) gives a tool point that is not finite "
+            "(1 of 2 set-ups): the machine's expressions leave their domain there") in _refused_any.stderr
+    assert not out.exists()
+
+
+def test_identify_names_the_set_up_where_the_model_is_not_finite(tmp_path):
+    """Before: 'the fit went to non-finite values on these 15 coordinates ... (coordinates in mm?
+    axes in their declared units?)', naming no row, though the model fails before any fit."""
+    machine = _write(tmp_path, "m.yaml", M4_SQRT)
+    rows = _nominal_rows()
+    rows[2][0] = "-500"
+    meas = _write(tmp_path, "meas.csv", "# a comment\nX,Y,Z,B,x,y,z\n" + "".join(",".join(r) + "\n" for r in rows))
+    proc = cli("identify", machine, meas, check=False)
+    assert proc.returncode == 2
+    assert (f"error: {meas}:5: the model's tool pose is not finite at this set-up (X = -500 mm, Y = 10 mm, "
+            "Z = -100 mm, B = 90 deg) with every error zero (1 set-up of 5): the machine's expressions leave their "
+            "domain there") in proc.stderr

@@ -32,6 +32,9 @@ def length(machine, option: str, raw: str, positive: bool = False) -> float:
     return value
 
 
+MIN_SIGMA = 1e-30   # internal units (mm, rad), as the smallest number a machine file may hold
+
+
 def sigma_spec(machine, raw: str) -> dict[str, float]:
     """'--sigma 20um,10arcsec' -> {x, y, z: 0.02, kx, ky, kz, wx, wy, wz: 4.8e-5} (internal
     units). Items separated by commas: a length is every tool-point column's standard
@@ -61,6 +64,10 @@ def sigma_spec(machine, raw: str) -> dict[str, float]:
             raise ChaincompError(f"--sigma: {error}")
         if not value > 0:
             raise ChaincompError(f"--sigma: must be positive, got {text.strip()!r}")
+        if value < MIN_SIGMA:   # 1/sigma squared overflows: at 1e-200 um the fit said 'nothing to identify'
+            raise ChaincompError(f"--sigma: {text.strip()!r} is below {MIN_SIGMA:g} "
+                                 f"{'mm' if kind == 'length' else 'rad'}: the weights 1/sigma^2 "
+                                 "would leave a double's range")
         targets = [column] if sep else list(COMPONENTS if kind == "length" else DIRECTIONS + ROTATION)
         want = "length" if targets[0] in COMPONENTS else "angle"
         if kind != want:

@@ -11,8 +11,8 @@ import numpy as np
 
 from ..errors import ChaincompError
 from ..expressions import MAX_LITERAL
-from ..identify import (MAX_ROWS, QUATERNION, coordinate_named_axes, outside_limits, read_table, simulate,
-                        simulate_orientations, write_table)
+from ..identify import (COMPONENTS, MAX_ROWS, QUATERNION, coordinate_named_axes, outside_limits, read_table,
+                        simulate, simulate_orientations, write_table)
 from ..machine import Symbol
 from ..params import load_params, parse_sets, parse_value
 from ..protocol import check_measure
@@ -173,6 +173,15 @@ def run(args) -> int:
           f"of {', '.join(s.name for s in machine.axes)}", file=sys.stderr)
     coords = simulate(machine, values, axes, noise, rng, measure)
     quats = simulate_orientations(machine, values, axes, angle_noise, rng) if quaternion else None
+    measured = [COMPONENTS.index(c) for c in measure]
+    bad = np.flatnonzero(~np.isfinite(coords[:, measured]).all(axis=1)
+                         | (quats is not None and ~np.isfinite(quats).all(axis=1)))
+    if bad.size:   # written as 'nan' cells, which identify then refuses line by line
+        r = int(bad[0])
+        at = ", ".join(f"{s.name} = {s.from_internal(axes[s.name][r]):g} {s.unit.name}" for s in machine.axes)
+        raise ChaincompError(f"set-up {r + 1} ({at}) gives a tool {'point' if quats is None else 'pose'} "
+                             f"that is not finite ({bad.size} of {count} set-ups): the machine's expressions "
+                             "leave their domain there (e.g. sqrt or acos of an axis beyond its limits)")
     if not (np.abs(coords[~np.isnan(coords)]) <= MAX_LITERAL).all():
         raise ChaincompError(f"the simulated coordinates reach beyond {MAX_LITERAL:g} {machine.length_unit} "
                              f"(or are not finite), which identify would refuse: check --noise and the "
