@@ -144,9 +144,11 @@ int main(int argc, char** argv) {
   }
   node->publish_status(true);
   const auto& k = node->counters();
-  std::fprintf(stderr, "chaincompd: stopped: received %lld, published %lld; seq gaps %lld (%lld missing), "
-               "stream restarts %lld, resets %lld, kernel drops %lld\n", static_cast<long long>(k.received),
-               static_cast<long long>(k.published), static_cast<long long>(k.seq_gaps),
+  std::fprintf(stderr, "chaincompd: stopped: received %lld, published %lld; clamped %lld (held back %lld), "
+               "clamped input %lld; seq gaps %lld (%lld missing), stream restarts %lld, resets %lld, kernel drops "
+               "%lld\n", static_cast<long long>(k.received), static_cast<long long>(k.published),
+               static_cast<long long>(k.clamped), static_cast<long long>(k.held_back),
+               static_cast<long long>(k.clamped_input), static_cast<long long>(k.seq_gaps),
                static_cast<long long>(k.seq_missing), static_cast<long long>(k.stream_restarts),
                static_cast<long long>(k.resets), static_cast<long long>(node->kernel_drops()));
   node.reset();

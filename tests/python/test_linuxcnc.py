@@ -171,8 +171,8 @@ def daemon_counts(run):
     import re
     with open(os.path.join(run.work, "chaincompd.log")) as f:
         log = f.read()
-    found = re.findall(r"chaincompd: stopped: received (\d+), published (\d+); seq gaps (\d+) \((\d+) missing\)",
-                       log)
+    found = re.findall(r"chaincompd: stopped: received (\d+), published (\d+); clamped \d+ \(held back \d+\), "
+                       r"clamped input \d+; seq gaps (\d+) \((\d+) missing\)", log)
     assert found, log[-3000:]
     return tuple(int(v) for v in found[-1])
 
