@@ -178,8 +178,10 @@ def _walk(obj, fn):
 
 def run(args) -> int:
     machine = load(args.machine)
+    prog = Progress(f"derive {machine.name}", True)
     d = derive(machine, args.order, progress=True)
     rep = report(d, progress=True)
+    prog.step(f"printing {args.format}")   # the formulas are printed on demand, here
     if args.format == "json":
         doc = {"machine": machine.name, "file": machine.file, "order": d.order,
                "symbols": [{"name": s.name, "role": s.role, "unit": s.unit.name, "meaning": s.meaning}
@@ -192,6 +194,7 @@ def run(args) -> int:
         print(_latex(machine, rep))
     else:
         print(_text(machine, d, rep))
+    prog.done()
     return 0
 
 
