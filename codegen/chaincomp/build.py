@@ -135,7 +135,7 @@ def _try_lock(lock) -> bool:
 
 def _solver_object(machine, tc: Toolchain, root: str) -> str:
     """The compensation solver of the machine's shape, compiled once per shape, toolchain and
-    runtime headers (ROOT/solvers-HASH/core_N_P_R_O.o) and linked into every model of that
+    runtime headers (ROOT/solvers-HASH/core_N_A_P_R_O.o) and linked into every model of that
     shape: a model's own compile leaves it out (CHAINCOMP_PREBUILT_CORE). Built under a
     lock and renamed into place, as the models."""
     shape = solver_shape(machine)
@@ -146,8 +146,8 @@ def _solver_object(machine, tc: Toolchain, root: str) -> str:
         with open(os.path.join(headers, fname), "rb") as f:
             key += b"\0" + fname.encode("utf-8") + b"\0" + f.read()
     folder = os.path.join(root, f"solvers-{fnv1a64(key):016x}")
-    n, p, r, o = shape
-    path = os.path.join(folder, f"core_{n}_{p}_{r}_{int(o)}.o")
+    n, a, p, r, o = shape
+    path = os.path.join(folder, f"core_{n}_{a}_{p}_{r}_{int(o)}.o")
     if os.path.exists(path):
         return path
     try:
@@ -160,8 +160,8 @@ def _solver_object(machine, tc: Toolchain, root: str) -> str:
         if os.path.exists(path):
             return path
         start = time.monotonic()
-        _say(f"{machine.name}: compiling the compensation solver for its shape ({n} axes, pose {p}, "
-             f"{r} rows), once for every model of that shape")
+        _say(f"{machine.name}: compiling the compensation solver for its shape ({n} axes, {bin(a).count('1')} "
+             f"rotary, pose {p}, {r} rows), once for every model of that shape")
         source = path[:-2] + ".cpp"
         with open(source, "w", encoding="utf-8", newline="\n") as f:
             f.write(solvers([shape]))

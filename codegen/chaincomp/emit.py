@@ -94,19 +94,22 @@ def corrects_direction(machine: Machine) -> bool:
     return machine.tool_direction is not None and sum(a.unit.kind == "angle" for a in machine.axes) >= 2
 
 
-def solver_shape(machine: Machine) -> tuple[int, int, int, bool]:
+def solver_shape(machine: Machine) -> tuple[int, int, int, int, bool]:
     """The template arguments of the compensation solver for ``machine`` (compensate.hpp's
-    Core<N, P, R, O>, which CoreOf<Kinematics> must equal): axes, pose size, residual rows,
-    and whether the orientation is corrected in full (a frame and three rotary axes)."""
+    Core<N, A, P, R, O>, which CoreOf<Kinematics> must equal): axes, their kinds (bit i set:
+    axis i is an angle), pose size, residual rows, and whether the orientation is corrected
+    in full (a frame and three rotary axes)."""
     pose_size = 3 + 3 * len(machine.tool_axes)
     corr_dir = corrects_direction(machine)
-    rotary = sum(a.unit.kind == "angle" for a in machine.axes)
-    return len(machine.axes), pose_size, 6 if corr_dir else 3, pose_size == 9 and corr_dir and rotary >= 3
+    mask = sum(1 << i for i, a in enumerate(machine.axes) if a.unit.kind == "angle")
+    rotary = bin(mask).count("1")
+    return (len(machine.axes), mask, pose_size, 6 if corr_dir else 3,
+            pose_size == 9 and corr_dir and rotary >= 3)
 
 
-def _core_name(shape: tuple[int, int, int, bool]) -> str:
-    n, p, r, o = shape
-    return f"chaincomp::Core<{n}, {p}, {r}, {'true' if o else 'false'}>"
+def _core_name(shape: tuple[int, int, int, int, bool]) -> str:
+    n, a, p, r, o = shape
+    return f"chaincomp::Core<{n}, {a}u, {p}, {r}, {'true' if o else 'false'}>"
 
 
 def solvers(shapes) -> str:

@@ -283,21 +283,22 @@ def test_daemon_on_a_built_machine_then_a_changed_constant(built, tmp_path):
 
 def test_the_solver_is_compiled_once_per_machine_shape(built):
     """The compensation solver depends on the machine's shape alone: the first build compiled
-    it (trunnion_ac: 5 axes, tool point and direction, two rotary axes, so 6 residual rows),
+    it (trunnion_ac: 5 axes, the last two rotary (kind mask 0b11000 = 24), tool point and
+    direction, so 6 residual rows),
     a second machine of that shape (another spindle height) links the cached object."""
     assert sum("compiling the compensation solver" in err for _, err in built["outs"]) == 1
     cache = os.path.join(built["env"]["XDG_CACHE_HOME"], "chaincomp")
     objects = [os.path.join(cache, d, n) for d in os.listdir(cache) if d.startswith("solvers-")
                for n in os.listdir(os.path.join(cache, d)) if n.endswith(".o")]
-    assert [os.path.basename(o) for o in objects] == ["core_5_6_6_0.o"]
+    assert [os.path.basename(o) for o in objects] == ["core_5_24_6_6_0.o"]
     other = variant(built["folder"], "test_trunnion_h", h=460)
     proc = chaincomp(built["env"], "build", other)
     assert proc.returncode == 0, proc.stderr
     assert "compiled in" in proc.stderr and "compensation solver" not in proc.stderr
     symbols = subprocess.run(["nm", "-C", proc.stdout.strip()], capture_output=True, text=True).stdout
-    assert "chaincomp::Core<5, 6, 6, false>::solve" in symbols
+    assert "chaincomp::Core<5, 24u, 6, 6, false>::solve" in symbols
     defined = subprocess.run(["nm", "-C", "--defined-only", objects[0]], capture_output=True, text=True).stdout
-    assert "chaincomp::Core<5, 6, 6, false>::compensate" in defined
+    assert "chaincomp::Core<5, 24u, 6, 6, false>::compensate" in defined
 
 
 def test_build_output_folder_is_checked_before_the_build(tmp_path):

@@ -9,6 +9,7 @@
 
 #include <Eigen/Core>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <type_traits>
@@ -83,10 +84,13 @@ struct AxisTrig {
   double c[N];
 };
 
-template <int N>
-void axis_trig(const bool* axis_is_angle, const Eigen::Matrix<double, N, 1>& q, AxisTrig<N>& t) noexcept {
+// Bit i of an axis-kind mask: axis i is an angle.
+constexpr bool is_angle_axis(unsigned angles, int i) noexcept { return ((angles >> i) & 1u) != 0; }
+
+template <int N, unsigned Angles>
+void axis_trig(const Eigen::Matrix<double, N, 1>& q, AxisTrig<N>& t) noexcept {
   for (int i = 0; i < N; ++i) {
-    if (axis_is_angle[i]) {
+    if (is_angle_axis(Angles, i)) {
       // One argument reduction for both (gcc merges the pair into sincos only when they
       // share a local).
       const double a = q[i];
@@ -97,19 +101,28 @@ void axis_trig(const bool* axis_is_angle, const Eigen::Matrix<double, N, 1>& q, 
   }
 }
 
+// K's axis kinds as a mask: bit i set where axis i is an angle.
+template <class K>
+constexpr unsigned angle_mask() noexcept {
+  static_assert(K::kNumAxes <= 32, "the axis-kind mask has 32 bits");
+  unsigned mask = 0;
+  for (int i = 0; i < K::kNumAxes; ++i) mask |= K::kAxisIsAngle[i] ? 1u << i : 0u;
+  return mask;
+}
+
 template <class K>
 void axis_trig(const typename K::Axes& q, AxisTrig<K::kNumAxes>& t) noexcept {
-  axis_trig<K::kNumAxes>(K::kAxisIsAngle, q, t);
+  axis_trig<K::kNumAxes, angle_mask<K>()>(q, t);
 }
 
 // sin and cos at q from those at `base` (the angle-sum formulas): a Newton iterate differs
 // from the command by at most the correction bound, where sin_small and cos_small are a
 // short series and cost less than the library's sin and cos.
-template <int N>
-void axis_trig_near(const bool* axis_is_angle, const Eigen::Matrix<double, N, 1>& base,
-                    const AxisTrig<N>& base_trig, const Eigen::Matrix<double, N, 1>& q, AxisTrig<N>& t) noexcept {
+template <int N, unsigned Angles>
+void axis_trig_near(const Eigen::Matrix<double, N, 1>& base, const AxisTrig<N>& base_trig,
+                    const Eigen::Matrix<double, N, 1>& q, AxisTrig<N>& t) noexcept {
   for (int i = 0; i < N; ++i) {
-    if (axis_is_angle[i]) {
+    if (is_angle_axis(Angles, i)) {
       const double d = q[i] - base[i], sd = sin_small(d), cd = cos_small(d);
       t.s[i] = base_trig.s[i] * cd + base_trig.c[i] * sd;
       t.c[i] = base_trig.c[i] * cd - base_trig.s[i] * sd;
@@ -239,14 +252,15 @@ Eigen::Vector3d orientation_residual(const Eigen::Vector3d& zt, const Eigen::Vec
   return cross3(zt, za) + yt.dot(xa) * zt;
 }
 
-// The compensation solver, on a machine's shape alone: N axes; pose size P (3: the tool point;
+// The compensation solver, on a machine's shape alone: N axes, Angles their kinds (bit i set: axis i
+// is an angle, so its bound and its sin and cos are known when compiling); pose size P (3: the tool point;
 // 6: and the tool direction; 9: and a frame's x axis); R residual rows (3: the point; 6: and the
 // direction, or with O the orientation, corrected). The model enters through three functions
 // (Machine), so one compiled solver serves every machine of a shape: chaincomp's own builds
 // compile it once per shape (emit.py's solvers(), chaincomp build's cached object) and
 // declare it extern in each model (CHAINCOMP_PREBUILT_CORE): a model's compile no longer
 // includes it. Without that macro a model instantiates it here, self-contained.
-template <int N, int P, int R, bool O>
+template <int N, unsigned Angles, int P, int R, bool O>
 struct Core {
   static_assert(R == 3 || R == 6, "rows: the point, or the point and the direction/orientation");
   static_assert(!O || (P == 9 && R == 6), "the orientation needs a frame (pose size 9)");
@@ -260,7 +274,6 @@ struct Core {
   // The model as the solver sees it: its pose (and Jacobian) at q from the axes' sin and cos.
   struct Machine {
     const void* identity;        // the model: a warm start only follows a call on the same one
-    const bool* axis_is_angle;   // N entries
     void* context;               // passed to the functions below
     Eval pose_nominal, pose_exact;
     EvalJacobian pose_jacobian;
@@ -307,11 +320,11 @@ inline double correction_bound(bool is_angle) noexcept {
 }
 
 // Whether every axis of q lies within `fraction` of its correction bound around `command`.
-template <int N>
-bool within_bounds(const bool* axis_is_angle, const Eigen::Matrix<double, N, 1>& q,
-                   const Eigen::Matrix<double, N, 1>& command, double fraction = 1.0) noexcept {
+template <int N, unsigned Angles>
+bool within_bounds(const Eigen::Matrix<double, N, 1>& q, const Eigen::Matrix<double, N, 1>& command,
+                   double fraction = 1.0) noexcept {
   for (int i = 0; i < N; ++i) {
-    if (!(std::abs(q[i] - command[i]) <= fraction * correction_bound(axis_is_angle[i]))) return false;
+    if (!(std::abs(q[i] - command[i]) <= fraction * correction_bound(is_angle_axis(Angles, i)))) return false;
   }
   return true;
 }
@@ -323,8 +336,8 @@ bool within_bounds(const bool* axis_is_angle, const Eigen::Matrix<double, N, 1>&
 // step removes the correction's part along it: of all corrections equally good, the one of
 // least bound-scaled norm, i.e. the one closest to the command, whatever the iteration
 // starts from (the null-space rule).
-template <int N, int P, int R, bool O>
-Status Core<N, P, R, O>::solve(const Machine& m, State& ws, const Axes& command, const Axes* start, Result& out,
+template <int N, unsigned Angles, int P, int R, bool O>
+Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& command, const Axes* start, Result& out,
                                bool& clean) noexcept {
   constexpr int n = N;
   constexpr int rows = R;
@@ -338,23 +351,22 @@ Status Core<N, P, R, O>::solve(const Machine& m, State& ws, const Axes& command,
   out.corrected = command;
   out.residual_point = out.residual_direction = 0;
   if (!command.allFinite()) return Status::kNonFiniteInput;
-  const bool* is_angle = m.axis_is_angle;
   // per axis: the correction bound and its inverse (constants: no division)
   double bound[n], inv_bound[n];
   for (int i = 0; i < n; ++i) {
-    bound[i] = correction_bound(is_angle[i]);
-    inv_bound[i] = is_angle[i] ? 1.0 / kMaxAngularCorrection : 1.0 / kMaxLinearCorrection;
+    bound[i] = correction_bound(is_angle_axis(Angles, i));
+    inv_bound[i] = is_angle_axis(Angles, i) ? 1.0 / kMaxAngularCorrection : 1.0 / kMaxLinearCorrection;
   }
   // The actual pose (and its Jacobian) at q. sin and cos of the angular axes at the command:
   // the library's once per call, the iterates' from them.
-  axis_trig<N>(is_angle, command, ws.command_trig);
+  axis_trig<N, Angles>(command, ws.command_trig);
   auto pose_at = [&](const Axes& q) {
-    axis_trig_near<N>(is_angle, command, ws.command_trig, q, ws.trig);
+    axis_trig_near<N, Angles>(command, ws.command_trig, q, ws.trig);
     m.pose_exact(m.context, q, ws.trig, ws.pose);
   };
   auto jacobian_at = [&](const Axes& q) {
     ws.jacobian_axes = q;
-    axis_trig_near<N>(is_angle, command, ws.command_trig, q, ws.trig);
+    axis_trig_near<N, Angles>(command, ws.command_trig, q, ws.trig);
     m.pose_jacobian(m.context, q, ws.trig, ws.pose, ws.jacobian);
   };
 
@@ -555,20 +567,19 @@ Status Core<N, P, R, O>::solve(const Machine& m, State& ws, const Axes& command,
   return ok ? Status::kOk : Status::kResidual;
 }
 
-template <int N, int P, int R, bool O>
-Status Core<N, P, R, O>::compensate(const Machine& m, State& ws, const Axes& command, Result& out) noexcept {
+template <int N, unsigned Angles, int P, int R, bool O>
+Status Core<N, Angles, P, R, O>::compensate(const Machine& m, State& ws, const Axes& command, Result& out) noexcept {
   // Warm: the same model, near the last command, within the correction bound of where the
   // factorised Jacobian was taken (the chord still gains about two digits per step), and the
   // last correction extrapolated linearly (the start) within kWarmCorrectionLimit of the
   // bound. A command holding NaN fails these tests and is refused by solve().
-  const bool* is_angle = m.axis_is_angle;
   Axes start;
   bool warm = ws.warm && ws.warm_model == m.identity &&
-              within_bounds<N>(is_angle, command, ws.last_command, kChordStepLimit) &&
-              within_bounds<N>(is_angle, command, ws.jacobian_axes);
+              within_bounds<N, Angles>(command, ws.last_command, kChordStepLimit) &&
+              within_bounds<N, Angles>(command, ws.jacobian_axes);
   if (warm) {
     start = command + (ws.last_corrected - ws.last_command) + ws.last_correction_change;
-    warm = within_bounds<N>(is_angle, start, command, kWarmCorrectionLimit);
+    warm = within_bounds<N, Angles>(start, command, kWarmCorrectionLimit);
   }
   ws.warm = false;
   bool clean = false;
@@ -612,7 +623,7 @@ constexpr bool kCorrectsOrientation() noexcept {
 
 // The solver of K's shape.
 template <class K>
-using CoreOf = Core<K::kNumAxes, K::Pose::RowsAtCompileTime, K::kCorrectsDirection ? 6 : 3, kCorrectsOrientation<K>()>;
+using CoreOf = Core<K::kNumAxes, angle_mask<K>(), K::Pose::RowsAtCompileTime, K::kCorrectsDirection ? 6 : 3, kCorrectsOrientation<K>()>;
 
 template <class K>
 using Result = typename CoreOf<K>::Result;
@@ -644,24 +655,25 @@ struct ModelCalls {
   }
   static void pose_exact(void* context, const typename C::Axes& q, const typename C::Trig& t,
                          typename C::Pose& out) noexcept {
+    K::pose_exact(*static_cast<Context*>(context)->model, q, t, out);
+  }
+  static void pose_jacobian(void* context, const typename C::Axes& q, const typename C::Trig& t,
+                            typename C::Pose& out, typename C::Jacobian& J) noexcept {
+    K::pose_jacobian(*static_cast<Context*>(context)->model, q, t, out, J);
+  }
+  // With varying errors:
+  static void pose_exact_varying(void* context, const typename C::Axes& q, const typename C::Trig& t,
+                                 typename C::Pose& out) noexcept {
     const Context& c = *static_cast<Context*>(context);
-    if (c.model->varying == nullptr) {
-      K::pose_exact(*c.model, q, t, out);
-      return;
-    }
     // Newton iterates that step past the end of a rejecting table by the correction are
     // evaluated held there.
     Workspace<K>& ws = *c.ws;
     set_varying<K, false>(*c.model->varying, ws.model, q, ws.hint, ws.slope, ws.values);
     K::pose_exact(ws.model, q, t, out);
   }
-  static void pose_jacobian(void* context, const typename C::Axes& q, const typename C::Trig& t,
-                            typename C::Pose& out, typename C::Jacobian& J) noexcept {
+  static void pose_jacobian_varying(void* context, const typename C::Axes& q, const typename C::Trig& t,
+                                    typename C::Pose& out, typename C::Jacobian& J) noexcept {
     const Context& c = *static_cast<Context*>(context);
-    if (c.model->varying == nullptr) {
-      K::pose_jacobian(*c.model, q, t, out, J);
-      return;
-    }
     Workspace<K>& ws = *c.ws;
     set_varying<K>(*c.model->varying, ws.model, q, ws.hint, ws.slope, ws.values);
     K::pose_jacobian_gain(ws.model, q, t, out, J, ws.gain);
@@ -688,8 +700,10 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
     clear_values<K>(ws.values);
   }
   typename ModelCalls<K>::Context context{&model, &ws};
-  const typename C::Machine machine{&model, K::kAxisIsAngle, &context, &ModelCalls<K>::pose_nominal,
-                                    &ModelCalls<K>::pose_exact, &ModelCalls<K>::pose_jacobian};
+  using Calls = ModelCalls<K>;
+  const typename C::Machine machine{&model, &context, &Calls::pose_nominal,
+                                    varying ? &Calls::pose_exact_varying : &Calls::pose_exact,
+                                    varying ? &Calls::pose_jacobian_varying : &Calls::pose_jacobian};
   return C::compensate(machine, ws.core, command, out);
 }
 
