@@ -49,7 +49,7 @@ from .machine import Machine
 from .numeric import ExactModel
 from .params import parse_value
 from .varying import Varying
-from .yamlsource import read_text
+from .yamlsource import read_text, write_checked
 
 # plane -> (first in-plane coordinate, second, normal): the angle turns from the first towards the second
 PLANES = {"XY": (0, 1, 2), "YZ": (1, 2, 0), "ZX": (2, 0, 1)}
@@ -345,8 +345,7 @@ def write_trace(path: str, machine: Machine, trace: Trace, comments=()) -> None:
     lines += [f"{_num(math.degrees(a))},{d},{v / UM:.6f}" for a, d, v in
               zip(trace.angle, trace.direction, trace.deviation)]
     try:
-        with open(path, "w", encoding="utf-8") as f:
-            f.write("\n".join(lines) + "\n")
+        write_checked(path, "\n".join(lines) + "\n")
     except OSError as exc:
         raise ChaincompError(f"cannot write: {exc.strerror}", path) from None
 

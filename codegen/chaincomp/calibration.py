@@ -21,7 +21,6 @@ Shapes (each a random draw from the seed):
 from __future__ import annotations
 
 import math
-import os
 import re
 from dataclasses import dataclass
 
@@ -245,19 +244,15 @@ def _write_loadable(path: str, text: str, machine: Machine) -> None:
     """Write text to path only once the product's own loader reads it back: written beside
     it first, loaded, then renamed over it (an old file at path stays whole until then)."""
     from .params import load_params
-    tmp = f"{path}.{os.getpid()}.tmp"
-    try:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)   # the umask applies, as to open()
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
+    from .yamlsource import write_checked
+
+    def check(tmp: str) -> None:
         try:
             load_params(tmp, machine)
         except ChaincompError as exc:
             raise ChaincompError(f"refusing to write a file that would not load back: {exc.message}", path,
                                  exc.line, exc.field) from None
-        os.replace(tmp, path)
+    try:
+        write_checked(path, text, check)
     except OSError as exc:
         raise ChaincompError(f"cannot write: {exc.strerror}", path) from None
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)

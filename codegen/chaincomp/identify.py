@@ -41,7 +41,7 @@ from .numeric import ExactModel
 from .orientation import ROWS as ROTATION, cross, rotation_vector
 from .units import INTERNAL, UNITS
 from .varying import MAX_POLYNOMIAL_COEFFICIENTS, MAX_TABLE_KNOTS, MAX_VARYING_ERRORS
-from .yamlsource import read_text
+from .yamlsource import read_text, write_checked
 
 CSTEP = 1e-20     # complex step, internal units (mm, rad): any tiny value gives the same digits
 STEP = 1e-6       # central-difference step, where the chain cannot take complex values
@@ -315,15 +315,15 @@ def write_table(path: str, machine: Machine, axes: dict[str, np.ndarray], coords
     length = UNITS[machine.length_unit].to_internal
     names = [s.name for s in machine.axes]
     idx = [COMPONENTS.index(c) for c in measure]
-    with open(path, "w", encoding="utf-8") as f:
-        for c in comments:
-            f.write(f"# {c}\n")
-        f.write(",".join(names + list(measure) + (list(QUATERNION) if quaternions is not None else [])) + "\n")
-        for r in range(coords.shape[0]):
-            cells = [f"{machine.symbol(a).from_internal(axes[a][r]):.15g}" for a in names]
-            cells += [f"{coords[r, i] / length:.17g}" for i in idx]
-            cells += [f"{v:.17g}" for v in (quaternions[r] if quaternions is not None else ())]
-            f.write(",".join(cells) + "\n")
+    out = [f"# {c}\n" for c in comments]
+    out.append(",".join(names + list(measure) + (list(QUATERNION) if quaternions is not None else [])) + "\n")
+    for r in range(coords.shape[0]):
+        cells = [f"{machine.symbol(a).from_internal(axes[a][r]):.15g}" for a in names]
+        cells += [f"{coords[r, i] / length:.17g}" for i in idx]
+        cells += [f"{v:.17g}" for v in (quaternions[r] if quaternions is not None else ())]
+        out.append(",".join(cells) + "\n")
+    # beside it, then renamed: a full disk leaves no short file that identify would read as whole
+    write_checked(path, "".join(out))
 
 
 def pose_points(machine: Machine, model: ExactModel, axes: dict[str, np.ndarray], errors: dict) -> np.ndarray:

@@ -32,6 +32,7 @@ from .errors import ChaincompError
 from .identify import numeric_rank, pose_points, step_derivatives
 from .machine import Machine
 from .numeric import ExactModel
+from .yamlsource import write_checked
 
 MAX_POSES = 20_000
 DEFAULT_POSES = 50
@@ -256,15 +257,15 @@ def write_poses(path: str, design: Design, command: str) -> None:
     axis (declared unit, 15 digits), then the measured coordinates, empty, to fill in."""
     m = design.machine
     names = [s.name for s in m.axes]
-    with open(path, "w", encoding="utf-8") as f:
-        f.write(f"# {command}: {len(design)} poses, {design.index} {design.value:.6g} "
-                f"(random sets of the same size: {design.random_median:.6g})\n")
-        f.write(f"# axes in their declared units; fill in the measured {', '.join(design.measure)} "
-                f"(tool point, {m.length_unit}) for chaincomp identify\n")
-        f.write(",".join(names + design.measure) + "\n")
-        for i in range(len(design)):
-            cells = [f"{m.symbol(a).from_internal(design.poses[a][i]):.15g}" for a in names]
-            f.write(",".join(cells + [""] * len(design.measure)) + "\n")
+    out = [f"# {command}: {len(design)} poses, {design.index} {design.value:.6g} "
+           f"(random sets of the same size: {design.random_median:.6g})\n",
+           f"# axes in their declared units; fill in the measured {', '.join(design.measure)} "
+           f"(tool point, {m.length_unit}) for chaincomp identify\n",
+           ",".join(names + design.measure) + "\n"]
+    for i in range(len(design)):
+        cells = [f"{m.symbol(a).from_internal(design.poses[a][i]):.15g}" for a in names]
+        out.append(",".join(cells + [""] * len(design.measure)) + "\n")
+    write_checked(path, "".join(out))   # beside it, then renamed: never a short file
 
 
 def design_json(design: Design, output: str | None) -> dict:

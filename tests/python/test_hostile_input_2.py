@@ -475,3 +475,85 @@ def test_identify_names_the_set_up_where_the_model_is_not_finite(tmp_path):
     assert (f"error: {meas}:5: the model's tool pose is not finite at this set-up (X = -500 mm, Y = 10 mm, "
             "Z = -100 mm, B = 90 deg) with every error zero (1 set-up of 5): the machine's expressions leave their "
             "domain there") in proc.stderr
+
+
+# ----------------------------------------------------------------------------- outputs that are not plain files
+
+def _full_device(tmp_path) -> str:
+    """A character device like /dev/full (1, 7: every write fails with ENOSPC), made in tmp_path
+    so that a regression never touches the system's own. Needs root."""
+    import os
+    import stat
+    if os.geteuid() != 0:
+        pytest.skip("making a device node needs root")
+    path = str(tmp_path / "full")
+    os.mknod(path, 0o666 | stat.S_IFCHR, os.makedev(1, 7))
+    return path
+
+
+def _outputs(tmp_path) -> dict[str, list[str]]:
+    machine = _write(tmp_path, "m.yaml", M4)
+    meas = _write(tmp_path, "meas.csv", "X,Y,Z,B,x,y,z\n" + "".join(",".join(r) + "\n" for r in _nominal_rows()))
+    return {"import-urdf": ["import-urdf", _write(tmp_path, "r.urdf", URDF), "--base", "base", "--tip", "tip"],
+            "identify": ["identify", machine, meas, "--assume-zero", "EXB,EAX,EYY,EBB"],
+            "simulate-measurements": ["simulate-measurements", machine],
+            "simulate-log": ["simulate-log", machine, "--seconds", "0.01"],
+            "report": ["report", machine],
+            "testvectors": ["testvectors", machine, "--count", "2"]}
+
+
+@pytest.mark.parametrize("verb", ["import-urdf", "identify", "simulate-measurements", "simulate-log", "report",
+                                  "testvectors"])
+def test_an_output_on_a_full_device_is_refused_and_the_device_stays(tmp_path, verb):
+    """'-o /dev/full' run as root: import-urdf and identify -o wrote beside it and renamed over
+    it, so /dev/full became a regular file and the verb said 'wrote'; simulate-log's liblcm
+    ignored the failed writes and reported success."""
+    import os
+    import stat
+    full = _full_device(tmp_path)
+    proc = cli(*_outputs(tmp_path)[verb], "-o", full, check=False)
+    assert proc.returncode == 2, proc.stderr
+    assert f"error: {full}: cannot write" in proc.stderr and "No space left on device" in proc.stderr
+    assert stat.S_ISCHR(os.stat(full).st_mode)
+    assert not [f for f in os.listdir(tmp_path) if f.endswith(".tmp") or f.startswith(".")]
+
+
+def test_an_output_through_a_symbolic_link_is_written_through_it(tmp_path):
+    """The link stays a link (a rename over it would have replaced the link by a file)."""
+    import os
+    real = tmp_path / "real.yaml"
+    real.write_text("old\n")
+    link = tmp_path / "link.yaml"
+    os.symlink(real, link)
+    cli(*_outputs(tmp_path)["import-urdf"], "-o", str(link))
+    assert os.path.islink(link)
+    assert real.read_text().startswith("# Imported from the URDF")
+
+
+@pytest.mark.parametrize("verb", ["simulate-measurements", "simulate-log", "report", "testvectors"])
+def test_a_write_that_fails_midway_leaves_the_old_file_whole(tmp_path, verb):
+    """A file size limit of 2 kB (RLIMIT_FSIZE, as a full disk would): the write fails partway.
+    Before, simulate-measurements left the first 100 kB of its CSV (which identify reads as the
+    whole run, a line short), and simulate-log exited 3 (an internal error)."""
+    import resource
+    import signal
+    import subprocess
+    import sys
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (2000, 2000))
+    argv = _outputs(tmp_path)[verb]
+    if verb == "simulate-measurements":
+        argv += ["--setups", "random:200"]
+    if verb in ("testvectors", "simulate-log"):
+        argv[-1] = {"testvectors": "100", "simulate-log": "1"}[verb]   # 100 vectors, 1000 records: past 2 kB
+    out = tmp_path / "out.dat"
+    out.write_text("old\n")
+    proc = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", *argv, "-o", str(out)], capture_output=True,
+                          text=True, preexec_fn=limit)
+    assert proc.returncode == 2, proc.stderr
+    assert f"error: {out}: cannot write" in proc.stderr and "File too large" in proc.stderr
+    assert out.read_text() == "old\n"
+    import os
+    assert not [f for f in os.listdir(tmp_path) if f.startswith(".")]   # no temporary file left

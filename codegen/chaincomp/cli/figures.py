@@ -10,6 +10,7 @@ import sys
 
 from ..display import DEFAULT_UNITS, display_unit
 from ..errors import ChaincompError
+from ..yamlsource import write_checked
 from ..units import UNITS
 
 ORDER_TEXT = {"1": "first-order", "2": "second-order", "exact": "exact",
@@ -87,8 +88,7 @@ def save(fig, path: str, **options) -> None:
 def write_file(path: str, data: bytes | str) -> None:
     """Write data to path; an OSError (also on close: a full disk) becomes a ChaincompError."""
     try:
-        with open(path, "wb") as f:
-            f.write(data.encode("utf-8") if isinstance(data, str) else data)
+        write_checked(path, data)   # beside it, then renamed: a full disk leaves no short image
     except OSError as exc:
         raise ChaincompError(f"cannot write: {exc.strerror or exc}", path) from None
 

@@ -4,15 +4,14 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
-import tempfile
 
 from .. import __version__
 from ..errors import ChaincompError
 from ..lint import lint
 from ..machine import load_machine
 from ..urdf import ERROR_MODES, machine_text
+from ..yamlsource import write_checked
 from .common import add_format_argument, check_output, number_list
 
 
@@ -81,21 +80,19 @@ def run(args) -> int:
                         reference)
     # Written beside the output and renamed over it only once it loads: a file that does
     # not load is a bug here, never left behind for the user.
-    folder = os.path.dirname(os.path.abspath(args.output))
-    fd, tmp = tempfile.mkstemp(prefix=".import-urdf-", suffix=".yaml", dir=folder)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
+    loaded = []
+
+    def check(tmp: str) -> None:
         try:
-            machine = load_machine(tmp)
+            loaded.append(load_machine(tmp))
         except ChaincompError as exc:
             raise RuntimeError(f"the machine file written does not load: {exc}") from None
-        findings = lint(machine)
-        os.replace(tmp, args.output)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    try:
+        write_checked(args.output, text, check)
+    except OSError as exc:
+        raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
+    machine = loaded[0]
+    findings = lint(machine)
     for f in findings:
         print(f"chaincomp import-urdf: {f.level}: {args.output}:{f}", file=sys.stderr)
     summary = {"output": args.output, "name": machine.name, "axes": [a.name for a in machine.axes],

@@ -7,6 +7,7 @@ import sys
 from .. import report
 from ..derive import derive
 from ..errors import ChaincompError
+from ..yamlsource import write_checked
 from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, add_order_argument,
                      check_output, load)
 
@@ -44,8 +45,7 @@ def run(args) -> int:
         sys.stdout.write(text)
         return 0
     try:
-        with open(args.output, "w", encoding="utf-8") as f:
-            f.write(text)
+        write_checked(args.output, text)
     except OSError as exc:
         raise ChaincompError(f"cannot write the report: {exc.strerror}", args.output) from None
     print(f"wrote {args.output} ({fmt}, {machine.name}, order {d.order})", file=sys.stderr)

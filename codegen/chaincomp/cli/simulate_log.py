@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import os
+import shutil
+import stat
 import sys
+import tempfile
 
 import lcm
 
@@ -16,6 +20,7 @@ from .common import add_machine_argument, check_output, integer, load, number
 MAX_CHANNEL = 63           # liblcm: LCM_MAX_CHANNEL_NAME_LENGTH
 MAX_AXES = 8               # lcmt_axis_command.axes, runtime kMaxAxes
 MAX_UTIME = 2**62          # int64 µs, with room for any duration after it
+_LOG_HEADER = 28           # an LCM log event: sync word, event number, utime, channel and data lengths
 
 
 def channel(text: str) -> str:
@@ -52,22 +57,56 @@ def run(args) -> int:
                              machine.file)
     types = import_lcmtypes()
     path = toolpath(machine, args.rate, args.seconds)
+    # liblcm's writer ignores a failed write (a full disk, /dev/full): count the bytes instead. Written
+    # beside the output and renamed over it once whole (a device or pipe is copied into instead: a
+    # rename would replace the node)
+    special = os.path.exists(args.output) and not stat.S_ISREG(os.stat(args.output).st_mode)
+    final = args.output if special else os.path.realpath(args.output)
+    fd, target = tempfile.mkstemp(suffix=".lcm", dir=None if special else os.path.dirname(final),
+                                  prefix="." + os.path.basename(final) + "-")
+    os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(target, 0o666 & ~umask)   # as open() would create it
     try:
-        log = lcm.EventLog(args.output, "w", overwrite=True)
-    except (IOError, OSError) as exc:
-        raise ChaincompError(f"cannot create {args.output!r}: {exc}") from None
-    msg = types.lcmt_axis_command()
-    msg.machine = machine.name
-    msg.num_axes = len(machine.axes)
-    step_us = 1e6 / args.rate
-    for i, row in enumerate(path):
-        msg.utime = args.start_utime + int(round(i * step_us))
-        msg.seq = i + 1
-        msg.axes = [float(v) for v in row] + [0.0] * (8 - len(row))
-        log.write_event(msg.utime, args.channel, msg.encode())
-        if i and i % 200000 == 0:
-            print(f"simulate-log: {i}/{len(path)} records", file=sys.stderr)
-    log.close()
+        try:
+            log = lcm.EventLog(target, "w", overwrite=True)
+        except (IOError, OSError) as exc:
+            raise ChaincompError(f"cannot create {args.output!r}: {exc}") from None
+        msg = types.lcmt_axis_command()
+        msg.machine = machine.name
+        msg.num_axes = len(machine.axes)
+        step_us = 1e6 / args.rate
+        expected = 0
+        try:
+            for i, row in enumerate(path):
+                msg.utime = args.start_utime + int(round(i * step_us))
+                msg.seq = i + 1
+                msg.axes = [float(v) for v in row] + [0.0] * (8 - len(row))
+                data = msg.encode()
+                log.write_event(msg.utime, args.channel, data)
+                expected += _LOG_HEADER + len(args.channel.encode()) + len(data)
+                if i and i % 200000 == 0:
+                    print(f"simulate-log: {i}/{len(path)} records", file=sys.stderr)
+        except OSError as exc:   # liblcm reports some failures (a file too large), not all (a full disk)
+            log.close()
+            raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
+        log.close()
+        written = os.path.getsize(target)
+        if written != expected:   # never a short log that replay would read as the whole run
+            raise ChaincompError(f"cannot write: {written} of {expected} bytes written (is the disk full?)",
+                                 args.output)
+        try:
+            if special:
+                with open(target, "rb") as src, open(final, "wb") as dst:
+                    shutil.copyfileobj(src, dst)
+            else:
+                os.replace(target, final)
+        except OSError as exc:
+            raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
+    finally:
+        if os.path.exists(target):
+            os.remove(target)
     print(f"simulate-log: {len(path)} commands of {machine.name} at {args.rate:g} Hz -> {args.output}",
           file=sys.stderr)
     return 0

@@ -10,6 +10,7 @@ import mpmath
 from ..jets import JetModel
 from ..numeric import ExactModel
 from ..errors import ChaincompError
+from ..yamlsource import write_checked
 from .common import add_machine_argument, add_seed_argument, check_output, integer, load
 
 # Realistic error sizes: lengths of a few µm, angles of a few arcsec (internal units).
@@ -62,8 +63,7 @@ def run(args) -> int:
                                  "expressions leave their domain within the axis limits", machine.file)
         lines.append(" ".join(" ".join(repr(float(v)) for v in row) for row in rows))
     try:
-        with open(args.output, "w", encoding="utf-8") as f:
-            f.write("\n".join(lines) + "\n")
+        write_checked(args.output, "\n".join(lines) + "\n")
     except OSError as exc:
         raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
     return 0
