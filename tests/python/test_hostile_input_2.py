@@ -557,3 +557,17 @@ def test_a_write_that_fails_midway_leaves_the_old_file_whole(tmp_path, verb):
     assert out.read_text() == "old\n"
     import os
     assert not [f for f in os.listdir(tmp_path) if f.startswith(".")]   # no temporary file left
+
+
+def test_identify_a_column_in_another_unit_is_named_as_the_likely_cause(tmp_path):
+    """B written in rad where the machine declares deg: every B is inside the limits, so no
+    warning; the fit cannot converge (the model puts the tool 100 mm away), and the message
+    now says what such a residual usually is."""
+    machine = _write(tmp_path, "m.yaml", M4)
+    rows = _nominal_rows()
+    for r in rows:
+        r[3] = repr(math.radians(float(r[3])))
+    meas = _write(tmp_path, "meas.csv", "X,Y,Z,B,x,y,z\n" + "".join(",".join(r) + "\n" for r in rows))
+    err = _refused("identify", machine, meas, "--assume-zero", "EXB,EBB", match="the fit did not converge")
+    assert ("a residual this large is most often a column in another unit (the axes are read in their declared "
+            "units, X in mm, Y in mm, Z in mm, B in deg; x, y, z in mm)") in err

@@ -201,9 +201,13 @@ def run(args) -> int:
     fit = identify(machine, table, assume, sigma, vary=vary, smooth=args.smooth, minimal=args.minimal,
                    prefer=prefer, progress=lambda text: print(f"chaincomp identify: {text}", file=sys.stderr))
     if not fit.converged:
+        units = ", ".join(f"{s.name} in {s.unit.name}" for s in machine.axes)
+        hint = (f": a residual this large is most often a column in another unit (the axes are read in their "
+                f"declared units, {units}; x, y, z in {machine.length_unit}) or another machine's measurements"
+                if fit.rms > 1.0 else "")   # 1 mm: no geometric error of a machine is that large
         raise ChaincompError(f"the fit did not converge in {fit.iterations} Gauss-Newton iterations "
                              f"(rms residual {fit.rms / UNITS[machine.length_unit].to_internal:.4g} "
-                             f"{machine.length_unit}); no values given", args.measurements)
+                             f"{machine.length_unit}); no values given{hint}", args.measurements)
     print(json_text(to_json(fit, args.measurements)) if args.format == "json"
           else to_text(fit, args.measurements, args.units))
     if args.output:
