@@ -89,7 +89,33 @@ def lint(machine: Machine, model: ExactModel | None = None) -> list[Finding]:
         else:
             message = f"axis {s.name} never moves the {what} (line {line})"
         findings.append(Finding("warning", message, s.line, f"symbols.{s.name}"))
-    return findings + _parallel_axes(machine)
+    return _limit_units(machine) + findings + _parallel_axes(machine)
+
+
+# limits in rad written for an axis declared in deg (or the other way round): pi/2, pi, 2 pi
+# as degrees, or 90, 180, 360 as radians (14, 29, 57 turns)
+_RAD_LIKE = {math.pi / 2: "pi/2", math.pi: "pi", 2 * math.pi: "2 pi"}
+_DEG_LIKE = (90.0, 180.0, 270.0, 360.0, 720.0)
+
+
+def _limit_units(machine: Machine) -> list[Finding]:
+    """An angular axis whose limits read as written in the other unit of angle."""
+    out = []
+    for s in machine.axes:
+        lo, hi = s.limits
+        if s.unit.name == "deg":
+            words = ["0" if x == 0 else next((("-" if x < 0 else "") + w for v, w in _RAD_LIKE.items()
+                                               if abs(abs(x) - v) <= 5e-3 * v), None) for x in (lo, hi)]
+            if None not in words and words != ["0", "0"]:
+                out.append(Finding("warning", f"axis {s.name}'s limits [{lo:g}, {hi:g}] deg look like radians "
+                                              f"({', '.join(words)}): a travel of only {hi - lo:.3g} deg; if they "
+                                              f"are radians, write [{math.degrees(lo):.4g}, {math.degrees(hi):.4g}] "
+                                              "or declare the axis in rad", s.line, f"symbols.{s.name}.limits"))
+        elif s.unit.name == "rad" and any(abs(abs(x) - v) < 1e-9 for x in (lo, hi) for v in _DEG_LIKE):
+            out.append(Finding("warning", f"axis {s.name}'s limits [{lo:g}, {hi:g}] rad are {(hi - lo) / (2 * math.pi):.3g} "
+                                          f"turns: if they are degrees, declare the axis in deg",
+                               s.line, f"symbols.{s.name}.limits"))
+    return out
 
 
 def _parallel_axes(machine: Machine) -> list[Finding]:

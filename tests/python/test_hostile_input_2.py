@@ -571,3 +571,30 @@ def test_identify_a_column_in_another_unit_is_named_as_the_likely_cause(tmp_path
     err = _refused("identify", machine, meas, "--assume-zero", "EXB,EBB", match="the fit did not converge")
     assert ("a residual this large is most often a column in another unit (the axes are read in their declared "
             "units, X in mm, Y in mm, Z in mm, B in deg; x, y, z in mm)") in err
+
+
+# ----------------------------------------------------------------------------- limits in the other angle unit
+
+@pytest.mark.parametrize("unit, limits, message", [
+    ("deg", "[-3.14159, 3.14159]", "axis B's limits [-3.14159, 3.14159] deg look like radians (-pi, pi): a travel "
+                                   "of only 6.28 deg; if they are radians, write [-180, 180] or declare the axis in rad"),
+    ("deg", "[0, 6.2832]", "deg look like radians (0, 2 pi): a travel of only 6.28 deg; if they are radians, write "
+                           "[0, 360]"),
+    ("deg", "[-1.5708, 1.5708]", "look like radians (-pi/2, pi/2)"),
+    ("rad", "[-180, 180]", "axis B's limits [-180, 180] rad are 57.3 turns: if they are degrees, declare the axis "
+                           "in deg"),
+    ("deg", "[-3, 3]", None), ("deg", "[-90, 90]", None), ("rad", "[-3.1416, 3.1416]", None),
+])
+def test_lint_warns_of_limits_written_in_the_other_angle_unit(tmp_path, unit, limits, message):
+    """B in deg with limits [-3.14159, 3.14159]: every random set-up, every protocol angle and
+    every plot then stays within +-3 deg, without a word. 180/pi = 57.2958 (by hand)."""
+    text = _edited(M4, "{name: B, role: axis, unit: deg, limits: [-90, 90]}",
+                   f"{{name: B, role: axis, unit: {unit}, limits: {limits}}}")
+    proc = cli("lint", _write(tmp_path, "m.yaml", text))
+    assert proc.returncode == 0
+    if message is None:
+        assert "limits" not in proc.stderr
+    else:
+        assert f"chaincomp lint: warning: {tmp_path / 'm.yaml'}:10: symbols.B.limits: " in proc.stderr
+        assert message in proc.stderr
+        assert cli("lint", _write(tmp_path, "m.yaml", text), "--strict", check=False).returncode == 2
