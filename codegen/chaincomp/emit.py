@@ -423,7 +423,7 @@ def _header(machine, banner, n, pose_size, corr_dir, order, n_pre, src_hash, src
                  f"{s.unit.to_internal!r}, {nominal!r}}},")
     L += ["};",
           f"inline constexpr MachineInfo kInfo = {{kName, kSourceHash, \"{src_file}\", kNumAxes, kAxes, "
-          "kNumParams, kParams, kPoseSize, kCorrectsDirection};", "",
+          f"kNumParams, kParams, kPoseSize, kCorrectsDirection, {'true' if shape[4] else 'false'}}};", "",
           "// Parameters from / to an array in kParams order.",
           "Params params_from_array(const double* v) noexcept;",
           "void params_to_array(const Params& p, double* v) noexcept;",

@@ -94,9 +94,7 @@ void Compensator::residual_at(const double* q, const std::array<double, kMaxAxes
   residual[0] = distance(0);
   residual[1] = 0.0;
   if (!entry_.info->corrects_direction) return;
-  int rotary = 0;
-  for (int i = 0; i < n_; ++i) rotary += entry_.info->axes[i].kind == UnitKind::kAngle ? 1 : 0;
-  if (entry_.info->pose_size != 9 || rotary < 3) {
+  if (!entry_.info->corrects_orientation) {
     residual[1] = distance(3);
     return;
   }

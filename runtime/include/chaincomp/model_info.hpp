@@ -42,8 +42,9 @@ struct MachineInfo {
   const ParamInfo* params;
   int pose_size;              // 3 (tool point), 6 (point, tool direction) or 9 (point, direction,
                               // the tool frame's x axis: a six-DOF frame)
-  bool corrects_direction;    // compensation also corrects the tool direction (with a frame and
-                              // three or more rotary axes: the full orientation, compensate.hpp)
+  bool corrects_direction;    // compensation also corrects the tool direction
+  bool corrects_orientation;  // ... and, with a frame and three or more rotary axes, the full
+                              // orientation (compensate.hpp's kCorrectsOrientation)
 };
 
 // Type-erased entry points of one generated model; buffers are in internal units.
