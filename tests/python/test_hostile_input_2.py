@@ -598,3 +598,21 @@ def test_lint_warns_of_limits_written_in_the_other_angle_unit(tmp_path, unit, li
         assert f"chaincomp lint: warning: {tmp_path / 'm.yaml'}:10: symbols.B.limits: " in proc.stderr
         assert message in proc.stderr
         assert cli("lint", _write(tmp_path, "m.yaml", text), "--strict", check=False).returncode == 2
+
+
+def test_a_constant_or_error_beyond_the_limits_the_machine_file_gives_it_warns(tmp_path):
+    """The loader checks a constant's nominal against its limits, but a --params or --set value
+    beyond them went without a word (axes warn)."""
+    text = _edited(M4, "{name: L, role: constant, unit: mm, nominal: 120}",
+                   "{name: L, role: constant, unit: mm, nominal: 120, limits: [100, 200]}")
+    text = _edited(text, "{name: EXX, role: error, unit: um}", "{name: EXX, role: error, unit: um, limits: [-5, 5]}")
+    path = _write(tmp_path, "m.yaml", text)
+    params = _write(tmp_path, "p.yaml", "machine: m4\nvalues:\n  L: 500 mm\n  EXX: 50 um\n")
+    proc = cli("eval", path, "--params", params, "--json")
+    assert f"chaincomp: warning: constant L = 500 mm is outside its limits [100, 200] ({path}:11)" in proc.stderr
+    assert f"chaincomp: warning: error EXX = 50 um is outside its limits [-5, 5] ({path}:12)" in proc.stderr
+    # the values are used as given: the tool 500 mm below, moved 50 um in x
+    out = json.loads(proc.stdout)
+    assert out["position"] == pytest.approx([0, 0, -500])
+    assert out["error"]["exact"] == pytest.approx([0.05, 0, 0])
+    assert "warning" not in cli("eval", path, "--set", "L=150", "--set", "EXX=1").stderr

@@ -109,12 +109,14 @@ def values_for(machine: Machine, params_path: str | None, sets: list[str]) -> tu
         given.update(load_params(params_path, machine))
     given.update(parse_sets(sets, machine))
     values.update(given)
-    for s in machine.axes:
+    for s in machine.symbols:   # axes; and constants or errors the machine file gives limits too
+        if s.limits is None or not isinstance(values.get(s.name), (int, float)):
+            continue   # an error given as a table or polynomial varies: its values are not one number
         v = s.from_internal(values[s.name])
         lo, hi = s.limits
         if not lo <= v <= hi:
-            print(f"chaincomp: warning: axis {s.name} = {v:g} {s.unit.name} is outside its limits "
-                  f"[{lo:g}, {hi:g}]", file=sys.stderr)
+            print(f"chaincomp: warning: {s.role} {s.name} = {v:g} {s.unit.name} is outside its limits "
+                  f"[{lo:g}, {hi:g}]" + (f" ({machine.file}:{s.line})" if s.role != "axis" else ""), file=sys.stderr)
     has_errors = any(machine.symbol(n).role == "error" for n in given)
     return values, has_errors
 
