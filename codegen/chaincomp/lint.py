@@ -112,8 +112,9 @@ def _limit_units(machine: Machine) -> list[Finding]:
                                               f"are radians, write [{math.degrees(lo):.4g}, {math.degrees(hi):.4g}] "
                                               "or declare the axis in rad", s.line, f"symbols.{s.name}.limits"))
         elif s.unit.name == "rad" and any(abs(abs(x) - v) < 1e-9 for x in (lo, hi) for v in _DEG_LIKE):
-            out.append(Finding("warning", f"axis {s.name}'s limits [{lo:g}, {hi:g}] rad are {(hi - lo) / (2 * math.pi):.3g} "
-                                          f"turns: if they are degrees, declare the axis in deg",
+            turns = (hi - lo) / (2 * math.pi)
+            out.append(Finding("warning", f"axis {s.name}'s limits [{lo:g}, {hi:g}] rad are {turns:.3g} turns: if "
+                                          "they are degrees, declare the axis in deg",
                                s.line, f"symbols.{s.name}.limits"))
     return out
 

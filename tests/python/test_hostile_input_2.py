@@ -233,7 +233,8 @@ def test_a_root_above_the_base_is_no_cycle(tmp_path):
     ("limit", '<limit lower="-0.2" upper="0.5" effort="1" velocity="1"/>',
      '<limit lower="-0.2" upper="0.5" effort="1" velocity="1"/>\n    <limit lower="-1" upper="1" effort="1" '
      'velocity="1"/>'),
-    ("child", '<parent link="l1"/><child link="l2"/>', '<parent link="l1"/><child link="l2"/>\n    <child link="tip"/>'),
+    ("child", '<parent link="l1"/><child link="l2"/>',
+     '<parent link="l1"/><child link="l2"/>\n    <child link="tip"/>'),
 ])
 def test_a_joint_element_given_twice_is_refused(tmp_path, element, old, new):
     """yourdfpy takes the first and drops the rest: a second <origin> (a user's correction
@@ -360,7 +361,8 @@ def _nominal_rows() -> list[list[str]]:
     rows = []
     for x, b in ((-300, -90), (0, 0), (300, 90), (100, 30), (-50, -45)):
         rb = math.radians(b)
-        rows.append([f"{x}", "10", "-100", f"{b}", f"{x - 120 * math.sin(rb)!r}", "10", f"{-100 - 120 * math.cos(rb)!r}"])
+        rows.append([f"{x}", "10", "-100", f"{b}", f"{x - 120 * math.sin(rb)!r}", "10",
+                     f"{-100 - 120 * math.cos(rb)!r}"])
     return rows
 
 
@@ -577,7 +579,8 @@ def test_identify_a_column_in_another_unit_is_named_as_the_likely_cause(tmp_path
 
 @pytest.mark.parametrize("unit, limits, message", [
     ("deg", "[-3.14159, 3.14159]", "axis B's limits [-3.14159, 3.14159] deg look like radians (-pi, pi): a travel "
-                                   "of only 6.28 deg; if they are radians, write [-180, 180] or declare the axis in rad"),
+                                   "of only 6.28 deg; if they are radians, write [-180, 180] or declare the axis "
+                                   "in rad"),
     ("deg", "[0, 6.2832]", "deg look like radians (0, 2 pi): a travel of only 6.28 deg; if they are radians, write "
                            "[0, 360]"),
     ("deg", "[-1.5708, 1.5708]", "look like radians (-pi/2, pi/2)"),
