@@ -292,11 +292,11 @@ struct Core {
   struct State {
     Pose target, pose;
     Jacobian jacobian;
-    Eigen::Matrix<double, R, N> weighted;     // the Jacobian as factorised
-    Eigen::Matrix<double, N, R> step_matrix;  // (J^T J)^-1 J^T: a step is step_matrix * r
-    // Where the step pulls the correction towards the command (a redundant machine, a damped
-    // step): the step adds pull * (q - command).
-    Eigen::Matrix<double, N, N> pull;
+    Eigen::Matrix<double, R, N> weighted;  // the Jacobian as factorised
+    // J^T J + levenberg I, factorised: a step solves it for J^T r (+ levenberg (q - command)
+    // on a redundant machine: the pull towards the command)
+    SmallLdlt<N> factor;
+    double levenberg = 0;
     bool warm = false;  // the last call ended corrected (ok), with every axis free
     const void* warm_model = nullptr;  // the model of that call
     Axes last_command, last_corrected;
@@ -360,14 +360,15 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
   // The actual pose (and its Jacobian) at q. sin and cos of the angular axes at the command:
   // the library's once per call, the iterates' from them.
   axis_trig<N, Angles>(command, ws.command_trig);
-  auto pose_at = [&](const Axes& q) {
+  auto trig_at = [&](const Axes& q) -> const Trig& {
+    if (q == command) return ws.command_trig;  // the cold start's Jacobian, the damped pass' residual
     axis_trig_near<N, Angles>(command, ws.command_trig, q, ws.trig);
-    m.pose_exact(m.context, q, ws.trig, ws.pose);
+    return ws.trig;
   };
+  auto pose_at = [&](const Axes& q) { m.pose_exact(m.context, q, trig_at(q), ws.pose); };
   auto jacobian_at = [&](const Axes& q) {
     ws.jacobian_axes = q;
-    axis_trig_near<N, Angles>(command, ws.command_trig, q, ws.trig);
-    m.pose_jacobian(m.context, q, ws.trig, ws.pose, ws.jacobian);
+    m.pose_jacobian(m.context, q, trig_at(q), ws.pose, ws.jacobian);
   };
 
   m.pose_nominal(m.context, command, ws.command_trig, ws.target);
@@ -377,7 +378,6 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
   // three digits) and one factorisation per call, or none, keeps the cost low. A large step
   // (near a singular pose) takes a fresh Jacobian.
   auto& J = ws.weighted;
-  auto& step_matrix = ws.step_matrix;
   // With a frame: the target's z and y axes, which the orientation rows are taken against.
   Eigen::Vector3d target_z = Eigen::Vector3d::Zero(), target_y = Eigen::Vector3d::Zero();
   if constexpr (O) {
@@ -385,7 +385,6 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
     target_y = cross3(target_z, ws.target.template segment<3>(6));
   }
   Square A;  // J^T J (lower triangle, with the tiny Levenberg term) of the last Jacobian
-  SmallLdlt<n> ldlt;
   bool damping = false;  // the steps are damped ones (the second pass)
   bool damped_factored = false;  // damped_ldlt holds A + lambda D of this Jacobian
   auto factorise = [&]() {
@@ -403,16 +402,10 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
       for (int i = j; i < n; ++i) A(i, j) = J.col(i).dot(J.col(j));
     }
     // A tiny Levenberg term keeps the step defined where an axis has no effect.
-    const double levenberg = 1e-14 * (1.0 + A.diagonal().maxCoeff());
-    A.diagonal().array() += levenberg;
+    ws.levenberg = 1e-14 * (1.0 + A.diagonal().maxCoeff());
+    A.diagonal().array() += ws.levenberg;
     damped_factored = false;
-    if (!ldlt.compute(A)) return false;
-    step_matrix = ldlt.solve(Eigen::Matrix<double, n, rows>(J.transpose()));
-    // More axes than conditions: the Levenberg term's pull, (A + l I)^-1 l, removes the
-    // correction's part along the Jacobian's null space, so that the iteration ends on the
-    // correction closest to the command whatever it starts from.
-    if constexpr (kRedundant) ws.pull = ldlt.solve(Square(Square::Identity() * levenberg));
-    return true;
+    return ws.factor.compute(A);
   };
   // A damped step: the correction d minimising |P (J (d - (q - c)) + r)|^2 + lambda d^T D d of
   // the model linearised at q (above), lambda kept for the pass. P weights the point rows by
@@ -472,7 +465,7 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
   };
   bool clamped = false;  // an axis was held at its bound
   bool settled = false;  // the last pass ended within tolerance or on a step too small to matter
-  // One pass of steps from q (ws.pose at q, a factorisation in step_matrix or from the
+  // One pass of steps from q (ws.pose at q, a factorisation in ws.factor or from the
   // command), undamped or with `lambda`; kOk, or the failure.
   auto run = [&]() {
     double last_move = std::numeric_limits<double>::infinity();  // the last step's largest axis move, as a fraction of its bound
@@ -494,8 +487,12 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
         if (!damped_correction(q, r, d)) return Status::kSingular;
         delta = (q - command) - d;
       } else {
-        delta = step_matrix * r;
-        if constexpr (kRedundant) delta += ws.pull * (q - command);
+        // More axes than conditions: the Levenberg term's pull, (A + l I)^-1 l (q - c), removes
+        // the correction's part along the Jacobian's null space, so that the iteration ends
+        // on the correction closest to the command whatever it starts from.
+        Axes g = J.transpose() * r;
+        if constexpr (kRedundant) g += ws.levenberg * (q - command);
+        delta = ws.factor.solve(g);
       }
       // A step that would move the pose by less than a tenth of the tolerance: what is left
       // cannot be corrected (fewer correctable DOF than errors, or a damped singular pose).
