@@ -44,7 +44,8 @@ def parse_value(sym: Symbol, raw) -> float:
     if not math.isfinite(value):
         raise ValueError(f"expected a finite number, got {raw!r}")
     if unit.kind != sym.unit.kind:
-        raise ValueError(f"unit {unit.name!r} is a {unit.kind} unit but {sym.name} is declared in "
+        raise ValueError(f"unit {unit.name!r} is {'an' if unit.kind == 'angle' else 'a'} {unit.kind} unit but "
+                         f"{sym.name} is declared in "
                          f"{sym.unit.name!r} ({sym.unit.kind})")
     internal = value * unit.to_internal
     if not abs(internal) <= MAX_LITERAL:

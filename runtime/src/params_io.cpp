@@ -84,7 +84,8 @@ bool parse_value(const ParamInfo& p, const YAML::Node& node, double& out, std::s
     return false;
   }
   if (unit_kind != p.kind) {
-    why = std::string("unit '") + unit_name + "' is a " + kind_name(unit_kind) + " unit but " + p.name +
+    why = std::string("unit '") + unit_name + (unit_kind == UnitKind::kAngle ? "' is an " : "' is a ") +
+          kind_name(unit_kind) + " unit but " + p.name +
           " is declared in '" + p.unit + "' (" + kind_name(p.kind) + ")";
     return false;
   }

@@ -73,7 +73,7 @@ TEST_CASE("bad params files name file, line and key", "[params]") {
   };
   const Case cases[] = {
       {"values:\n  Nope: 1\n", ":2: values.Nope", "unknown symbol"},
-      {"values:\n  Ocx: 1\n  Ocy: 2 arcsec\n", ":3: values.Ocy", "is a angle unit"},
+      {"values:\n  Ocx: 1\n  Ocy: 2 arcsec\n", ":3: values.Ocy", "is an angle unit"},
       {"values:\n  Ocx: .nan\n", ":2: values.Ocx", "expected a"},
       {"values:\n  Ocx:\n", ":2: values.Ocx", "missing value"},
       {"values:\n  Ocx: 1 furlong\n", ":2: values.Ocx", "unknown unit"},

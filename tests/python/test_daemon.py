@@ -33,7 +33,7 @@ def test_daemon_help():
     (lambda t: ["--machine", machine_path("five_axis_ac"), "--params", PARAMS, "--model", str(t / "none.so")],
      "none.so: cannot load"),
     (lambda t: ["--machine", machine_path("five_axis_ac"), "--params", _write(t, "p.yaml", "values:\n  EXX: 1 deg\n")],
-     "p.yaml:2: values.EXX: unit 'deg' is a angle unit"),
+     "p.yaml:2: values.EXX: unit 'deg' is an angle unit"),
     (lambda t: ["--machine", machine_path("five_axis_ac"), "--params", PARAMS, "--config",
                 _write(t, "r.yaml", "status_period: fast\n")], "r.yaml:1: status_period: expected a number"),
     (lambda t: ["--machine", machine_path("five_axis_ac"), "--params", PARAMS, "--config",

@@ -66,3 +66,22 @@ def test_long_chain_straight_line_code_is_byte_identical_across_runs(tmp_path):
                        check=True, capture_output=True, cwd=ROOT, env=env)
         outs.append({f: (out / f).read_bytes() for f in sorted(os.listdir(out))})
     assert outs[0] == outs[1] and sorted(outs[0]) == ["ur5.cpp", "ur5.hpp"]
+
+
+def test_a_write_that_fails_midway_leaves_the_old_header_whole(tmp_path):
+    """A file size limit of 3 kB (RLIMIT_FSIZE, as a full disk would): before, generate exited 2
+    but left the first 3000 bytes of the header, which a build then read as the model."""
+    import resource
+    import signal
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (3000, 3000))
+    out = tmp_path / "gen"
+    out.mkdir()
+    (out / "me220_xz.hpp").write_text("old\n")
+    proc = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "generate", machine_path("me220_xz"), "-o",
+                           str(out)], capture_output=True, text=True, cwd=ROOT, preexec_fn=limit)
+    assert proc.returncode == 2 and "cannot write" in proc.stderr and "File too large" in proc.stderr, proc.stderr
+    assert (out / "me220_xz.hpp").read_text() == "old\n"
+    assert not [f for f in os.listdir(out) if f.startswith(".")]   # no temporary file left

@@ -8,6 +8,7 @@ import time
 
 from ..emit import generate, registry, solver_shape, solvers
 from ..errors import ChaincompError
+from ..yamlsource import write_checked
 from .common import add_order_argument, check_output, load
 
 
@@ -63,7 +64,6 @@ def run(args) -> int:
 
 def _write(path: str, text: str) -> None:
     try:
-        with open(path, "w", encoding="utf-8", newline="\n") as f:
-            f.write(text)
+        write_checked(path, text)  # whole or not at all: a full disk leaves no short header
     except OSError as exc:
         raise ChaincompError(f"cannot write {path!r}: {exc.strerror}") from None
