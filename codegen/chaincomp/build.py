@@ -139,10 +139,20 @@ def _solver_object(machine, tc: Toolchain, root: str) -> str:
     shape: a model's own compile leaves it out (CHAINCOMP_PREBUILT_CORE). Built under a
     lock and renamed into place, as the models."""
     shape = solver_shape(machine)
-    include = next(d for d in tc.include_dirs if d.endswith(os.path.join("runtime", "include")))
+    text = solvers([shape])
+    include = next((d for d in tc.include_dirs if os.path.isfile(os.path.join(d, "chaincomp", "compensate.hpp"))),
+                   None)
+    if include is None:
+        raise ChaincompError(f"no chaincomp/compensate.hpp under the include folders of "
+                             f"{os.path.join(build_dir(), 'model_build.json')} ({', '.join(tc.include_dirs)}): "
+                             f"re-configure the C++ build (tools/setup)")
     headers = os.path.join(include, "chaincomp")
-    key = tc.key().encode("utf-8")
+    # the key: the toolchain, the solver's source and every runtime header (a header changed
+    # by an update compiles a new solver; the old one stays for the models linked with it)
+    key = tc.key().encode("utf-8") + b"\0" + text.encode("utf-8")
     for fname in sorted(os.listdir(headers)):
+        if not fname.endswith(".hpp") or not os.path.isfile(os.path.join(headers, fname)):
+            continue  # an editor's backup or a folder is no header the solver includes
         with open(os.path.join(headers, fname), "rb") as f:
             key += b"\0" + fname.encode("utf-8") + b"\0" + f.read()
     folder = os.path.join(root, f"solvers-{fnv1a64(key):016x}")
@@ -156,7 +166,9 @@ def _solver_object(machine, tc: Toolchain, root: str) -> str:
     except OSError as exc:
         raise ChaincompError(f"cannot write the model cache {root}: {exc.strerror}") from None
     with lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not _try_lock(lock):
+            _say(f"{machine.name}: another build is making the compensation solver of this shape; waiting for it")
+            fcntl.flock(lock, fcntl.LOCK_EX)
         if os.path.exists(path):
             return path
         start = time.monotonic()
@@ -164,17 +176,31 @@ def _solver_object(machine, tc: Toolchain, root: str) -> str:
              f"rotary, pose {p}, {r} rows), once for every model of that shape")
         source = path[:-2] + ".cpp"
         with open(source, "w", encoding="utf-8", newline="\n") as f:
-            f.write(solvers([shape]))
+            f.write(text)
         tmp = path + ".tmp"
-        proc = subprocess.run([tc.compiler, *tc.flags, *(f"-I{d}" for d in tc.include_dirs), "-c", source, "-o", tmp],
-                              capture_output=True, text=True)
-        if proc.returncode != 0:
-            lines = proc.stderr.splitlines()
-            first = next((ln for ln in lines if "error" in ln), lines[0] if lines else "no message")
-            raise ChaincompError(f"{tc.compiler} failed on the compensation solver: {first}")
-        os.rename(tmp, path)
+        try:
+            proc = subprocess.run([tc.compiler, *tc.flags, *(f"-I{d}" for d in tc.include_dirs), "-c", source,
+                                   "-o", tmp], capture_output=True, text=True)
+            if proc.returncode != 0:
+                raise ChaincompError(f"{tc.compiler} failed on the compensation solver ({source}): "
+                                     f"{_first_error(proc)}")
+            os.rename(tmp, path)
+        finally:
+            if os.path.lexists(tmp):
+                os.unlink(tmp)  # a failed or killed compile leaves no half object
         _say(f"{machine.name}: solver built in {time.monotonic() - start:.1f} s")
     return path
+
+
+def _first_error(proc) -> str:
+    """The compiler's first line naming an error, else its first line, else how it ended."""
+    lines = proc.stderr.splitlines()
+    first = next((ln for ln in lines if "error" in ln), lines[0] if lines else None)
+    if first is not None:
+        return first
+    if proc.returncode < 0:
+        return f"killed by signal {-proc.returncode}, no message"
+    return f"exit status {proc.returncode}, no message"
 
 
 def _compile(machine, source: bytes, tc: Toolchain, folder: str) -> None:
@@ -195,9 +221,7 @@ def _compile(machine, source: bytes, tc: Toolchain, folder: str) -> None:
            f"{name}.cpp", "library.cpp", solver, *tc.link_flags, "-o", f"{name}.so"]
     proc = subprocess.run(cmd, cwd=folder, capture_output=True, text=True)
     if proc.returncode != 0:
-        lines = proc.stderr.splitlines()
-        first = next((ln for ln in lines if "error" in ln), lines[0] if lines else "no message")
-        raise ChaincompError(f"{tc.compiler} failed on the generated code of {name}: {first}")
+        raise ChaincompError(f"{tc.compiler} failed on the generated code of {name}: {_first_error(proc)}")
     _say(f"{name}: compiled in {time.monotonic() - start:.1f} s")
 
 
