@@ -160,6 +160,10 @@ class RingPrinter:
     def _mul_str(self, c: Fraction, v: tuple) -> str:
         if not any(v):
             return str(sp.Rational(c.numerator, c.denominator))
+        if c == 1 and sum(1 for e in v if e) == 1 and min(v) < -1:
+            # a lone Pow, not a Mul: sympy's str prints tan(A)**(-2), not 1/tan(A)**2
+            p = next(p for p, e in enumerate(v) if e)
+            return self._factor(self._str, str, p, v[p])
         sign = "-" if c < 0 else ""
         c = abs(c)
         num = [str(c.numerator)] if c.numerator != 1 else []

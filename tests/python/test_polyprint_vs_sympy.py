@@ -1,0 +1,205 @@
+"""chaincomp.polyprint against sympy's own printers, on generated series.
+
+``chaincomp derive`` prints its formulas straight from the series' ring terms
+(chaincomp.polyprint), imitating ``str`` and ``sympy.latex`` of the expressions it used to
+build: ``collect(expand(...), errors)`` of each error term, the nominal sums, their ``diff``
+in each axis, the gain matrix's coefficients (cli/derive.py's ``_report_sympy``). Here
+hypothesis builds series of the kind a derivation holds: monomials in error symbols (names
+sympy sorts and typesets in non-obvious ways: digits, underscores, Greek names, uppercase
+before lowercase) of degree 0 to 4, each with a coefficient that is a polynomial over the
+rationals in large symbols and atoms (sin, cos, 1/tan, 1/cos of angles), and compares
+polyprint's text and LaTeX, through the entry points cli/derive.py calls, with sympy's
+printing of the same series turned into sympy expressions the old way (Derivation.expr,
+degree_part, collect(expand(..)), sp.diff). sympy is the truth: nothing here comes from
+polyprint's own output.
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import pytest
+import sympy as sp
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from sympy.polys.domains import QQ
+from sympy.polys.rings import ring as poly_ring
+
+from chaincomp.derive import Derivation
+from chaincomp.polyprint import RingPrinter, shown_collected, shown_plain
+
+# Error names: digits (dx1 < dx10 < dx2), underscores (sorted between upper and lower case),
+# Greek names sympy typesets (\alpha, \Delta), names sympy's LaTeX splits (e_b2 -> e_{b2},
+# dalpha6 -> dalpha_{6}, x__1 a superscript), modifiers (xdot, vhat), ISO-style EX0A.
+ERROR_NAMES = ["dx1", "dx10", "dx2", "dx_1", "EX0A", "EXX", "EX1", "E_X", "e_b2", "eb", "dalpha6",
+               "alpha", "Delta1", "beta_2", "dtheta", "theta0", "omega", "phi1", "psi", "epsilon",
+               "ex", "ey", "ez", "a_0", "Z_", "zz", "mu", "x__1", "xdot", "vhat", "ThetaAs", "Oas",
+               "DY", "lamda", "Gamma", "d_x", "dA", "da"]
+# Large symbols (lengths, constants) and axis angles
+LARGE_NAMES = ["L", "a2", "d4", "G", "e", "b", "Lz", "alpha2", "X", "Y", "Z", "Ap", "Cp", "A", "C",
+               "q1", "q2", "q10", "Yp", "theta1", "r_1", "aa"]
+
+COEFFS = [Fraction(1), Fraction(-1), Fraction(2), Fraction(-2), Fraction(1, 2), Fraction(-1, 2),
+          Fraction(3, 7), Fraction(-3, 7), Fraction(10 ** 6), Fraction(-10 ** 6),
+          Fraction(123456789012345), Fraction(1, 10 ** 6), Fraction(-1000000, 3), Fraction(5, 4),
+          Fraction(7), Fraction(-1, 3), Fraction(1, 180), Fraction(254, 10), Fraction(10 ** 15), Fraction(-7, 10 ** 15),
+          Fraction(2 ** 70 + 1, 3)]
+
+# atoms: what chaincomp.series.Atoms makes of functions of large symbols
+ATOM_KINDS = ["sin", "cos", "sin", "cos", "tan", "1/tan", "1/cos", "1/sin", "1/tan**2", "atan", "asin",
+              "acos", "atan2"]
+
+
+def _atom(kind: str, x: sp.Symbol) -> sp.Expr:
+    if kind == "1/tan**2":
+        return sp.tan(x) ** -2
+    if kind == "atan2":
+        return sp.atan2(x, sp.Symbol("L", real=True))
+    if kind.startswith("1/"):
+        return getattr(sp, kind[2:])(x) ** -1
+    return getattr(sp, kind)(x)
+
+
+@st.composite
+def problems(draw):
+    names = draw(st.permutations(ERROR_NAMES))
+    n_err = draw(st.integers(1, 5))
+    errors = list(names[:n_err])                                      # the machine's order
+    large_names = [n for n in draw(st.permutations(LARGE_NAMES)) if n not in errors]
+    n_large = draw(st.integers(0, 4))
+    large = [sp.Symbol(n, real=True) for n in large_names[:n_large]]
+    angles = large_names[n_large:n_large + draw(st.integers(0, 3))]
+    atoms = []
+    for a in angles:
+        x = sp.Symbol(a, real=True)
+        kinds = draw(st.lists(st.sampled_from(ATOM_KINDS), min_size=1, max_size=3, unique=True))
+        atoms += [_atom(k, x) for k in kinds]
+        if draw(st.booleans()):
+            large.append(x)                 # the angle also as a factor (a Jacobian's A*cos(A))
+    small = [sp.Symbol(n, real=True) for n in errors]
+    placeholders = [sp.Symbol(f"_atom{i}") for i in range(len(atoms))]
+    gens = large + placeholders
+    if not gens:
+        gens = [sp.Symbol("L", real=True)]
+        large = list(gens)
+    R, *_ = poly_ring(gens, QQ)
+    restore = dict(zip(placeholders, atoms))
+    max_exp = draw(st.integers(1, 4))
+
+    def poly():
+        n = draw(st.integers(1, 8))
+        out = R.zero
+        for _ in range(n):
+            c = draw(st.sampled_from(COEFFS))
+            exps = tuple(draw(st.integers(0, max_exp)) if draw(st.integers(0, 2)) == 0 else 0
+                         for _ in gens)
+            out += R.from_dict({exps: QQ(c.numerator, c.denominator)})
+        return out
+
+    series = {}
+    n_monos = draw(st.integers(0, 6))
+    for _ in range(n_monos):
+        degree = draw(st.integers(0, 4))
+        mono = tuple(sorted(draw(st.lists(st.integers(0, n_err - 1), min_size=degree, max_size=degree))))
+        p = poly()
+        if draw(st.integers(0, 3)) == 0 and mono in series:
+            p = -series[mono]                 # a cancellation: zero terms
+        series[mono] = series.get(mono, R.zero) + p
+    series = {m: c for m, c in series.items() if c}
+    return R, restore, small, large, series
+
+
+def _derivation(small, restore, series, order):
+    return Derivation(machine=None, order=order, small=small, point=[series], direction=None,
+                      columns=None, _restore=restore)
+
+
+def _same(shown, expr, what):
+    assert str(shown) == str(expr), (what, expr)
+    assert shown.latex() == sp.latex(expr), (what, expr)
+    assert shown.is_zero == (expr == 0), (what, expr)
+
+
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(problems())
+def test_polyprint_prints_as_sympy(problem):
+    R, restore, small, large, series = problem
+    pr = RingPrinter(R, restore, small)
+    assert pr.supported
+    d = _derivation(small, restore, series, 4)
+    # the error terms of each degree: collect(expand(...), errors), as cli/derive.py built them
+    for k in range(1, 5):
+        want = sp.collect(sp.expand(d.degree_part(series, k)), small)
+        _same(shown_collected(pr, pr.series_terms(series, k)), want, ("collected", k))
+    # the nominal sum and its derivative in each large symbol
+    nominal = d.nominal(series)
+    terms = pr.terms(series[()]) if () in series else []
+    _same(shown_plain(pr, terms), nominal, "nominal")
+    for sym in large + sorted({a for e in restore.values() for a in e.free_symbols}, key=str):
+        dt = pr.derivative(terms, sym)
+        if dt is not None:
+            _same(shown_plain(pr, dt), sp.diff(nominal, sym), ("diff", sym))
+    # the gain matrix's entries: the coefficient of each error alone
+    for j in range(len(small)):
+        c = series.get((j,))
+        _same(shown_plain(pr, pr.terms(c) if c else []), d.expr(c) if c else sp.Integer(0), ("gain", j))
+
+
+# ----------------------------------------------------------------------------- machine files
+
+# A machine a user could write whose formulas hold lone negative powers (1 + 1/tan(Yp)^2 under
+# an error, 1/cos(A)^2 as a gain): sympy's str prints a lone Pow as tan(Yp)**(-2), not as
+# the 1/tan(Yp)**2 it prints inside a product. Odd names, 1/sin, tan and 1/tan of one angle.
+LONE_POWERS = """\
+name: lone_powers
+length_unit: mm
+rotation_sense: right_hand
+symbols:
+  - {name: A, role: axis, unit: deg, limits: [-90, 90], meaning: table}
+  - {name: q10, role: axis, unit: deg, limits: [-90, 90], meaning: head}
+  - {name: Yp, role: constant, unit: deg, nominal: 50, meaning: head angle}
+  - {name: e, role: constant, unit: mm, nominal: 10, meaning: offset}
+  - {name: L, role: constant, unit: mm, nominal: 100, meaning: arm}
+  - {name: dx1, role: error, unit: um, meaning: offset error}
+  - {name: e_b2, role: error, unit: um, meaning: another}
+  - {name: dalpha6, role: error, unit: arcsec, meaning: tilt}
+  - {name: EX0A, role: error, unit: arcsec, meaning: head tilt}
+  - {name: Delta1, role: error, unit: um, meaning: head offset}
+chain:
+  - {translate: [dx1*(1 + 1/tan(Yp)^2), e_b2/cos(A)^2, e/tan(Yp) - 3/7*Delta1/sin(Yp)], label: offsets}
+  - {rotate: z, angle: A + dalpha6, label: table}
+  - {translate: [L*tan(Yp), 0, 1000000*EX0A/cos(q10)^3], label: arm}
+  - {rotate: x, angle: q10 - EX0A/2, label: head}
+tool:
+  point: [L, 0, -e/2]
+  direction: [0, 0, 1]
+"""
+
+
+def _flat(rep: dict) -> dict:
+    out = {}
+    for key, value in rep.items():
+        for comp, v in value.items():
+            for n, e in (v.items() if isinstance(v, dict) else [(None, v)]):
+                out[(key, comp, n)] = e
+    return out
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_machine_file_prints_as_sympy(tmp_path, order):
+    from chaincomp import load_machine
+    from chaincomp.cli import derive as cli_derive
+    from chaincomp.derive import derive
+
+    path = tmp_path / "lone_powers.yaml"
+    path.write_text(LONE_POWERS)
+    d = derive(load_machine(str(path)), order)
+    assert RingPrinter(cli_derive._ring(d), d._restore, d.small).supported   # polyprint prints it
+    fast, slow = _flat(cli_derive.report(d)), _flat(cli_derive._report_sympy(d))
+    assert fast.keys() == slow.keys()
+    for key in fast:
+        assert str(fast[key]) == str(slow[key]), key
+        assert fast[key].latex() == slow[key].latex(), key
+        assert fast[key].is_zero == slow[key].is_zero, key
+    # the case itself: sympy's own text of the gain 1/cos(A)^2
+    assert str(fast[("gain", "dy", "e_b2")]) == str(sp.cos(sp.Symbol("A", real=True)) ** -2) == "cos(A)**(-2)"
