@@ -62,13 +62,13 @@ def _atom(kind: str, x: sp.Symbol) -> sp.Expr:
 
 @st.composite
 def problems(draw):
-    names = draw(st.permutations(ERROR_NAMES))
-    n_err = draw(st.integers(1, 5))
-    errors = list(names[:n_err])                                      # the machine's order
-    large_names = [n for n in draw(st.permutations(LARGE_NAMES)) if n not in errors]
-    n_large = draw(st.integers(0, 4))
+    errors = draw(st.lists(st.sampled_from(ERROR_NAMES), min_size=1, max_size=5, unique=True))  # machine order
+    n_err = len(errors)
+    large_names = draw(st.lists(st.sampled_from([n for n in LARGE_NAMES if n not in errors]),
+                                max_size=7, unique=True))
+    n_large = draw(st.integers(0, min(4, len(large_names))))
     large = [sp.Symbol(n, real=True) for n in large_names[:n_large]]
-    angles = large_names[n_large:n_large + draw(st.integers(0, 3))]
+    angles = large_names[n_large:n_large + 3]
     atoms = []
     for a in angles:
         x = sp.Symbol(a, real=True)
