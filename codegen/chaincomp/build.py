@@ -177,7 +177,9 @@ def _solver_object(machine, tc: Toolchain, root: str) -> str:
         source = path[:-2] + ".cpp"
         with open(source, "w", encoding="utf-8", newline="\n") as f:
             f.write(text)
-        tmp = path + ".tmp"
+        # this process' own name: a compiler left running by a build killed before (its lock
+        # released) cannot write into this one's object
+        tmp = f"{path}.{os.getpid()}.tmp"
         try:
             proc = subprocess.run([tc.compiler, *tc.flags, *(f"-I{d}" for d in tc.include_dirs), "-c", source,
                                    "-o", tmp], capture_output=True, text=True)

@@ -8,8 +8,9 @@ import ctypes
 import json
 import os
 import shutil
+import signal
 import subprocess
-import textwrap
+import time
 
 import numpy as np
 import pytest
@@ -41,19 +42,18 @@ def wrapper(tmp_path, on_solver: str) -> str:
     with open(CONFIG) as f:
         real = json.load(f)["compiler"]
     path = tmp_path / "cxx"
-    path.write_text(textwrap.dedent(f"""\
-        #!/bin/sh
-        out=""; solver=""; prev=""
-        for a in "$@"; do
-          [ "$prev" = "-o" ] && out="$a"
-          case "$a" in *core_*.cpp) solver=1;; esac
-          prev="$a"
-        done
-        if [ -n "$solver" ]; then
-        {on_solver}
-        fi
-        exec {real} "$@"
-        """))
+    path.write_text("\n".join([
+        "#!/bin/sh",
+        'out=""; solver=""; prev=""',
+        'for a in "$@"; do',
+        '  [ "$prev" = "-o" ] && out="$a"',
+        '  case "$a" in *core_*.cpp) solver=1;; esac',
+        '  prev="$a"',
+        "done",
+        'if [ -n "$solver" ]; then',
+        on_solver,
+        "fi",
+        f'exec {real} "$@"', ""]))
     path.chmod(0o755)
     return str(path)
 
@@ -350,3 +350,46 @@ def test_generated_models_compile_alone_without_the_macro(tmp_path):
     for line in run.stdout.splitlines():
         name, status, worst = line.split()
         assert status == "0" and float(worst) <= 1e-7, line
+
+
+def test_a_compiler_left_by_a_killed_build_cannot_write_into_the_next_ones_object(tmp_path):
+    """A build killed (SIGKILL) while its solver compiles releases its locks, but the compiler
+    it started runs on and writes its output late. The next build's object must not be that
+    output: each compile writes under a name of its own."""
+    with open(CONFIG) as f:
+        real = json.load(f)["compiler"]
+    log, ready, done = tmp_path / "outs", tmp_path / "ready", tmp_path / "done"
+    cxx = wrapper(tmp_path, f'echo "$$ $out" >> {log}\n'
+                            f'if [ -n "$HANG" ]; then exec sleep 60; fi\n'
+                            f'{real} "$@" || exit 1; touch {ready}\n'
+                            f'while [ ! -e {done} ]; do sleep 0.1; done; exit 0')
+    env = env_for(tmp_path, toolchain_dir(tmp_path, compiler=cxx))
+    first = subprocess.Popen([PY, "-m", "chaincomp.cli.main", "build", variant(str(tmp_path), "killed_a")],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=dict(env, HANG="1"), cwd=ROOT)
+    try:
+        for _ in range(600):
+            if log.exists() and log.read_text().strip():
+                break
+            first.poll()
+            assert first.returncode is None, "the first build ended before its solver compile"
+            time.sleep(0.1)
+        first.kill()  # the build, not its compiler: that one runs on
+        first.wait()
+        orphan_pid, orphan_out = log.read_text().split()
+        second = subprocess.Popen([PY, "-m", "chaincomp.cli.main", "build", variant(str(tmp_path), "killed_b", h=440)],
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
+        for _ in range(1200):
+            if ready.exists() or second.poll() is not None:
+                break
+            time.sleep(0.1)
+        # the left compiler's late output, while the second build's compile ends
+        with open(orphan_out, "wb") as f:
+            f.write(b"half an object of the killed build")
+        done.touch()
+        out, err = second.communicate(timeout=600)
+    finally:
+        done.touch()
+        if 'orphan_pid' in locals():
+            os.kill(int(orphan_pid), signal.SIGKILL)  # the left compiler (a sleep), by its id
+    assert second.returncode == 0, err
+    assert_compensates(load(out.strip()))
