@@ -203,3 +203,88 @@ def test_machine_file_prints_as_sympy(tmp_path, order):
         assert fast[key].is_zero == slow[key].is_zero, key
     # the case itself: sympy's own text of the gain 1/cos(A)^2
     assert str(fast[("gain", "dy", "e_b2")]) == str(sp.cos(sp.Symbol("A", real=True)) ** -2) == "cos(A)**(-2)"
+
+
+# Random machine files: chains of translations (sums of products of numbers, lengths, sin, cos,
+# tan, 1/tan^k, 1/cos^k of the angles and errors) and rotations (an axis, its negative, plus or
+# minus an error, pi/2 + an axis, an error alone), tool point, direction and frame.
+_ERRS = ["dx1", "dx10", "e_b2", "EX0A", "dalpha6", "Delta1", "alpha", "x__1", "theta0", "dA", "da", "EXX"]
+_AXES = ["A", "C", "q1", "q10"]
+_CONSTS = [("L", "mm", 100), ("a2", "mm", 250), ("d4", "mm", 12.5), ("Yp", "deg", 50), ("e", "mm", 10)]
+_NUMS = ["1", "2", "3/7", "-1/2", "1000000", "0.1", "25.4"]
+
+
+def _random_machine(rng) -> str:
+    import re
+    errs = rng.sample(_ERRS, rng.randint(1, 4))
+    axes = rng.sample(_AXES, rng.randint(1, 2))
+    consts = rng.sample(_CONSTS, rng.randint(1, 3))
+    angles = axes + [n for n, u, _ in consts if u == "deg"]
+    lengths = [n for n, u, _ in consts if u == "mm"]
+
+    def term():
+        parts = [] if (c := rng.choice(_NUMS)) == "1" else [c]
+        for _ in range(rng.randint(0, 2)):
+            k, a = rng.random(), rng.choice(angles)
+            parts.append(rng.choice(lengths) if k < 0.3 and lengths else f"{rng.choice(['sin', 'cos'])}({a})"
+                         if k < 0.6 else f"1/tan({a})^{rng.randint(1, 2)}" if k < 0.75
+                         else f"1/cos({a})^{rng.randint(1, 3)}" if k < 0.85 else f"tan({a})")
+        parts += [rng.choice(errs) for _ in range((rng.random() < 0.6) + (rng.random() < 0.2))]
+        return "*".join(parts) if parts else "0"
+
+    chain = []
+    for _ in range(rng.randint(1, 4)):
+        if rng.random() < 0.5:
+            v = [" + ".join(term() for _ in range(rng.randint(0, 3))) or "0" for _ in range(3)]
+            chain.append(f"  - {{translate: [{', '.join(v)}], label: t}}")
+        else:
+            a, err = rng.choice(axes), rng.choice(errs)
+            angle = rng.choice([a, f"-{a}", f"{a} + {err}", f"{a} - {err}/2", err, f"pi/2 + {a}"])
+            chain.append(f"  - {{rotate: {rng.choice('xyz')}, angle: {angle}, label: r}}")
+    point = [rng.choice(["0", "-3/7", *lengths]) for _ in range(3)]
+    tool = ["tool:", f"  point: [{', '.join(point)}]"]
+    if rng.random() < 0.7:
+        tool.append("  direction: [0, 0, 1]")
+        if rng.random() < 0.6:
+            tool.append("  reference: [1, 0, 0]")
+    body = "\n".join(["chain:", *chain, *tool])
+    used = set(re.findall(r"[A-Za-z_][A-Za-z0-9_]*", body))
+    symbols = [f"  - {{name: {a}, role: axis, unit: deg, limits: [10, 80], meaning: m}}" for a in axes if a in used]
+    symbols += [f"  - {{name: {n}, role: constant, unit: {u}, nominal: {v}, meaning: m}}"
+                for n, u, v in consts if n in used]
+    symbols += [f"  - {{name: {e}, role: error, unit: um, meaning: m}}" for e in errs if e in used]
+    return "\n".join(["name: rnd", "length_unit: mm", "rotation_sense: right_hand", "symbols:", *symbols, body]) + "\n"
+
+
+def test_random_machine_files_print_as_sympy(tmp_path):
+    import contextlib
+    import io
+    import random
+
+    from chaincomp import load_machine
+    from chaincomp.cli import derive as cli_derive
+    from chaincomp.derive import derive
+    from chaincomp.errors import ChaincompError
+
+    compared = 0
+    for seed in range(120):
+        rng = random.Random(seed)
+        path = tmp_path / f"rnd{seed}.yaml"
+        path.write_text(_random_machine(rng))
+        try:
+            with contextlib.redirect_stderr(io.StringIO()):
+                m = load_machine(str(path))
+        except ChaincompError:
+            continue          # not finite at the nominal values, an unused error, ...
+        d = derive(m, rng.randint(1, 2))
+        if not RingPrinter(cli_derive._ring(d), d._restore, d.small).supported:
+            continue
+        fast, slow = _flat(cli_derive.report(d)), _flat(cli_derive._report_sympy(d))
+        assert fast.keys() == slow.keys()
+        for key in fast:
+            assert str(fast[key]) == str(slow[key]), (seed, key, path.read_text())
+            assert fast[key].latex() == slow[key].latex(), (seed, key)
+            assert fast[key].is_zero == slow[key].is_zero, (seed, key)
+        compared += 1
+    print(f"{compared} machines compared")
+    assert compared >= 40, compared
