@@ -2,12 +2,17 @@
 // (the build itself and its loading are tested end to end in tests/python/test_build.py).
 #include <catch2/catch.hpp>
 
+#include <cmath>
 #include <cstdlib>
 #include <fstream>
 #include <string>
+#include <vector>
 
+#include "chaincomp/compensate.hpp"
+#include "chaincomp/model_info.hpp"
 #include "chaincomp/open_model.hpp"
 #include "chaincomp/params_io.hpp"
+#include "chaincomp/varying.hpp"
 
 namespace {
 
@@ -55,4 +60,91 @@ TEST_CASE("a --model file that is not a library is refused in one line", "[open_
   CHECK(chaincomp::open_model(kMachine, kMachine, error) == nullptr);
   CHECK(error.rfind("--model: " + kMachine + ": cannot load: ", 0) == 0);
   CHECK(error.find('\n') == std::string::npos);
+}
+
+// The solver compiled once per shape (compensate.hpp's Core) serves a model through the
+// varying errors' calls (ModelCalls): a kept workspace on a model whose table rejects beyond
+// its end, the stream running onto the end and past it and back. Truth from outside the
+// solver: the range (the table's knots, written here) decides outside_table, and at every
+// correction the actual pose equals the nominal one at the command; a warm start lands where
+// a cold one does (five axes: one solution).
+TEST_CASE("a kept workspace onto a rejecting table's end: outside exactly beyond it, else as cold", "[compensate]") {
+  std::string error;
+  const auto* e = chaincomp::open_machine(std::string(CHAINCOMP_SOURCE_DIR) + "/configs/machines/five_axis_ac.yaml",
+                                          error);
+  REQUIRE(e != nullptr);
+  const auto& info = *e->info;
+  std::vector<double> params(info.num_params);
+  int exx = -1, column = 0;
+  for (int i = 0; i < info.num_params; ++i) {
+    params[i] = info.params[i].nominal;
+    if (std::string(info.params[i].name) == "EXX") exx = i;
+    if (exx < 0 && info.params[i].role == chaincomp::ParamRole::kError) ++column;
+  }
+  REQUIRE(exx >= 0);
+  // X positioning -5 um at the end: the correction pushes X beyond it (Newton iterates there
+  // are evaluated held at the end)
+  chaincomp::VaryingErrors v;
+  const double x[] = {-100, 0, 60, 100}, y[] = {0, 2e-3, -1e-3, -5e-3};
+  std::string why;
+  int at;
+  REQUIRE(chaincomp::add_table(v, exx, column, 0, x, y, 4, chaincomp::Interpolation::kMonotoneCubic,
+                               chaincomp::Outside::kReject, why, at));
+  alignas(64) static unsigned char model[1 << 14];
+  e->prepare(params.data(), model);
+  e->attach_varying(model, &v);
+  // the same table held beyond its end: the truth where a correction lies past the end (the
+  // solver evaluates its iterates so; the entry points give NaN there, as outside the range)
+  chaincomp::VaryingErrors held;
+  REQUIRE(chaincomp::add_table(held, exx, column, 0, x, y, 4, chaincomp::Interpolation::kMonotoneCubic,
+                               chaincomp::Outside::kHold, why, at));
+  alignas(64) static unsigned char held_model[1 << 14];
+  e->prepare(params.data(), held_model);
+  e->attach_varying(held_model, &held);
+  std::vector<unsigned char> storage;
+  void* ws = chaincomp::aligned_slot(storage, e->workspace_size, e->workspace_align);
+  e->init_workspace(ws);
+  int ok = 0, outside = 0, past_end = 0;
+  for (int k = 0; k < 4000; ++k) {
+    // X: 99 -> 100.5 -> 99 (steps of 0.75 um), A through 0 and back (the singular pose: damped,
+    // a warm start redone cold), C turning
+    const double s = k < 2000 ? k : 4000 - k;
+    double cmd[5] = {99.0 + 7.5e-4 * s, 10.0, -50.0, 0.02 * std::cos(0.003 * k), 0.4 + 1e-3 * k};
+    double warm[5], cold[5], rw[2], rc[2], actual[6], target[6];
+    const int sw = e->compensate(model, ws, cmd, warm, rw);
+    const int sc = e->compensate(model, nullptr, cmd, cold, rc);
+    INFO("command " << k << " X " << cmd[0]);
+    REQUIRE(sw == sc);
+    if (cmd[0] > 100) {
+      CHECK(sw == static_cast<int>(chaincomp::Status::kOutsideTable));
+      for (int i = 0; i < 5; ++i) CHECK(warm[i] == cmd[i]);
+      ++outside;
+      continue;
+    }
+    CHECK(sw != static_cast<int>(chaincomp::Status::kOutsideTable));
+    if (sw == static_cast<int>(chaincomp::Status::kOk)) {
+      ++ok;
+      // within tolerance of one solution; near A = 0 (the tool along C) the axes that hold the
+      // pose within tolerance spread wider, and at A within 1e-3 rad of 0 C is all but free
+      // (the poses are checked below)
+      const double spread = std::abs(cmd[3]) > 0.01 ? 1e-6 : 1e-5;
+      if (std::abs(cmd[3]) > 1e-3)
+        for (int i = 0; i < 5; ++i) CHECK(std::abs(warm[i] - cold[i]) < spread);
+      past_end += warm[0] > 100;
+      e->pose_nominal(model, cmd, target);
+      e->pose_exact(held_model, warm, actual);
+      double point = 0, dir = 0;
+      for (int i = 0; i < 3; ++i) point += (actual[i] - target[i]) * (actual[i] - target[i]);
+      for (int i = 3; i < 6; ++i) dir += (actual[i] - target[i]) * (actual[i] - target[i]);
+      CHECK(std::sqrt(point) <= chaincomp::kPointTolerance * (1 + 1e-9));
+      CHECK(std::sqrt(dir) <= chaincomp::kDirectionTolerance * (1 + 1e-6));
+    } else {
+      CHECK(sw == static_cast<int>(chaincomp::Status::kResidual));
+      CHECK(std::abs(rw[0] - rc[0]) < 1e-9);
+      CHECK(std::abs(rw[1] - rc[1]) < 1e-11);
+    }
+  }
+  CHECK(outside == 1333);  // X beyond 100 on 2 x 666 commands and the turn (k = 2000)
+  CHECK(ok > 1000);
+  CHECK(past_end > 0);  // corrections beyond the end of the table, as intended
 }
