@@ -14,10 +14,13 @@ printed directly, with sympy's own rules for the shapes they take:
 - the factors of a product in ``as_ordered_factors`` order, the rational coefficient's
   numerator first and its denominator with the negative powers after a ``/`` (``str``), or
   ``\\frac{..}{..}`` (``latex``);
+- a term that is a single base to a power below -1 with coefficient 1 is a Pow, not a Mul:
+  ``str`` prints it ``tan(A)**(-2)`` (in a product ``1/tan(A)**2``), ``latex`` as a fraction;
 - the strings of each base and power from sympy itself (``str(b**e)``, ``latex(b**e)``, once).
 
 The same text, character for character, as ``str`` / ``sympy.latex`` of the collected sympy
-expression (tests/python/test_derive_fast.py holds it against sympy on every bundled machine).
+expression (tests/python/test_derive_fast.py holds it against sympy on every bundled machine,
+tests/python/test_polyprint_vs_sympy.py on generated series and random machine files).
 Atoms it does not know (a number such as sqrt(2), a root of a symbol) make ``supported``
 False, and the caller builds sympy expressions as before.
 """
