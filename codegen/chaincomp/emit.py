@@ -505,6 +505,13 @@ def _source(machine, banner, n, pre, functions, order) -> str:
           "    const Model* at = model_at<Kinematics>(m, q, scratch, slope);",
           f"    if (at == nullptr) {{ pose_out.setConstant({nan}); return; }}",
           "    pose_exact(*at, q, out);", "  }", "  pose_out = out;", "}",
+          "void erased_pose_exact_held(const void* model, const double* axes, double* pose) noexcept {",
+          "  const Model& m = *static_cast<const Model*>(model);", "  const Eigen::Map<const Axes> q(axes);",
+          "  Pose out;", "  if (m.varying == nullptr) {", "    pose_exact(m, q, out);", "  } else {",
+          "    Model scratch = m;", "    double slope[kMaxVaryingErrors], values[kNumParams];",
+          "    clear_values<Kinematics>(values);",
+          "    set_varying<Kinematics, false>(*m.varying, scratch, q, nullptr, slope, values);  // held past a rejecting end",
+          "    pose_exact(scratch, q, out);", "  }", "  Eigen::Map<Pose> pose_out(pose);", "  pose_out = out;", "}",
           "void erased_pose_nominal(const void* model, const double* axes, double* pose) noexcept {",
           "  Pose out;", "  pose_nominal(*static_cast<const Model*>(model), Eigen::Map<const Axes>(axes), out);",
           "  Eigen::Map<Pose> pose_out(pose);", "  pose_out = out;", "}",
@@ -557,7 +564,7 @@ def _source(machine, banner, n, pre, functions, order) -> str:
           "                           erased_pose_nominal, erased_pose_jacobian, erased_error, kOrder,",
           "                           erased_compensate, sizeof(Workspace), alignof(Workspace),",
           "                           erased_init_workspace, kNumErrors, erased_attach_varying,",
-          "                           erased_pose_jacobian_gain};", "",
+          "                           erased_pose_jacobian_gain, erased_pose_exact_held};", "",
           f"}}  // namespace chaincomp::models::{name}", ""]
     return "\n".join(L)
 

@@ -80,11 +80,13 @@ bool Compensator::seq_ok(const Command& in, const std::array<double, kMaxAxes>& 
 // Point (mm) and direction (rad) error left at `target` (axis units) for the command at q
 // (internal units): what a target whose correction was limited or ramped really leaves. With
 // a frame corrected in full, the orientation residual compensate() reports (compensate.hpp).
+// Tables that reject beyond their end are held there, as compensate's iterates hold them: a
+// target corrected a little past the end (the command inside) is a pose, not NaN.
 void Compensator::residual_at(const double* q, const std::array<double, kMaxAxes>& target,
                               double* residual) const noexcept {
   double t[kMaxAxes], actual[9], nominal[9];  // pose_size is 3, 6 or 9
   for (int i = 0; i < n_; ++i) t[i] = target[i] * entry_.info->axes[i].to_internal;
-  entry_.pose_exact(model_, t, actual);
+  entry_.pose_exact_held(model_, t, actual);
   entry_.pose_nominal(model_, q, nominal);
   auto distance = [&](int from) {
     double s = 0;

@@ -508,3 +508,40 @@ TEST_CASE("a rate-limited correction that would leave the tool further off than 
   CHECK(comp.counters().held_back <= held + uncertain);
   CHECK(ref.counters().held_back == 0);
 }
+
+TEST_CASE("a command just inside a rejecting table's end is corrected while ramping, not rejected") {
+  // EXX (the X slide's positioning error) a table over X on [-100, 100] mm that rejects
+  // beyond its ends, -5 µm at X = 100. A command at X = 99.998 lies inside; its correction
+  // (about +5 µm in X, and the 5 µm errors of the fixture) puts the target a little past the
+  // end. Before, the ramp's residual was taken at that target with the table rejecting there:
+  // NaN, and 199 of 200 commands were refused as compensation_failed.
+  Fixture f;
+  int exx = -1, column = 0;
+  for (int i = 0; i < f.entry.info->num_params; ++i) {
+    if (std::string_view(f.entry.info->params[i].name) == "EXX") exx = i;
+    if (exx < 0 && f.entry.info->params[i].role == chaincomp::ParamRole::kError) ++column;
+  }
+  REQUIRE(exx >= 0);
+  chaincomp::VaryingErrors v;
+  const double x[] = {-100, 0, 60, 100}, y[] = {0, 2e-3, -1e-3, -5e-3};
+  std::string why;
+  int at = -1;
+  REQUIRE(chaincomp::add_table(v, exx, column, 0, x, y, 4, chaincomp::Interpolation::kMonotoneCubic,
+                               chaincomp::Outside::kReject, why, at));
+  f.entry.attach_varying(f.model, &v);
+  chaincomp::CompensatorConfig config = f.config.compensator;
+  config.ramp_time_s = 0.1;  // 100 commands of ramp
+  for (const double xcmd : {99.99, 99.998}) {
+    chaincomp::Compensator comp(f.entry, f.model, config);
+    int accepted = 0;
+    for (int k = 1; k <= 200; ++k) {
+      chaincomp::Target t;
+      accepted += comp.process(f.command(k, xcmd), t) ? 1 : 0;
+    }
+    CHECK(accepted == 200);
+  }
+  // beyond the end the command itself is outside the table: refused, as before
+  chaincomp::Compensator comp(f.entry, f.model, config);
+  chaincomp::Target t;
+  CHECK_FALSE(comp.process(f.command(1, 100.5), t));
+}

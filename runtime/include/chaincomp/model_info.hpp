@@ -79,6 +79,9 @@ struct ModelEntry {
   // at zero errors (pose_size x num_errors, column-major; `gain` may be null).
   void (*pose_jacobian_gain)(const void* model, const double* axes, double* pose, double* jacobian,
                              double* gain) noexcept;
+  // pose_exact with each varying error held at the end of a range that rejects, as
+  // compensate's iterates see it: the pose at a corrected target a little past the end.
+  void (*pose_exact_held)(const void* model, const double* axes, double* pose) noexcept;
 };
 
 // Sizes `storage` for an object of `size` bytes aligned to `align` (a model, a workspace)
