@@ -10,6 +10,7 @@ compiler's ``--version`` line and the flags.
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import json
 import os
@@ -98,15 +99,8 @@ def build(machine_path: str) -> tuple[str, bool]:
     path = cache_path(root, machine.name, source, tc.key())
     if os.path.exists(path):
         return path, True
-    try:
-        os.makedirs(root, exist_ok=True)
-        lock = open(os.path.dirname(path) + ".lock", "w")
-    except OSError as exc:
-        raise ChaincompError(f"cannot write the model cache {root}: {exc.strerror}") from None
-    with lock:
-        if not _try_lock(lock):
-            _say(f"{machine.name}: another build of this model is running; waiting for it")
-            fcntl.flock(lock, fcntl.LOCK_EX)
+    with _exclusive(os.path.dirname(path) + ".lock", root,
+                    f"{machine.name}: another build of this model is running; waiting for it"):
         if os.path.exists(path):
             return path, True
         folder = os.path.dirname(path)
@@ -125,12 +119,23 @@ def build(machine_path: str) -> tuple[str, bool]:
     return path, False
 
 
-def _try_lock(lock) -> bool:
+@contextlib.contextmanager
+def _exclusive(lock_path: str, root: str, waiting: str):
+    """Holds the lock file at ``lock_path`` (its folder created) for the block: concurrent
+    builds of one thing, one builds and the others wait (saying ``waiting``) and then find
+    its result."""
     try:
-        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        return True
-    except BlockingIOError:
-        return False
+        os.makedirs(os.path.dirname(lock_path), exist_ok=True)
+        lock = open(lock_path, "w")
+    except OSError as exc:
+        raise ChaincompError(f"cannot write the model cache {root}: {exc.strerror}") from None
+    with lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            _say(waiting)
+            fcntl.flock(lock, fcntl.LOCK_EX)
+        yield
 
 
 def _solver_object(machine, tc: Toolchain, root: str) -> str:
@@ -160,15 +165,8 @@ def _solver_object(machine, tc: Toolchain, root: str) -> str:
     path = os.path.join(folder, f"core_{n}_{a}_{p}_{r}_{int(o)}.o")
     if os.path.exists(path):
         return path
-    try:
-        os.makedirs(folder, exist_ok=True)
-        lock = open(path + ".lock", "w")
-    except OSError as exc:
-        raise ChaincompError(f"cannot write the model cache {root}: {exc.strerror}") from None
-    with lock:
-        if not _try_lock(lock):
-            _say(f"{machine.name}: another build is making the compensation solver of this shape; waiting for it")
-            fcntl.flock(lock, fcntl.LOCK_EX)
+    with _exclusive(path + ".lock", root,
+                    f"{machine.name}: another build is making the compensation solver of this shape; waiting for it"):
         if os.path.exists(path):
             return path
         start = time.monotonic()
@@ -340,15 +338,7 @@ def build_linuxcnc(machine_path: str, params_path: str | None, module: str = RT_
     path = os.path.join(folder, module + ".so")
     if os.path.exists(path):
         return path, True
-    try:
-        os.makedirs(root, exist_ok=True)
-        lock = open(folder + ".lock", "w")
-    except OSError as exc:
-        raise ChaincompError(f"cannot write the model cache {root}: {exc.strerror}") from None
-    with lock:  # concurrent builds of one module: one compiles, the others wait for it
-        if not _try_lock(lock):
-            _say(f"{machine.name}: another build of {module} is running; waiting for it")
-            fcntl.flock(lock, fcntl.LOCK_EX)
+    with _exclusive(folder + ".lock", root, f"{machine.name}: another build of {module} is running; waiting for it"):
         if os.path.exists(path):
             return path, True
         _compile_rt(machine, values, params_path, tc, root, folder, module)
