@@ -138,6 +138,17 @@ def _exclusive(lock_path: str, root: str, waiting: str):
         yield
 
 
+def _runtime_include(tc: Toolchain) -> str:
+    """The include folder of chaincomp's runtime headers among the toolchain's."""
+    include = next((d for d in tc.include_dirs if os.path.isfile(os.path.join(d, "chaincomp", "compensate.hpp"))),
+                   None)
+    if include is None:
+        raise ChaincompError(f"no chaincomp/compensate.hpp under the include folders of "
+                             f"{os.path.join(build_dir(), 'model_build.json')} ({', '.join(tc.include_dirs)}): "
+                             f"re-configure the C++ build (tools/setup)")
+    return include
+
+
 def _solver_object(machine, tc: Toolchain, root: str) -> str:
     """The compensation solver of the machine's shape, compiled once per shape, toolchain and
     runtime headers (ROOT/solvers-HASH/core_N_A_P_R_O.o) and linked into every model of that
@@ -145,13 +156,7 @@ def _solver_object(machine, tc: Toolchain, root: str) -> str:
     lock and renamed into place, as the models."""
     shape = solver_shape(machine)
     text = solvers([shape])
-    include = next((d for d in tc.include_dirs if os.path.isfile(os.path.join(d, "chaincomp", "compensate.hpp"))),
-                   None)
-    if include is None:
-        raise ChaincompError(f"no chaincomp/compensate.hpp under the include folders of "
-                             f"{os.path.join(build_dir(), 'model_build.json')} ({', '.join(tc.include_dirs)}): "
-                             f"re-configure the C++ build (tools/setup)")
-    headers = os.path.join(include, "chaincomp")
+    headers = os.path.join(_runtime_include(tc), "chaincomp")
     # the key: the toolchain, the solver's source and every runtime header (a header changed
     # by an update compiles a new solver; the old one stays for the models linked with it)
     key = tc.key().encode("utf-8") + b"\0" + text.encode("utf-8")
@@ -368,7 +373,7 @@ def _compile_rt(machine, values: dict, params_path: str | None, tc: Toolchain, r
             shutil.copy(os.path.join(hal, n), tmp)
         _say(f"{machine.name}: generated in {time.monotonic() - start:.1f} s; compiling {module}.so "
              f"(Makefile.modinc, -fno-exceptions -fno-rtti)")
-        include = next(d for d in tc.include_dirs if d.endswith(os.path.join("runtime", "include")))
+        include = _runtime_include(tc)
         eigen = next((d for d in tc.include_dirs if "eigen" in d), "/usr/include/eigen3")
         proc = subprocess.run(["make", "-s", f"MODEL={machine.name}", f"MODULE={module}", f"CHAINCOMP_INCLUDE={include}",
                                f"EIGEN_INCLUDE={eigen}", f"CHAINCOMP_SRC={os.path.join(_runtime_dir(), 'src')}",

@@ -9,7 +9,6 @@
 
 #include <Eigen/Core>
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <limits>
 #include <type_traits>
@@ -169,15 +168,17 @@ void add_slopes(const VaryingErrors& v, const typename K::Gain& gain, const doub
 }
 
 // The model to evaluate at `q`: `m` itself without varying errors, else `scratch` holding
-// them at `q` (slopes into `slope`); nullptr where `q` lies outside a range that rejects.
+// them at `q` (slopes into `slope`); nullptr where `q` lies outside a range that rejects,
+// unless `held`: then the errors there are held at the range's end, as compensate's
+// iterates see them.
 template <class K>
 const typename K::Model* model_at(const typename K::Model& m, const typename K::Axes& q,
-                                  typename K::Model& scratch, double* slope) noexcept {
+                                  typename K::Model& scratch, double* slope, bool held = false) noexcept {
   if (m.varying == nullptr) return &m;
   scratch = m;
   double values[K::kNumParams];
   clear_values<K>(values);
-  return set_varying<K>(*m.varying, scratch, q, nullptr, slope, values) ? &scratch : nullptr;
+  return set_varying<K>(*m.varying, scratch, q, nullptr, slope, values) || held ? &scratch : nullptr;
 }
 
 // LDL^T factorisation of a small symmetric positive definite matrix and its solve, plain
