@@ -23,7 +23,7 @@ namespace held_back_case {
 constexpr const char* kMachine = "five_axis_ac";
 constexpr int kCommands = 3001;
 
-// 20 um and 20 arcsec on every error, alternating signs
+// 20 um and 20 arcsec on every error, alternating signs (also the singular-pose test's errors)
 inline void prepare(const chaincomp::ModelEntry& entry, void* model) {
   std::vector<double> params(entry.info->num_params);
   for (int i = 0; i < entry.info->num_params; ++i) {

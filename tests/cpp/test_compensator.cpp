@@ -379,19 +379,10 @@ TEST_CASE("near a singular pose the rate-limited target is never further off tha
     const chaincomp::ModelEntry& entry = *chaincomp::find_model(c.name);
     alignas(64) static unsigned char model[1 << 15];
     REQUIRE(entry.model_size <= sizeof model);
-    std::vector<double> params(entry.info->num_params);
-    for (int i = 0; i < entry.info->num_params; ++i) {  // 20 um and 20 arcsec, alternating signs
-      const auto& p = entry.info->params[i];
-      const double sign = i % 2 ? -1.0 : 1.0;
-      params[i] = p.role == chaincomp::ParamRole::kError
-                      ? sign * (p.kind == chaincomp::UnitKind::kLength ? 20e-3 : 20.0 * M_PI / 648000.0)
-                      : p.nominal;
-    }
-    entry.prepare(params.data(), model);
+    held_back_case::prepare(entry, model);  // 20 um and 20 arcsec, alternating signs
     chaincomp::DaemonConfig config;
     std::string error;
-    REQUIRE(chaincomp::load_daemon_config(*entry.info, "", config, error));
-    config.compensator.ramp_time_s = 0;  // every command compensating in full
+    REQUIRE(held_back_case::config(entry, config, error));  // every command compensating in full
     chaincomp::Compensator comp(entry, model, config.compensator);
     const int n = entry.info->num_axes, steps = 4000;
     std::vector<double> last(n, 0.0);
