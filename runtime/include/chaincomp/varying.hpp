@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "chaincomp/trig.hpp"  // sin_small, cos_small: the generated set_errors
+
 namespace chaincomp {
 
 // Capacities, checked when a table or polynomial is added (and by the Python loader).
@@ -124,21 +126,6 @@ inline bool evaluate(const VaryingErrors& v, const VaryingError& e, double t, in
   value = e.scale_out * p;
   if (kSlope) slope = inside ? e.scale_out * e.scale_in * dp : 0.0;
   return inside || e.outside == Outside::kHold;
-}
-
-// sin and cos of an angle that is usually an error (µrad to arcmin): a short Taylor series
-// below 2^-6 rad (truncation < 1e-20 relative, so within rounding of std::sin / std::cos),
-// the library otherwise. The generated set_errors uses them: tables of angular errors
-// recompute these per evaluation.
-inline double sin_small(double x) noexcept {
-  if (!(std::abs(x) < 0.015625)) return std::sin(x);
-  const double x2 = x * x;
-  return x + x * x2 * (-1.0 / 6 + x2 * (1.0 / 120 + x2 * (-1.0 / 5040)));
-}
-inline double cos_small(double x) noexcept {
-  if (!(std::abs(x) < 0.015625)) return std::cos(x);
-  const double x2 = x * x;
-  return 1.0 + x2 * (-0.5 + x2 * (1.0 / 24 + x2 * (-1.0 / 720 + x2 * (1.0 / 40320))));
 }
 
 // true when every varying error whose `outside` is reject holds the axes `q` within range.
