@@ -5,7 +5,8 @@ cached by content hash for chaincompd and replay to ``dlopen``.
 The compiler, flags and ABI come from the C++ build's ``model_build.json`` (written by
 runtime/CMakeLists.txt, which also compiles them into the loader), so this module and the
 loader compute the same cache key: the machine file's content, the ABI version, the
-compiler's ``--version`` line and the flags.
+compiler's ``--version`` line, the flags and a digest of the code generator and the runtime
+headers.
 """
 
 from __future__ import annotations
@@ -36,10 +37,11 @@ class Toolchain:
     link_flags: list[str]
     include_dirs: list[str]
     abi: int
+    sources: str  # the digest of the code generator and runtime headers (runtime/CMakeLists.txt)
 
     def key(self) -> str:
         """The text the loader's model_toolchain() builds (open_model.cpp), line for line."""
-        return f"chaincomp model abi {self.abi}\n{self.version}\n{' '.join(self.flags)}"
+        return f"chaincomp model abi {self.abi}\n{self.version}\n{' '.join(self.flags)}\nsources {self.sources}"
 
 
 def toolchain() -> Toolchain:
@@ -56,8 +58,10 @@ def toolchain() -> Toolchain:
     proc = subprocess.run([compiler, "--version"], capture_output=True, text=True)
     if proc.returncode != 0 or not proc.stdout.strip():
         raise ChaincompError(f"{compiler} --version failed: reinstall the Debian package g++")
+    if "sources" not in cfg:
+        raise ChaincompError(f"{path} is from an older chaincomp: re-configure the C++ build (tools/setup)")
     return Toolchain(compiler, proc.stdout.splitlines()[0].rstrip("\r"), list(cfg["flags"]),
-                     list(cfg["link_flags"]), list(cfg["include_dirs"]), int(cfg["abi"]))
+                     list(cfg["link_flags"]), list(cfg["include_dirs"]), int(cfg["abi"]), str(cfg["sources"]))
 
 
 def cache_root() -> str:

@@ -89,7 +89,8 @@ bool run_build(const std::string& machine_path, std::string& error) {
 std::string model_toolchain(std::string& error) {
   std::string version;
   if (!compiler_version(version, error)) return "";
-  return "chaincomp model abi " + std::to_string(kModelAbi) + "\n" + version + "\n" + CHAINCOMP_MODEL_FLAGS;
+  return "chaincomp model abi " + std::to_string(kModelAbi) + "\n" + version + "\n" + CHAINCOMP_MODEL_FLAGS +
+         "\nsources " CHAINCOMP_MODEL_SOURCES;
 }
 
 std::string model_cache_root(std::string& error) {

@@ -3,6 +3,8 @@ its temporary folder (never under configs/), built into a shared library, loaded
 and replay; a stale, foreign or wrong-ABI library is refused with one line, never used."""
 
 import ctypes
+import glob
+import hashlib
 import json
 import os
 import re
@@ -118,12 +120,54 @@ def test_library_has_one_entry_point_with_name_hash_text_abi(built):
     assert got.source_hash == fnv1a64(source)
     assert ctypes.string_at(got.source_text, got.source_size) == source
     compiler = subprocess.run(["c++", "--version"], capture_output=True, text=True).stdout.splitlines()[0]
-    assert got.toolchain.decode().split("\n")[:2] == [f"chaincomp model abi {abi}", compiler]
+    lines = got.toolchain.decode().split("\n")
+    assert lines[:2] == [f"chaincomp model abi {abi}", compiler]
+    assert lines[-1] == f"sources {sources_digest()}"
     assert got.entry
     nm = shutil.which("nm")
     if nm:
         syms = subprocess.run([nm, "-D", "--defined-only", built["path"]], capture_output=True, text=True).stdout
         assert [line.split()[-1] for line in syms.splitlines()] == ["chaincomp_model_library"]
+
+
+def sources_digest() -> str:
+    """What the key says the model's code comes from, computed here from its definition (the
+    code generator's Python files and the runtime headers: SHA-256 of each, listed by path)."""
+    files = sorted(glob.glob(os.path.join(ROOT, "codegen", "chaincomp", "**", "*.py"), recursive=True)
+                   + glob.glob(os.path.join(ROOT, "runtime", "include", "chaincomp", "*.hpp")))
+    text = "".join(f"{os.path.relpath(f, ROOT)} {hashlib.sha256(open(f, 'rb').read()).hexdigest()}\n" for f in files)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def test_a_library_of_older_chaincomp_code_is_not_reused(built, tmp_path):
+    # The same machine file and compiler, but another code generator or runtime headers (an
+    # upgrade of chaincomp: here another digest in model_build.json): a new library, compiled.
+    with open(os.path.join(ROOT, "build", "model_build.json")) as f:
+        cfg = json.load(f)
+    assert cfg["sources"] == sources_digest()  # the build's digest is the sources' (re-configured on change)
+    cfg["sources"] = "0" * 64
+    folder = tmp_path / "upgraded"
+    folder.mkdir()
+    (folder / "model_build.json").write_text(json.dumps(cfg))
+    # (a cache of its own holding the built library: the other tests count solver objects)
+    cache = tmp_path / "cache"
+    shutil.copytree(built["env"]["XDG_CACHE_HOME"], cache)
+    env = dict(built["env"], CHAINCOMP_BUILD_DIR=str(folder), XDG_CACHE_HOME=str(cache))
+    proc = chaincomp(env, "build", built["machine"])
+    assert proc.returncode == 0, proc.stderr
+    assert "compiled in" in proc.stderr
+    path = proc.stdout.strip()
+    old = built["path"].replace(built["env"]["XDG_CACHE_HOME"], str(cache))
+    assert os.path.dirname(path) != os.path.dirname(old) and os.path.isfile(old)
+    lib = ctypes.CDLL(path)
+    lib.chaincomp_model_library.restype = ctypes.POINTER(_Library)
+    assert lib.chaincomp_model_library().contents.toolchain.decode().endswith("\nsources " + "0" * 64)
+    # and a model_build.json from before the digest names the fix
+    del cfg["sources"]
+    (folder / "model_build.json").write_text(json.dumps(cfg))
+    proc = chaincomp(env, "build", built["machine"])
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert proc.stderr.splitlines()[-1].endswith("is from an older chaincomp: re-configure the C++ build (tools/setup)")
 
 
 def test_cached_build_is_reused_and_copied(built, tmp_path):
