@@ -290,10 +290,11 @@ Eigen::Vector3d orientation_residual(const Eigen::Vector3d& zt, const Eigen::Vec
 // is an angle, so its bound and its sin and cos are known when compiling); pose size P (3: the tool point;
 // 6: and the tool direction; 9: and a frame's x axis); R residual rows (3: the point; 6: and the
 // direction, or with O the orientation, corrected). The model enters through three functions
-// (Machine), so one compiled solver serves every machine of a shape: chaincomp's own builds
-// compile it once per shape (emit.py's solvers(), chaincomp build's cached object) and
-// declare it extern in each model (CHAINCOMP_PREBUILT_CORE): a model's compile no longer
-// includes it. Without that macro a model instantiates it here, self-contained.
+// (Machine), so one compiled solver serves every machine of a shape: chaincomp build compiles
+// it once per shape (its cached object; emit.py's solvers() for programs of one's own) and
+// declares it extern in each model (CHAINCOMP_PREBUILT_CORE): a model's compile no longer
+// includes it. Without that macro (the bundled build) a model instantiates it here,
+// self-contained, and the calls through Machine go straight to its functions.
 template <int N, unsigned Angles, int P, int R, bool O>
 struct Core {
   static_assert(R == 3 || R == 6, "rows: the point, or the point and the direction/orientation");
