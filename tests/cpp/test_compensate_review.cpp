@@ -426,3 +426,288 @@ TEST_CASE("review: fewer DOF than the pose: the residual reported is the least-s
   review_residual<models::angle_head::Kinematics>("angle_head");
   review_residual<models::me220_xz::Kinematics>("me220_xz");
 }
+
+// ---- a machine of this file's own, through the solver directly ------------------------------
+//
+// X A Y C Z (the axis kinds interleaved, mask 0b01010, none of the bundled machines has it): the
+// tool point (X, Y, Z) + Rz(C) Rx(A) (0, 0, -L) and direction Rz(C) Rx(A) e_z, with slide,
+// squareness, rotary zero, tilt and offset errors in the actual pose. Every evaluation checks
+// the sines and cosines the solver passes against sinl / cosl of its axes and logs the call.
+
+namespace {
+
+using Mixed = chaincomp::Core<5, 0b01010u, 6, 6, false>;
+using MAxes = Mixed::Axes;
+using MPose = Mixed::Pose;
+
+struct MixedMachine {
+  double L = 200;
+  // errors (mm, rad): slides, squareness, the rotaries' zeros, a tilt of the tool, its offset
+  double ex = 0.01, ey = -0.02, ez = 0.015, sxy = 2e-5, szx = -3e-5, ea = 5e-5, ec = -4e-5, eb = 3e-5;
+  double ox = 0.02, oy = -0.01, dl = 0.03;
+  struct Call {
+    char kind;  // 'N' nominal, 'E' exact, 'J' Jacobian
+    MAxes q;
+  };
+  std::vector<Call> calls;
+  double worst_trig = 0;  // of the sines and cosines passed, against sinl / cosl of q
+
+  void check_trig(const MAxes& q, const Mixed::Trig& t) {
+    for (int i : {1, 3}) {
+      worst_trig = std::max({worst_trig, static_cast<double>(std::fabs(t.s[i] - sinl(q[i]))),
+                             static_cast<double>(std::fabs(t.c[i] - cosl(q[i])))});
+    }
+  }
+  // The pose from the sines and cosines of A and C (the solver's, or the test's own).
+  void pose(const MAxes& q, double sa0, double ca0, double sc0, double cc0, bool errors, MPose& out,
+            Mixed::Jacobian* J) const {
+    const double e = errors ? 1.0 : 0.0;
+    // sin and cos of A + ea and C + ec by the angle-sum formulas
+    const double sa = sa0 * std::cos(e * ea) + ca0 * std::sin(e * ea), ca = ca0 * std::cos(e * ea) - sa0 * std::sin(e * ea);
+    const double sc = sc0 * std::cos(e * ec) + cc0 * std::sin(e * ec), cc = cc0 * std::cos(e * ec) - sc0 * std::sin(e * ec);
+    const Eigen::Vector3d w(e * ox, e * oy, -L + e * dl), u(std::sin(e * eb), 0, std::cos(e * eb));
+    auto rx = [&](const Eigen::Vector3d& v) { return Eigen::Vector3d(v[0], ca * v[1] - sa * v[2], sa * v[1] + ca * v[2]); };
+    auto drx = [&](const Eigen::Vector3d& v) { return Eigen::Vector3d(0, -sa * v[1] - ca * v[2], ca * v[1] - sa * v[2]); };
+    auto rz = [&](const Eigen::Vector3d& v) { return Eigen::Vector3d(cc * v[0] - sc * v[1], sc * v[0] + cc * v[1], v[2]); };
+    auto drz = [&](const Eigen::Vector3d& v) { return Eigen::Vector3d(-sc * v[0] - cc * v[1], cc * v[0] - sc * v[1], 0); };
+    const Eigen::Vector3d base(q[0] + e * (ex + sxy * q[2]), q[2] + e * ey, q[4] + e * (ez + szx * q[0]));
+    out.head<3>() = base + rz(rx(w));
+    out.tail<3>() = rz(rx(u));
+    if (J != nullptr) {
+      J->setZero();
+      (*J)(0, 0) = 1;
+      (*J)(2, 0) = e * szx;
+      J->col(1).head<3>() = rz(drx(w));
+      J->col(1).tail<3>() = rz(drx(u));
+      (*J)(0, 2) = e * sxy;
+      (*J)(1, 2) = 1;
+      J->col(3).head<3>() = drz(rx(w));
+      J->col(3).tail<3>() = drz(rx(u));
+      (*J)(2, 4) = 1;
+    }
+  }
+  // The same with the test's own sines and cosines (sinl, cosl).
+  void pose_exact_trig(const MAxes& q, bool errors, MPose& out) const {
+    pose(q, static_cast<double>(sinl(q[1])), static_cast<double>(cosl(q[1])), static_cast<double>(sinl(q[3])),
+         static_cast<double>(cosl(q[3])), errors, out, nullptr);
+  }
+
+  static void nominal(void* c, const MAxes& q, const Mixed::Trig& t, MPose& out) noexcept {
+    auto& m = *static_cast<MixedMachine*>(c);
+    m.check_trig(q, t);
+    m.calls.push_back({'N', q});
+    m.pose(q, t.s[1], t.c[1], t.s[3], t.c[3], false, out, nullptr);
+  }
+  static void exact(void* c, const MAxes& q, const Mixed::Trig& t, MPose& out) noexcept {
+    auto& m = *static_cast<MixedMachine*>(c);
+    m.check_trig(q, t);
+    m.calls.push_back({'E', q});
+    m.pose(q, t.s[1], t.c[1], t.s[3], t.c[3], true, out, nullptr);
+  }
+  static void jacobian(void* c, const MAxes& q, const Mixed::Trig& t, MPose& out, Mixed::Jacobian& J) noexcept {
+    auto& m = *static_cast<MixedMachine*>(c);
+    m.check_trig(q, t);
+    m.calls.push_back({'J', q});
+    m.pose(q, t.s[1], t.c[1], t.s[3], t.c[3], true, out, &J);
+  }
+  Mixed::Machine machine() { return Mixed::Machine{this, this, &nominal, &exact, &jacobian}; }
+};
+
+double mixed_bound(int i) { return i == 1 || i == 3 ? chaincomp::kMaxAngularCorrection : chaincomp::kMaxLinearCorrection; }
+
+struct MixedCall {
+  Status status;
+  Mixed::Result out;
+  bool cold;    // the solve began with the Jacobian at the command
+  bool damped;  // a pose at the command after the first pass (the damped pass' lambda)
+};
+
+MixedCall mixed_run(MixedMachine& mm, Mixed::State& ws, const MAxes& command) {
+  mm.calls.clear();
+  MixedCall c;
+  c.status = Mixed::compensate(mm.machine(), ws, command, c.out);
+  // a warm call redone cold begins again with the nominal pose: the last solve counts
+  std::size_t begin = 0;
+  for (std::size_t i = 0; i < mm.calls.size(); ++i)
+    if (mm.calls[i].kind == 'N') begin = i;
+  c.cold = mm.calls.size() > begin + 1 && mm.calls[begin + 1].kind == 'J' && mm.calls[begin + 1].q == command;
+  c.damped = false;
+  for (std::size_t i = begin + 2; i < mm.calls.size(); ++i)
+    c.damped = c.damped || (mm.calls[i].kind == 'E' && mm.calls[i].q == command);
+  // every evaluation within the correction bounds of the command (to its rounding)
+  for (const auto& call : mm.calls) {
+    for (int i = 0; i < 5; ++i) {
+      const double ulp = std::nextafter(std::abs(command[i]), kInf) - std::abs(command[i]);
+      CHECK(std::abs(call.q[i] - command[i]) <= mixed_bound(i) + ulp);
+    }
+  }
+  return c;
+}
+
+// The residual the actual pose at the correction leaves, with sinl / cosl.
+Residual mixed_residual(const MixedMachine& mm, const MAxes& command, const MAxes& corrected) {
+  MPose target, actual;
+  mm.pose_exact_trig(command, false, target);
+  mm.pose_exact_trig(corrected, true, actual);
+  return {(actual.head<3>() - target.head<3>()).norm(), (actual.tail<3>() - target.tail<3>()).norm()};
+}
+
+}  // namespace
+
+TEST_CASE("review: the test's own X A Y C Z machine: its Jacobian against central differences", "[review]") {
+  MixedMachine mm;
+  std::mt19937_64 rng(9);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int k = 0; k < 50; ++k) {
+    const MAxes q(300 * u(rng), 1.5 * u(rng), 300 * u(rng), 3 * u(rng), -150 + 150 * u(rng));
+    MPose p;
+    Mixed::Jacobian J;
+    mm.pose(q, std::sin(q[1]), std::cos(q[1]), std::sin(q[3]), std::cos(q[3]), true, p, &J);
+    for (int i = 0; i < 5; ++i) {
+      const double h = 1e-5;
+      MAxes a = q, b = q;
+      a[i] += h;
+      b[i] -= h;
+      MPose pa, pb;
+      mm.pose(a, std::sin(a[1]), std::cos(a[1]), std::sin(a[3]), std::cos(a[3]), true, pa, nullptr);
+      mm.pose(b, std::sin(b[1]), std::cos(b[1]), std::sin(b[3]), std::cos(b[3]), true, pb, nullptr);
+      CHECK(((pa - pb) / (2 * h) - J.col(i)).norm() <= 1e-6 * (1 + J.col(i).norm()));
+    }
+  }
+}
+
+TEST_CASE("review: X A Y C Z through the solver: the sines and cosines of every evaluation, ok to the tolerance",
+          "[compensate][review]") {
+  MixedMachine mm;
+  std::mt19937_64 rng(10);
+  std::uniform_real_distribution<double> u(-1, 1), v(0, 1);
+  auto stream = std::make_unique<Mixed::State>();
+  int ok = 0, total = 0, warm = 0;
+  for (int k = 0; k < 3000; ++k) {
+    const double a = (0.2 + 1.3 * v(rng)) * (u(rng) < 0 ? -1 : 1);  // away from A = 0 (tool along C)
+    MAxes q(300 * u(rng), a, 300 * u(rng), 3 * u(rng), -150 + 150 * u(rng));
+    // A and C whole turns away: within the reduction's limit, at it, and beyond (the library)
+    const int kind = k % 4;
+    if (kind == 1) q[3] += std::floor(v(rng) * 15000) * 6.283185307179586;
+    if (kind == 2) q[3] = std::copysign(chaincomp::kSinCosLimit, u(rng)) * (k % 8 == 2 ? 1.0 : 1.0 + 2.2e-16);
+    if (kind == 3) q[1] += std::floor(v(rng) * 30000) * 6.283185307179586;
+    INFO("command " << k << ": " << q.transpose());
+    for (int s = 0; s < 2; ++s) {
+      Mixed::State fresh;
+      Mixed::State& ws = s ? *stream : fresh;
+      // the stream: this command, then one 2 um / 2e-5 rad away (a warm start)
+      for (int step = 0; step < (s ? 2 : 1); ++step) {
+        const MAxes c = step ? MAxes(q + MAxes(2e-3, 2e-5, -2e-3, 2e-5, 1e-3)) : q;
+        mm.worst_trig = 0;
+        const MixedCall r = mixed_run(mm, ws, c);
+        CHECK(mm.worst_trig <= 4e-16);
+        REQUIRE((r.status == Status::kOk || r.status == Status::kResidual));
+        ++total;
+        ok += r.status == Status::kOk;
+        warm += !r.cold;
+        const Residual t = mixed_residual(mm, c, r.out.corrected);
+        CHECK(std::abs(t.point - r.out.residual_point) <= 1e-9 + 1e-9 * t.point);
+        CHECK(std::abs(t.direction - r.out.residual_direction) <= 1e-12 + 1e-9 * t.direction);
+        if (r.status == Status::kOk) {
+          CHECK(t.point <= chaincomp::kPointTolerance + 1e-12);
+          CHECK(t.direction <= chaincomp::kDirectionTolerance + 1e-14);
+        }
+      }
+    }
+  }
+  INFO(ok << " of " << total << " ok, " << warm << " warm");
+  CHECK(ok == total);  // away from the singular pose every command is corrected in full
+  CHECK(warm >= 2000);  // and the stream's second commands start warm
+}
+
+TEST_CASE("review: X A Y C Z: after a damped call, a refused one or a residual, the next call starts cold",
+          "[compensate][review]") {
+  MixedMachine mm;
+  auto ws = std::make_unique<Mixed::State>();
+  // clean: a warm start follows
+  const MAxes clean(10, 0.8, -20, 0.3, -100);
+  MixedCall r = mixed_run(mm, *ws, clean);
+  REQUIRE(r.status == Status::kOk);
+  CHECK(r.cold);
+  CHECK(!r.damped);
+  r = mixed_run(mm, *ws, clean + MAxes(1e-3, 1e-5, 0, 0, 0));
+  CHECK(r.status == Status::kOk);
+  CHECK(!r.cold);
+  // A = 0: the tool along C, its tilt eb turns about C only with a quarter turn of C: held
+  // at the bound, damped
+  const MAxes singular(10, 0.0, -20, 0.3, -100);
+  for (const MAxes& next : {MAxes(singular + MAxes(1e-3, 0, 0, 0, 0)), MAxes(clean + MAxes(0, 0, 0, 1e-4, 0))}) {
+    r = mixed_run(mm, *ws, clean);  // warm state first
+    r = mixed_run(mm, *ws, singular);
+    INFO("status " << chaincomp::status_name(r.status));
+    CHECK(r.damped);
+    CHECK(r.status == Status::kResidual);
+    const Residual t = mixed_residual(mm, singular, r.out.corrected);
+    CHECK(std::abs(t.point - r.out.residual_point) <= 1e-9 + 1e-9 * t.point);
+    CHECK(t.point <= 1e-6);  // the point keeps priority
+    // the next call, near the damped one or back near the clean one: cold, as a fresh state's
+    const MixedCall after = mixed_run(mm, *ws, next);
+    CHECK(after.cold);
+    Mixed::State fresh;
+    const MixedCall alone = mixed_run(mm, fresh, next);
+    CHECK(after.status == alone.status);
+    CHECK(after.out.corrected == alone.out.corrected);
+    CHECK(after.out.residual_point == alone.out.residual_point);
+    CHECK(after.out.residual_direction == alone.out.residual_direction);
+  }
+  // NaN or Inf on a linear or an angular axis: refused without evaluating the model; then cold
+  for (int axis : {0, 1, 3, 4}) {
+    for (double bad : {kNaN, kInf}) {
+      mixed_run(mm, *ws, clean);
+      MAxes b = clean + MAxes(1e-4, 0, 0, 0, 0);
+      b[axis] = bad;
+      r = mixed_run(mm, *ws, b);
+      CHECK(r.status == Status::kNonFiniteInput);
+      CHECK(mm.calls.empty());
+      r = mixed_run(mm, *ws, clean);
+      CHECK(r.cold);
+      CHECK(r.status == Status::kOk);
+    }
+  }
+}
+
+TEST_CASE("review: X A Y C Z swept through A = 0: the sines and cosines of every damped evaluation",
+          "[compensate][review]") {
+  // Near A = 0 the undamped correction grows past kDampingStart of its bound: the damped pass
+  // starts from the command (held at the bound) or, partly damped, between the command and the
+  // undamped correction; its Jacobian there must have the sines and cosines of there.
+  MixedMachine mm;
+  auto ws = std::make_unique<Mixed::State>();
+  int damped = 0, damped_away = 0, residual = 0;
+  double worst = 0;
+  for (int k = -1500; k <= 1500; ++k) {
+    const MAxes command(10 + 0.01 * k, 2e-5 * k, -20, 0.3 + 1e-4 * k, -100);
+    for (int s = 0; s < 2; ++s) {
+      Mixed::State fresh;
+      mm.worst_trig = 0;
+      const MixedCall r = mixed_run(mm, s ? *ws : fresh, command);
+      worst = std::max(worst, mm.worst_trig);
+      REQUIRE((r.status == Status::kOk || r.status == Status::kResidual));
+      residual += r.status == Status::kResidual;
+      const Residual t = mixed_residual(mm, command, r.out.corrected);
+      CHECK(std::abs(t.point - r.out.residual_point) <= 1e-9 + 1e-9 * t.point);
+      CHECK(std::abs(t.direction - r.out.residual_direction) <= 1e-12 + 1e-9 * t.direction);
+      if (!r.damped) continue;
+      ++damped;
+      // the damped pass' first Jacobian: the first 'J' after the pose at the command
+      bool seen = false;
+      for (const auto& call : mm.calls) {
+        if (call.kind == 'E' && call.q == command) seen = true;
+        if (seen && call.kind == 'J') {
+          damped_away += !(call.q == command);
+          break;
+        }
+      }
+    }
+  }
+  INFO(damped << " damped calls, " << damped_away << " of them starting away from the command, " << residual
+              << " residuals; worst sin/cos " << worst);
+  CHECK(worst <= 4e-16);
+  CHECK(damped_away > 0);
+  CHECK(residual > 0);
+}

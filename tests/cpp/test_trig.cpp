@@ -128,3 +128,173 @@ TEST_CASE("axis_trig_near: sines and cosines a correction away from the command"
     }
   }
 }
+
+// ---- review of ed81529 (bad input, boundaries, masks) ----------------------------------------
+
+// The library's sin(-0) is -0 (C99 F.9.4.1); sin_cos_reduced's is +0: in r + r r2 P the sum
+// -0 + (+0) rounds to +0. Harmless for the poses (products and sums), visible where a sign of
+// zero matters (atan2, 1/x, a printed "-0"). Fails on ed81529: the review's report proposes
+// the fix.
+TEST_CASE("sin_cos_reduced(-0) is -0, as the library's sin", "[trig][!mayfail]") {
+  double s, c;
+  chaincomp::sin_cos_reduced(-0.0, s, c);
+  CHECK(std::signbit(s));
+  CHECK(std::signbit(std::sin(-0.0)));
+}
+
+TEST_CASE("sin_cos_reduced: signed zero, subnormals, the smallest normal", "[trig]") {
+  double s, c;
+  chaincomp::sin_cos_reduced(-0.0, s, c);
+  CHECK(s == 0.0);
+  CHECK(c == 1.0);
+  for (double x : {5e-324, -5e-324, 1e-310, -1e-310, 2.2250738585072014e-308, 1e-200}) {
+    chaincomp::sin_cos_reduced(x, s, c);
+    CHECK(s == x);  // sin x = x to rounding below 1e-8
+    CHECK(c == 1.0);
+  }
+}
+
+TEST_CASE("sin_cos_reduced where the quadrant changes (x near (k + 1/2) pi/2) and at the limit", "[trig]") {
+  // There n = round(x 2/pi) switches and the reduced angle is +-pi/4: the polynomials' widest
+  // argument, and a tie of the rounding where x 2/pi lands on a half-integer.
+  double worst = 0;
+  const long last = static_cast<long>(chaincomp::kSinCosLimit / 1.5707963267948966) + 1;
+  for (long k = -last; k <= last; ++k) {
+    const double mid = static_cast<double>((k + 0.5L) * 1.5707963267948966192313216916397514L);
+    double x = mid;
+    for (int i = 0; i < 3; ++i) x = std::nextafter(x, -1e9);
+    for (int step = 0; step < 7; ++step, x = std::nextafter(x, 1e9)) {
+      if (std::abs(x) > chaincomp::kSinCosLimit) continue;
+      double s, c;
+      chaincomp::sin_cos_reduced(x, s, c);
+      worst = std::max({worst, error(s, sinl(x)), error(c, cosl(x))});
+    }
+  }
+  CHECK(worst <= 2.5e-16);
+  // at the limit and the doubles next to it inside
+  double x = chaincomp::kSinCosLimit;
+  for (int i = 0; i < 1000; ++i, x = std::nextafter(x, 0.0)) {
+    for (double y : {x, -x}) {
+      double s, c;
+      chaincomp::sin_cos_reduced(y, s, c);
+      CHECK(error(s, sinl(y)) <= 2.5e-16);
+      CHECK(error(c, cosl(y)) <= 2.5e-16);
+    }
+  }
+}
+
+TEST_CASE("sin_cos_reduced at the double nearest every multiple of pi/2 up to the limit", "[trig]") {
+  double worst = 0;
+  const long last = static_cast<long>(chaincomp::kSinCosLimit / 1.5707963267948966);
+  for (long k = -last; k <= last; ++k) {
+    const double x = static_cast<double>(k * 1.5707963267948966192313216916397514L);
+    for (double y : {std::nextafter(x, -1e9), x, std::nextafter(x, 1e9)}) {
+      double s, c;
+      chaincomp::sin_cos_reduced(y, s, c);
+      worst = std::max({worst, error(s, sinl(y)), error(c, cosl(y))});
+    }
+  }
+  CHECK(worst <= 1e-20);  // sin there is as small as 1e-12: its error must be too
+}
+
+namespace {
+
+// axis_trig<N, Mask> against sinl / cosl on the angle lanes (the linear lanes are not
+// checked: nothing reads them), uniform angles in +-range.
+template <int N, unsigned Mask>
+double axis_trig_error(double range, std::uint64_t seed, int count) {
+  using Axes = Eigen::Matrix<double, N, 1>;
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-range, range);
+  double worst = 0;
+  for (int k = 0; k < count; ++k) {
+    Axes q;
+    for (int i = 0; i < N; ++i) q[i] = u(rng);
+    chaincomp::AxisTrig<N> t;
+    chaincomp::axis_trig<N, Mask>(q, t);
+    for (int i = 0; i < N; ++i) {
+      if (chaincomp::is_angle_axis(Mask, i)) worst = std::max({worst, error(t.s[i], sinl(q[i])), error(t.c[i], cosl(q[i]))});
+    }
+  }
+  return worst;
+}
+
+}  // namespace
+
+TEST_CASE("axis_trig on every kind of mask: all angles (the vectorised loop), one, none in between", "[trig]") {
+  for (double range : {7.0, chaincomp::kSinCosLimit, 3e5}) {  // 3e5: mostly the library's
+    INFO("range " << range);
+    CHECK(axis_trig_error<7, 0b1111111u>(range, 1, 20000) <= 2.5e-16);  // the Panda
+    CHECK(axis_trig_error<6, 0b111111u>(range, 2, 20000) <= 2.5e-16);   // the UR5
+    CHECK(axis_trig_error<5, 0b11000u>(range, 3, 20000) <= 2.5e-16);    // five_axis_ac
+    CHECK(axis_trig_error<5, 0b01010u>(range, 4, 20000) <= 2.5e-16);    // X A Y C Z
+    CHECK(axis_trig_error<6, 0b100000u>(range, 5, 20000) <= 2.5e-16);   // the last lane only
+    CHECK(axis_trig_error<4, 0b0001u>(range, 6, 20000) <= 2.5e-16);     // the first lane only
+    CHECK(axis_trig_error<2, 0b11u>(range, 7, 20000) <= 2.5e-16);       // the angle head
+    CHECK(axis_trig_error<1, 0b1u>(range, 8, 20000) <= 2.5e-16);
+  }
+  // An all-angle arm with one lane beyond the limit, NaN or Inf: the library for all lanes;
+  // the bad lane NaN, the others their sin and cos.
+  using Axes = Eigen::Matrix<double, 6, 1>;
+  for (double bad : {2e5, -1e12, std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()}) {
+    Axes q(0.1, -2.0, 3.0, 99999.0, -6.0, 1e-3);
+    q[2] = bad;
+    chaincomp::AxisTrig<6> t;
+    chaincomp::axis_trig<6, 0b111111u>(q, t);
+    for (int i = 0; i < 6; ++i) {
+      INFO("bad " << bad << " lane " << i);
+      if (std::isfinite(q[i])) {
+        CHECK(error(t.s[i], sinl(q[i])) <= 2.5e-16);
+        CHECK(error(t.c[i], cosl(q[i])) <= 2.5e-16);
+      } else {
+        CHECK(std::isnan(t.s[i]));
+        CHECK(std::isnan(t.c[i]));
+      }
+    }
+  }
+}
+
+TEST_CASE("axis_trig_near: bit for bit the base's at the base, the series' switch at 2^-6, bases far out",
+          "[trig]") {
+  using Axes = Eigen::Matrix<double, 5, 1>;
+  constexpr unsigned kMask = 0b01010u;  // X A Y C Z
+  for (const Axes& base : {Axes(1.0, 0.4, -2.0, 6.0, 3.0), Axes(1e9, chaincomp::kSinCosLimit, -1e9, -chaincomp::kSinCosLimit, 0.0),
+                           Axes(0.0, 1e6, 0.0, -3e5, 0.0), Axes(0.0, -0.0, 5e-324, 1e-310, 0.0)}) {
+    INFO("base " << base.transpose());
+    chaincomp::AxisTrig<5> bt, t;
+    chaincomp::axis_trig<5, kMask>(base, bt);
+    // at the base itself: exactly the base's values (compensate's q = command relies on it)
+    chaincomp::axis_trig_near<5, kMask>(base, bt, base, t);
+    for (int i : {1, 3}) {
+      CHECK(t.s[i] == bt.s[i]);
+      CHECK(t.c[i] == bt.c[i]);
+    }
+    // steps at and either side of kSmallAngle on one lane (the branch-free loop or the
+    // per-lane one), and up to the correction bound, with the other lane moved or not
+    const double k = chaincomp::kSmallAngle;
+    for (double d : {std::nextafter(k, 0.0), k, std::nextafter(k, 1.0), -k, 0.0175, -0.0175, 1e-9, 0.0}) {
+      for (double other : {0.0, 1e-4, -0.0175}) {
+        Axes q = base;
+        q[1] += d;
+        q[3] += other;
+        q[0] += 0.5;  // linear axes move too: they must not matter
+        chaincomp::axis_trig_near<5, kMask>(base, bt, q, t);
+        for (int i : {1, 3}) {
+          // the step as the solver takes it (q - base, exact by Sterbenz near the base)
+          const long double truth_angle = static_cast<long double>(base[i]) + static_cast<long double>(q[i] - base[i]);
+          INFO("step " << d << " other " << other << " lane " << i);
+          CHECK(error(t.s[i], sinl(truth_angle)) <= 4e-16);
+          CHECK(error(t.c[i], cosl(truth_angle)) <= 4e-16);
+        }
+      }
+    }
+    // NaN in one lane's step: NaN there, the other lane untouched
+    Axes q = base;
+    q[3] = std::numeric_limits<double>::quiet_NaN();
+    q[1] += 1e-3;
+    chaincomp::axis_trig_near<5, kMask>(base, bt, q, t);
+    CHECK(std::isnan(t.s[3]));
+    CHECK(std::isnan(t.c[3]));
+    CHECK(error(t.s[1], sinl(static_cast<long double>(base[1]) + static_cast<long double>(q[1] - base[1]))) <= 4e-16);
+  }
+}
