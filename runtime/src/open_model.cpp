@@ -189,7 +189,7 @@ const ModelEntry* open_model(const std::string& machine_path, const std::string&
   if (access(path.c_str(), F_OK) != 0) {
     if (!run_build(machine_path, error)) return nullptr;
     if (access(path.c_str(), F_OK) != 0) {
-      error = "chaincomp build did not leave " + path + " (its compiler or flags differ from this program's: " +
+      error = "chaincomp build did not leave " + path + " (its compiler, flags or sources differ from this program's: " +
               "rebuild with tools/setup)";
       return nullptr;
     }
