@@ -131,11 +131,10 @@ TEST_CASE("axis_trig_near: sines and cosines a correction away from the command"
 
 // ---- review of ed81529 (bad input, boundaries, masks) ----------------------------------------
 
-// The library's sin(-0) is -0 (C99 F.9.4.1); sin_cos_reduced's is +0: in r + r r2 P the sum
-// -0 + (+0) rounds to +0. Harmless for the poses (products and sums), visible where a sign of
-// zero matters (atan2, 1/x, a printed "-0"). Fails on ed81529: the review's report proposes
-// the fix.
-TEST_CASE("sin_cos_reduced(-0) is -0, as the library's sin", "[trig][!mayfail]") {
+// The library's sin(-0) is -0 (C99 F.9.4.1); in r + r r2 P the sum -0 + (+0) rounds to +0,
+// which sin_cos_reduced mends. Harmless for the poses (products and sums), visible where a
+// sign of zero matters (atan2, 1/x, a printed "-0").
+TEST_CASE("sin_cos_reduced(-0) is -0, as the library's sin", "[trig]") {
   double s, c;
   chaincomp::sin_cos_reduced(-0.0, s, c);
   CHECK(std::signbit(s));

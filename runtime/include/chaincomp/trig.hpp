@@ -34,12 +34,27 @@ inline double cos_small(double x) noexcept { return std::abs(x) < kSmallAngle ? 
 // callers use the library.
 constexpr double kSinCosLimit = 1e5;
 
+// The reduction needs IEEE double arithmetic as written: -ffast-math (and gcc's
+// -fassociative-math) fold (a + kRound) - kRound to a, and x87 excess precision
+// (__FLT_EVAL_METHOD__ 2: i386 without -mfpmath=sse) keeps a + kRound from rounding to an
+// integer; either gives sines and cosines of the wrong quadrant. There the library's.
+#if defined(__FAST_MATH__) || defined(__ASSOCIATIVE_MATH__) || (defined(__FLT_EVAL_METHOD__) && __FLT_EVAL_METHOD__ != 0)
+constexpr bool kReducedTrig = false;
+#else
+constexpr bool kReducedTrig = true;
+#endif
+
 // sin and cos of x, |x| <= kSinCosLimit. x - n pi/2 in three parts (Cody and Waite: pi/2 =
 // kPio2a + kPio2b + kPio2c, the first two of 33 significant bits), the Taylor series of sin
 // and cos on [-pi/4, pi/4] to the terms x^17 and x^18 (the next below 1e-19), and the
 // quadrant n mod 4 picks and signs them. No integer conversion: beyond the limit (or NaN)
 // the result is wrong, not undefined behaviour.
 inline void sin_cos_reduced(double x, double& s, double& c) noexcept {
+  if constexpr (!kReducedTrig) {
+    s = std::sin(x);
+    c = std::cos(x);
+    return;
+  }
   constexpr double kTwoOverPi = 0.6366197723675814;
   constexpr double kPio2a = 0x1.921fb544p+0;        // 1.5707963267341256
   constexpr double kPio2b = 0x1.0b4611a6p-34;       // 6.077100506303966e-11
@@ -72,6 +87,7 @@ inline void sin_cos_reduced(double x, double& s, double& c) noexcept {
   const bool odd = m * m == 1.0;  // quadrants 1 and 3 swap sin and cos
   const double sq = odd ? cr : sr, cq = odd ? sr : cr;
   s = (m < 0.0 || m > 1.5) ? -sq : sq;   // sin < 0 in quadrants 2 and 3
+  s = x == 0.0 ? x : s;                  // sin(-0) = -0, as the library's
   c = (m > 0.5 || m < -1.5) ? -cq : cq;  // cos < 0 in quadrants 1 and 2
 }
 
