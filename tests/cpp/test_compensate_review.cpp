@@ -18,6 +18,7 @@
 
 #include "angle_head.hpp"
 #include "chaincomp/compensate.hpp"
+#include "frame_angle.hpp"
 #include "chaincomp/model_info.hpp"
 #include "five_axis_ac.hpp"
 #include "me220_xz.hpp"
@@ -70,23 +71,6 @@ typename K::Trig exact_trig(const typename K::Axes& q) {
     t.c[i] = K::kAxisIsAngle[i] ? static_cast<double>(cosl(q[i])) : kNaN;
   }
   return t;
-}
-
-// The rotation angle between frames given by z and x axes (test_singular.cpp's).
-double frame_angle(const double* za, const double* xa, const double* zt, const double* xt) {
-  auto cross = [](const double* a, const double* b, double* c) {
-    c[0] = a[1] * b[2] - a[2] * b[1];
-    c[1] = a[2] * b[0] - a[0] * b[2];
-    c[2] = a[0] * b[1] - a[1] * b[0];
-  };
-  double ya[3], yt[3];
-  cross(za, xa, ya);
-  cross(zt, xt, yt);
-  double d2 = 0;
-  for (int k = 0; k < 3; ++k) {
-    d2 += (xa[k] - xt[k]) * (xa[k] - xt[k]) + (ya[k] - yt[k]) * (ya[k] - yt[k]) + (za[k] - zt[k]) * (za[k] - zt[k]);
-  }
-  return 2 * std::asin(std::sqrt(d2 / 8));
 }
 
 struct Residual {

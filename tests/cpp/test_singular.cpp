@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "chaincomp/compensate.hpp"
+#include "frame_angle.hpp"
 #include "chaincomp/model_info.hpp"
 
 namespace {
@@ -39,25 +40,6 @@ struct Machine {
                                                                : chaincomp::kMaxLinearCorrection;
   }
 };
-
-// The rotation angle between two frames given by their z and x axes (y = z x x), exactly:
-// |Ra - Rt|_F^2 = 4 (1 - cos angle) = 8 sin^2(angle / 2) (better conditioned than acos of the
-// trace near 0). Not compensate()'s first-order residual.
-double frame_angle(const double* za, const double* xa, const double* zt, const double* xt) {
-  auto cross = [](const double* a, const double* b, double* c) {
-    c[0] = a[1] * b[2] - a[2] * b[1];
-    c[1] = a[2] * b[0] - a[0] * b[2];
-    c[2] = a[0] * b[1] - a[1] * b[0];
-  };
-  double ya[3], yt[3];
-  cross(za, xa, ya);
-  cross(zt, xt, yt);
-  double d2 = 0;
-  for (int k = 0; k < 3; ++k) {
-    d2 += (xa[k] - xt[k]) * (xa[k] - xt[k]) + (ya[k] - yt[k]) * (ya[k] - yt[k]) + (za[k] - zt[k]) * (za[k] - zt[k]);
-  }
-  return 2 * std::asin(std::sqrt(d2 / 8));
-}
 
 struct PathStats {
   double largest_change = 0;       // of any axis' correction between commands, / its bound
