@@ -48,15 +48,20 @@ def _flat(rep: dict) -> dict:
     return out
 
 
-@pytest.mark.parametrize("name,order", [(n, 2) for n in MACHINE_TOOLS] + [("mori_seiki_nv1500", 3), ("me220_xz", 3)])
-def test_machine_tools_print_as_sympy_prints_them(name, order):
-    d = derive(load_machine(machine_path(name)), order)
+def assert_prints_as_sympy(d, where=()) -> None:
+    """derive's report of the derivation `d` (polyprint) has sympy's own text, LaTeX and zeros
+    (_report_sympy) for every formula; `where` goes into each failure's message."""
     fast, slow = _flat(cli_derive.report(d)), _flat(cli_derive._report_sympy(d))
     assert fast.keys() == slow.keys()
     for key in fast:
-        assert str(fast[key]) == str(slow[key]), key
-        assert fast[key].latex() == slow[key].latex(), key
-        assert fast[key].is_zero == slow[key].is_zero, key
+        assert str(fast[key]) == str(slow[key]), (*where, key)
+        assert fast[key].latex() == slow[key].latex(), (*where, key)
+        assert fast[key].is_zero == slow[key].is_zero, (*where, key)
+
+
+@pytest.mark.parametrize("name,order", [(n, 2) for n in MACHINE_TOOLS] + [("mori_seiki_nv1500", 3), ("me220_xz", 3)])
+def test_machine_tools_print_as_sympy_prints_them(name, order):
+    assert_prints_as_sympy(derive(load_machine(machine_path(name)), order))
 
 
 def test_ur5_sample_prints_as_sympy_prints_it():
