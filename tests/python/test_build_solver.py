@@ -67,30 +67,31 @@ def cache_entries(tmp_path):
     return sorted(str(p.relative_to(root)) for p in root.rglob("*")) if root.exists() else []
 
 
+def failed_solver_build(tmp_path, on_solver: str, name: str):
+    """`chaincomp build` of a machine whose solver compile runs `on_solver` and fails: its
+    stderr, after checking it ends on the one line naming the compiler and the solver."""
+    cxx = wrapper(tmp_path, on_solver)
+    env = env_for(tmp_path, toolchain_dir(tmp_path, compiler=cxx))
+    proc = chaincomp(env, "build", variant(str(tmp_path), name))
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.splitlines()[-1].startswith(f"chaincomp build: error: {cxx} failed on the compensation solver (")
+    return proc.stderr
+
+
 def test_a_failed_solver_compile_names_the_first_error_and_leaves_no_half_object(tmp_path):
     # the compiler writes half an object, then fails (as one that runs out of memory late)
-    cxx = wrapper(tmp_path, 'echo half > "$out"; echo "x.cpp: In function:" >&2; '
-                            'echo "x.cpp:3:1: error: boom" >&2; exit 1')
-    env = env_for(tmp_path, toolchain_dir(tmp_path, compiler=cxx))
-    proc = chaincomp(env, "build", variant(str(tmp_path), "solver_fail"))
-    assert proc.returncode == 2, proc.stderr
-    last = proc.stderr.splitlines()[-1]
-    assert last.startswith(f"chaincomp build: error: {cxx} failed on the compensation solver (")
-    assert last.endswith("): x.cpp:3:1: error: boom")
-    assert "Traceback" not in proc.stderr
+    err = failed_solver_build(tmp_path, 'echo half > "$out"; echo "x.cpp: In function:" >&2; '
+                                        'echo "x.cpp:3:1: error: boom" >&2; exit 1', "solver_fail")
+    assert err.splitlines()[-1].endswith("): x.cpp:3:1: error: boom")
+    assert "Traceback" not in err
     left = cache_entries(tmp_path)
     assert not any(e.endswith((".o", ".tmp", ".so")) for e in left), left
     assert not any(os.path.basename(e).startswith(".") for e in left), left  # no temporary model folder
 
 
 def test_a_killed_solver_compile_says_so(tmp_path):
-    cxx = wrapper(tmp_path, 'echo half > "$out"; kill -9 $$')
-    env = env_for(tmp_path, toolchain_dir(tmp_path, compiler=cxx))
-    proc = chaincomp(env, "build", variant(str(tmp_path), "solver_killed"))
-    assert proc.returncode == 2, proc.stderr
-    last = proc.stderr.splitlines()[-1]
-    assert last.startswith(f"chaincomp build: error: {cxx} failed on the compensation solver (")
-    assert last.endswith(".cpp): killed by signal 9, no message")
+    err = failed_solver_build(tmp_path, 'echo half > "$out"; kill -9 $$', "solver_killed")
+    assert err.splitlines()[-1].endswith(".cpp): killed by signal 9, no message")
     assert not any(e.endswith((".o", ".tmp", ".so")) for e in cache_entries(tmp_path))
 
 
