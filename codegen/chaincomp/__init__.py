@@ -13,15 +13,14 @@ The Python API (values in internal units: mm, rad)::
 """
 
 import importlib
-import sys
-import types
 
 # The API's names, imported when first used: a command line verb imports only what it needs
 # (the symbolic modules pull in sympy, ~0.5 s).
-_WHERE = {"Budget": "budget", "compute_budget": "budget", "make_grid": "budget", "Derivation": "derive",
-          "derive": "derive", "ChaincompError": "errors", "Finding": "lint", "lint": "lint", "Machine": "machine",
-          "Symbol": "machine", "load_machine": "machine", "ExactModel": "numeric", "TruncatedModel": "numeric",
-          "load_params": "params", "load_tolerances": "tolerances"}
+_WHERE = {"Budget": "analysis.budget", "compute_budget": "analysis.budget", "make_grid": "analysis.budget",
+          "Finding": "analysis.lint", "lint": "analysis.lint", "load_tolerances": "analysis.tolerances",
+          "ChaincompError": "errors", "Machine": "model.machine", "Symbol": "model.machine",
+          "load_machine": "model.machine", "load_params": "model.params", "Derivation": "symbolic.derive",
+          "derive": "symbolic.derive", "ExactModel": "symbolic.numeric", "TruncatedModel": "symbolic.numeric"}
 _ORIGINAL = {"compute_budget": "compute"}
 
 
@@ -29,16 +28,6 @@ def __getattr__(name: str):
     if name not in _WHERE:
         raise AttributeError(f"module 'chaincomp' has no attribute {name!r}")
     return getattr(importlib.import_module(f".{_WHERE[name]}", __name__), _ORIGINAL.get(name, name))
-
-
-class _Package(types.ModuleType):
-    """derive and lint name both a module and its function: chaincomp.derive stays the function
-    (importing the module would otherwise bind the module there)."""
-    derive = property(lambda self: __getattr__("derive"), lambda self, value: None)
-    lint = property(lambda self: __getattr__("lint"), lambda self, value: None)
-
-
-sys.modules[__name__].__class__ = _Package
 
 
 __all__ = ["Budget", "ChaincompError", "Derivation", "ExactModel", "Finding", "Machine", "Symbol",

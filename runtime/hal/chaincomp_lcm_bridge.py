@@ -43,9 +43,9 @@ if "/usr/lib/python3/dist-packages" not in sys.path:
 import hal  # noqa: E402
 import lcm  # noqa: E402
 
-from chaincomp.buildtree import binary, import_lcmtypes  # noqa: E402
+from chaincomp.emit.buildtree import binary, import_lcmtypes  # noqa: E402
 from chaincomp.errors import ChaincompError  # noqa: E402
-from chaincomp.machine import load_machine  # noqa: E402
+from chaincomp.model.machine import load_machine  # noqa: E402
 
 NAME = "chaincomp-bridge"
 

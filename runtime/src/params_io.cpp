@@ -48,7 +48,7 @@ const char* kind_name(UnitKind k) {
 }
 
 // "12.5", "12.5 um", "-3arcsec", 12.5: the value in internal units of a parameter, with the
-// checks and messages of chaincomp/params.py's parse_value, in its order.
+// checks and messages of chaincomp/model/params.py's parse_value, in its order.
 bool parse_value(const ParamInfo& p, const YAML::Node& node, double& out, std::string& why) {
   static const std::regex value_re(
       "\\s*([-+]?(?:[0-9]+\\.?[0-9]*|\\.[0-9]+)(?:[eE][-+]?[0-9]+)?)\\s*([^\\s0-9].*?)?\\s*");
@@ -90,7 +90,7 @@ bool parse_value(const ParamInfo& p, const YAML::Node& node, double& out, std::s
     return false;
   }
   out = v * factor;
-  // the Python loader's bound on any number (chaincomp/expressions.py MAX_LITERAL): it also
+  // the Python loader's bound on any number (chaincomp/model/expressions.py MAX_LITERAL): it also
   // refuses values that overflow in the conversion (1e308 m)
   if (!(std::fabs(out) <= 1e15)) {
     why = py_repr(node) + " is larger than 1e+15 " +
@@ -113,7 +113,7 @@ std::string at(const std::string& path, int line, const std::string& key) {
   return path + (line > 0 ? ":" + std::to_string(line) : std::string()) + ": " + key + ": ";
 }
 
-// A plain YAML number, as chaincomp/varying.py's _number takes it.
+// A plain YAML number, as chaincomp/model/varying.py's _number takes it.
 bool number(const YAML::Node& n, double& out, std::string& why) {
   if (!yaml_number(n, out)) {
     why = "expected a number, got " + describe(n);
@@ -127,7 +127,7 @@ bool number(const YAML::Node& n, double& out, std::string& why) {
 }
 
 // One error given as a table or a polynomial over one axis (the Python loader,
-// chaincomp/varying.py, takes the same format with the same messages).
+// chaincomp/model/varying.py, takes the same format with the same messages).
 bool load_varying(const MachineInfo& info, int param, const std::string& path, const YAML::Node& keynode,
                   const YAML::Node& node, VaryingErrors& varying, std::string& error) {
   const ParamInfo& p = info.params[param];

@@ -398,7 +398,7 @@ std::string py_repr(const YAML::Node& n) {
 
 // A number with an exponent that YAML 1.1 takes for text (1e3, 1.5e3, 1e+3: it wants a dot and
 // a signed exponent) -> the spelling it reads as that number (1.0e+3); "" for other text. As
-// chaincomp/yamlsource.py's yaml11_number, so that both loaders' messages carry the same hint.
+// chaincomp/model/yamlsource.py's yaml11_number, so that both loaders' messages carry the same hint.
 std::string yaml11_number(const std::string& s) {
   static const std::regex re("([-+]?)([0-9]*)(\\.?)([0-9]*)[eE]([-+]?)([0-9]+)");
   std::smatch m;   // libstdc++'s regex recurses per character: a hint only for number-sized text

@@ -6,7 +6,7 @@ import os
 import numpy as np
 
 from chaincomp import load_machine, load_params
-from chaincomp.numeric import ExactModel
+from chaincomp.symbolic.numeric import ExactModel
 
 from lcm_harness import ROOT
 

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from chaincomp import load_machine, load_params
-from chaincomp.numeric import ExactModel
+from chaincomp.symbolic.numeric import ExactModel
 
 from arm_models import UR5_A, UR5_D
 from conftest import PARAMS, ROOT, machine_path

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from chaincomp import display
+from chaincomp.model import display
 from chaincomp.cli.main import main
 from conftest import machine_path
 

@@ -56,8 +56,8 @@ def test_identify_at_the_smoothing_bound_still_fits_a_straight_table(tmp_path):
     """EXX a tent 0, 3, 0 um over X's knots -400, 0, 400 mm, every other error zero and held so:
     without smoothing the fit finds the tent (within 4 standard uncertainties); at the bound,
     1e12, the second difference is nil (a straight table) and every number finite."""
-    from chaincomp.identify import Vary, identify, read_table
-    from chaincomp.machine import load_machine
+    from chaincomp.measure.identify import Vary, identify, read_table
+    from chaincomp.model.machine import load_machine
     p, meas = tmp_path / "p.yaml", tmp_path / "meas.csv"
     p.write_text("machine: vmc_xyz\nvalues:\n  EXX:\n    axis: X\n    units: [mm, um]\n    interpolation: linear\n"
                  "    outside: hold\n    table:\n      - [-400, 0]\n      - [0, 3]\n      - [400, 0]\n")
@@ -77,8 +77,8 @@ def test_identify_at_the_smoothing_bound_still_fits_a_straight_table(tmp_path):
 
 def test_identify_api_refuses_a_smoothing_weight_beyond_1e12(measurements):
     from chaincomp.errors import ChaincompError
-    from chaincomp.identify import identify, read_table
-    from chaincomp.machine import load_machine
+    from chaincomp.measure.identify import identify, read_table
+    from chaincomp.model.machine import load_machine
     m = load_machine(VMC)
     with pytest.raises(ChaincompError, match="--smooth: must be at least 0 and at most 1e"):
         identify(m, read_table(measurements, m), sigma=1e-3, smooth=1e13)
@@ -189,7 +189,9 @@ def test_import_urdf_renames_joints_named_like_a_measured_coordinate(capsys, tmp
     (a column x would be both the axis and the measured coordinate)."""
     import json
 
-    from chaincomp import identify, urdf
+    from chaincomp.measure import identify
+
+    from chaincomp.model import urdf
     assert set(urdf.MEASURED_NAMES) == set(identify.COLUMNS)
     src, m = tmp_path / "gantry.urdf", tmp_path / "gantry.yaml"
     src.write_text(GANTRY)

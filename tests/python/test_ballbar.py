@@ -10,10 +10,10 @@ import os
 import numpy as np
 import pytest
 
-from chaincomp import ballbar as bb
+from chaincomp.measure import ballbar as bb
 from chaincomp.cli.main import main
-from chaincomp.machine import load_machine
-from chaincomp.numeric import ExactModel
+from chaincomp.model.machine import load_machine
+from chaincomp.symbolic.numeric import ExactModel
 from conftest import PARAMS, machine_path, run_cli
 
 ARCSEC = math.pi / 648000
@@ -112,7 +112,7 @@ def test_trace_is_the_actual_tool_point_along_the_nominal_circle(machine_file, t
 def test_trace_on_vmc_xyz_against_the_exact_model(plane, axes, held):
     machine = load_machine(machine_path("vmc_xyz"))
     model = ExactModel(machine)
-    from chaincomp.params import load_params
+    from chaincomp.model.params import load_params
     values = {**machine.nominal_values(), **load_params(os.path.join(PARAMS, "vmc_xyz-demo.yaml"), machine)}
     sets = [f"{k}={v}" for k, v in held.items()]
     args = ["ballbar", machine_path("vmc_xyz"), "--params", os.path.join(PARAMS, "vmc_xyz-demo.yaml"),
@@ -210,7 +210,7 @@ def test_fit_recovers_squareness_and_scale_mismatch(machine_file, tmp_path):
     assert terms["centre y"]["value"] == pytest.approx(3.0, abs=3 * terms["centre y"]["uncertainty"])
     assert doc["rms_residual_um"] == pytest.approx(sigma * 1e3, rel=0.1)
     # the params file loads and its values are the estimates
-    from chaincomp.params import load_params
+    from chaincomp.model.params import load_params
     got = load_params(str(out), load_machine(machine_file))
     assert got["SV"] == pytest.approx(terms["SV"]["value"] * 1e-6, rel=1e-8)
     assert got["SQ"] == pytest.approx(terms["SQ"]["value"] * ARCSEC, rel=1e-8)
@@ -224,7 +224,7 @@ def test_fit_on_vmc_xyz_recovers_squareness_and_scale_as_polynomials(tmp_path):
     p.write_text("machine: vmc_xyz\nvalues:\n  EC0Y: 6 arcsec\n"
                  "  EXX: {axis: X, units: [mm, um], polynomial: [2.0, 0.012]}\n"
                  "  EYY: {axis: Y, units: [mm, um], polynomial: [-1.0, -0.004]}\n")
-    from chaincomp.params import load_params
+    from chaincomp.model.params import load_params
     values = {**machine.nominal_values(), **load_params(str(p), machine)}
     rng = np.random.default_rng(11)
     n, r, sigma = 600, 150.0, 0.2e-3

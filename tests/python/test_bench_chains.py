@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from chaincomp import ExactModel, load_machine
-from chaincomp.lint import lint
+from chaincomp.analysis.lint import lint
 
 from arm_models import panda, rx, rz, tr, ur5
 

@@ -16,10 +16,10 @@ import yaml
 
 from conftest import PARAMS, ROOT, cli, machine_path, run_cli
 
-from chaincomp import budget as B
-from chaincomp.machine import load_machine
-from chaincomp.numeric import ExactModel
-from chaincomp.tolerances import load_tolerances
+from chaincomp.analysis import budget as B
+from chaincomp.model.machine import load_machine
+from chaincomp.symbolic.numeric import ExactModel
+from chaincomp.analysis.tolerances import load_tolerances
 
 TOLERANCES = os.path.join(ROOT, "configs", "tolerances")
 FIVE = machine_path("five_axis_ac")
@@ -402,7 +402,7 @@ def test_systematic_error_at_the_params_values_is_the_exact_models():
     of the exact model there (order exact), and the second-order model's within its own order."""
     machine = load_machine(FIVE)
     params = os.path.join(PARAMS, "five_axis_ac-demo.yaml")
-    from chaincomp.params import load_params
+    from chaincomp.model.params import load_params
     errors = load_params(params, machine)
     common = (FIVE, "--tolerances", FIVE_TOL, "--params", params, "--over", "X,Ap,Cp", "--grid", "4",
               "--set", "Y=100", "--set", "Z=-300", "--samples", "0")

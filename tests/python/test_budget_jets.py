@@ -12,10 +12,10 @@ import pytest
 from conftest import ROOT, machine_path
 from test_budget import FIVE_TOL, fd_gains, grid_values, read_tolerances, reference_figures
 
-from chaincomp import budget as B
-from chaincomp.derive import derive
-from chaincomp.machine import load_machine
-from chaincomp.tolerances import load_tolerances
+from chaincomp.analysis import budget as B
+from chaincomp.symbolic.derive import derive
+from chaincomp.model.machine import load_machine
+from chaincomp.analysis.tolerances import load_tolerances
 
 UR5 = os.path.join(ROOT, "tools", "bench_machines", "ur5.yaml")
 UR5_TOL = """machine: ur5

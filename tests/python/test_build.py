@@ -254,7 +254,7 @@ def _replay_exact(built, machine, tmp_path, extra=()):
     """replay of a simulated log on `machine`; largest tool point error (mm) of the corrected
     axes against the exact model's nominal pose at the commands."""
     sys.path.insert(0, E2E)
-    from common import exact_check  # the e2e scenarios' check: chaincomp.numeric.ExactModel
+    from common import exact_check  # the e2e scenarios' check: chaincomp.symbolic.numeric.ExactModel
     log, csv, cfg = tmp_path / "axes.lcmlog", tmp_path / "out.csv", tmp_path / "r.yaml"
     cfg.write_text(CONFIG_TEXT)
     proc = chaincomp(built["env"], "simulate-log", machine, "-o", str(log), "--seconds", "0.5")
@@ -389,8 +389,8 @@ def test_linuxcnc_options_are_checked_before_any_work(tmp_path):
 
 
 def test_linuxcnc_header_bakes_the_params_in_internal_units():
-    from chaincomp.build import rt_model_header
-    from chaincomp.machine import load_machine
+    from chaincomp.emit.build import rt_model_header
+    from chaincomp.model.machine import load_machine
 
     m = load_machine(FIVE)
     text = rt_model_header(m, {"EXX": 0.004, "G": 151.0}, "p.yaml")

@@ -7,7 +7,7 @@ tables it writes move the tool relative to the workpiece as the standard reads t
 import numpy as np
 
 from chaincomp import ExactModel, load_machine, load_params
-from chaincomp.calibration import find_slides
+from chaincomp.measure.calibration import find_slides
 from chaincomp.cli.main import main
 
 from conftest import machine_path

@@ -22,7 +22,7 @@ import yaml
 from sympy.parsing.sympy_parser import parse_expr
 
 from chaincomp import load_machine
-from chaincomp.machine import Rotation
+from chaincomp.model.machine import Rotation
 
 from conftest import ROOT, cli, machine_path, run_cli
 

@@ -187,7 +187,7 @@ def test_top_level_help_lists_every_verb_on_one_line():
 
 @pytest.mark.parametrize("program", ["chaincompd", "chaincomp_replay"])
 def test_the_programs_version_is_the_package_version(program):
-    from chaincomp.buildtree import binary
+    from chaincomp.emit.buildtree import binary
     try:
         path = binary(program)
     except ChaincompError as exc:   # no C++ build here

@@ -228,9 +228,9 @@ def test_json_output_is_strict_json(ws, capsys):
 
 
 def test_simulate_calibration_at_the_knot_limit_loads_back(ws, capsys):
-    from chaincomp.machine import load_machine
-    from chaincomp.params import load_params
-    from chaincomp.varying import MAX_TABLE_KNOTS, Table
+    from chaincomp.model.machine import load_machine
+    from chaincomp.model.params import load_params
+    from chaincomp.model.varying import MAX_TABLE_KNOTS, Table
 
     out = ws["out"] + ".yaml"
     code, _, err = run(capsys, ["simulate-calibration", ws["five"], "-o", out, "--knots", str(MAX_TABLE_KNOTS),
@@ -251,7 +251,7 @@ def test_simulate_calibration_at_the_knot_limit_loads_back(ws, capsys):
 
 
 def test_protocol_bounds_its_set_ups(ws, capsys):
-    from chaincomp.protocol import MAX_SETUPS
+    from chaincomp.measure.protocol import MAX_SETUPS
 
     # angle_head: Ap and Cp over the same values, both within limits: n^2 set-ups
     n = math.isqrt(MAX_SETUPS) + 1

@@ -20,10 +20,10 @@ import subprocess
 import pytest
 
 from chaincomp.errors import ChaincompError
-from chaincomp.machine import load_machine
-from chaincomp.params import load_params
-from chaincomp.tolerances import load_tolerances
-from chaincomp.varying import Varying
+from chaincomp.model.machine import load_machine
+from chaincomp.model.params import load_params
+from chaincomp.analysis.tolerances import load_tolerances
+from chaincomp.model.varying import Varying
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 CORPUS = os.path.join(ROOT, "tests", "conformance")

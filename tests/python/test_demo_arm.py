@@ -84,7 +84,7 @@ def test_the_urdf_import_step(demo):
     base_link; tests/python/test_arms.py), ee_link's origin on flange frame 6's, and each
     joint's zero offset adds to its angle. The URDF writes pi/2 as 1.57079632679: 2e-8 mm."""
     from chaincomp import load_machine
-    from chaincomp.numeric import ExactModel
+    from chaincomp.symbolic.numeric import ExactModel
     work, out = demo
     assert "ur5: no findings" in out
     machine = load_machine(str(work / "ur5-urdf.yaml"))

@@ -1,4 +1,4 @@
-"""chaincomp derive's printed formulas, printed straight from the series (chaincomp.polyprint)
+"""chaincomp derive's printed formulas, printed straight from the series (chaincomp.symbolic.polyprint)
 and, on the arms, the series themselves:
 
 - on every bundled machine tool the text and LaTeX are sympy's own (str / sympy.latex of
@@ -9,7 +9,7 @@ and, on the arms, the series themselves:
   (tests/python/arm_models.py: exact pose with errors minus without) by O(ε³), the order-1
   terms alone by O(ε²): point, direction and the orientation error ω against the exact
   rotation vector log(R·R₀ᵀ);
-- the UR5's order 3 (ω by s·arcsin|s|/|s|, chaincomp.orientation) by O(ε⁴), printed and as
+- the UR5's order 3 (ω by s·arcsin|s|/|s|, chaincomp.symbolic.orientation) by O(ε⁴), printed and as
   numeric jets.
 """
 
@@ -27,8 +27,8 @@ import sympy as sp
 import arm_models as am
 from chaincomp import load_machine
 from chaincomp.cli import derive as cli_derive
-from chaincomp.derive import derive
-from chaincomp.jets import JetModel
+from chaincomp.symbolic.derive import derive
+from chaincomp.symbolic.jets import JetModel
 from conftest import cli, machine_path
 
 MACHINE_TOOLS = ["vmc_xyz", "me220_xz", "trunnion_ac", "five_axis_ac", "angle_head", "mori_seiki_nv1500"]

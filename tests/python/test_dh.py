@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from chaincomp import ChaincompError, ExactModel, load_machine
-from chaincomp.jets import JetModel
-from chaincomp.lint import lint
+from chaincomp.symbolic.jets import JetModel
+from chaincomp.analysis.lint import lint
 
 from arm_models import PANDA_A, PANDA_ALPHA, PANDA_D, PANDA_FLANGE, UR5_A, UR5_ALPHA, UR5_D, panda, ur5
 

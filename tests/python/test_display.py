@@ -1,4 +1,4 @@
-"""chaincomp.display: units for people and estimate ± uncertainty, against hand-worked rounding.
+"""chaincomp.model.display: units for people and estimate ± uncertainty, against hand-worked rounding.
 
 Rule (GUM 7.2.6 practice): the uncertainty to 2 significant digits, the estimate to the same
 decimal place. Each expectation below was rounded by hand from the decimal text of the inputs."""
@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from chaincomp.display import DEFAULT_UNITS, add_units_argument, convert, display_unit, plus_minus, quantity, uncertain
+from chaincomp.model.display import DEFAULT_UNITS, add_units_argument, convert, display_unit, plus_minus, quantity, uncertain
 
 
 @pytest.mark.parametrize("value, u, text", [

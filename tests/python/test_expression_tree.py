@@ -1,4 +1,4 @@
-"""The expression tree (chaincomp.expressions.Expr) against sympy, its peer: the sympy form it
+"""The expression tree (chaincomp.model.expressions.Expr) against sympy, its peer: the sympy form it
 builds is the one a parser building sympy directly builds (written here, independently), its
 numbers and Taylor jets are sympy's (N, series.taylor), and the load's numeric screen never
 passes what sympy's checks refuse. Then the numeric models on every bundled machine and on
@@ -19,11 +19,11 @@ import pytest
 import sympy as sp
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from chaincomp import series as S
-from chaincomp.expressions import ExpressionError, check_sympy, parse_tree, plausible
-from chaincomp.jets import JetModel
-from chaincomp.machine import ROT_PLANE, Rotation, _check_at_nominal, load_machine
-from chaincomp.numeric import ExactModel
+from chaincomp.symbolic import series as S
+from chaincomp.model.expressions import ExpressionError, check_sympy, parse_tree, plausible
+from chaincomp.symbolic.jets import JetModel
+from chaincomp.model.machine import ROT_PLANE, Rotation, _check_at_nominal, load_machine
+from chaincomp.symbolic.numeric import ExactModel
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 MACHINES = sorted(glob.glob(os.path.join(ROOT, "configs", "machines", "*.yaml")))
@@ -327,8 +327,8 @@ def test_every_element_jet_is_sympys_taylor_series_on_every_machine(tmp_path):
 
 def test_jet_model_is_the_truncated_model_of_the_derivation(tmp_path):
     """Small machines: the jets through the chain against derive's formulas, lambdified."""
-    from chaincomp.derive import derive
-    from chaincomp.numeric import TruncatedModel
+    from chaincomp.symbolic.derive import derive
+    from chaincomp.symbolic.numeric import TruncatedModel
     rng = np.random.default_rng(9)
     for path in [os.path.join(ROOT, "configs", "machines", "vmc_xyz.yaml"), _machines(tmp_path)[-1]]:
         machine = load_machine(path)

@@ -5,7 +5,7 @@ import random
 import numpy as np
 import sympy as sp
 
-from chaincomp.numeric import ExactModel
+from chaincomp.symbolic.numeric import ExactModel
 
 from conftest import derived
 from test_truncation import random_values

@@ -25,7 +25,7 @@ def test_generate_is_byte_identical_across_runs(tmp_path):
 
 
 def test_generated_header_names_its_source_and_hash(tmp_path):
-    from chaincomp.emit import fnv1a64
+    from chaincomp.emit.cpp import fnv1a64
     run_cli("generate", machine_path("me220_xz"), "-o", str(tmp_path))
     text = (tmp_path / "me220_xz.hpp").read_text()
     with open(machine_path("me220_xz"), "rb") as f:

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from chaincomp import ExactModel, load_machine
-from chaincomp.derive import EXPANDED_TERMS_LIMIT
-from chaincomp.emit import generate
-from chaincomp.jets import JetModel
+from chaincomp.symbolic.derive import EXPANDED_TERMS_LIMIT
+from chaincomp.emit.cpp import generate
+from chaincomp.symbolic.jets import JetModel
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 VOID_P, DBL_P = ctypes.c_void_p, ctypes.POINTER(ctypes.c_double)

@@ -16,8 +16,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from chaincomp.errors import ChaincompError
-from chaincomp.expressions import MAX_DEPTH, MAX_LENGTH, ExpressionError, parse
-from chaincomp.machine import load_machine
+from chaincomp.model.expressions import MAX_DEPTH, MAX_LENGTH, ExpressionError, parse
+from chaincomp.model.machine import load_machine
 
 from test_bad_input import MACHINE, PARAMS, edit, line_of
 
@@ -312,7 +312,7 @@ def test_huge_integer_nominal(tmp_path):
 
 
 def test_chain_and_symbol_counts_bounded(tmp_path):
-    from chaincomp.machine import MAX_CHAIN_ELEMENTS, MAX_SYMBOLS
+    from chaincomp.model.machine import MAX_CHAIN_ELEMENTS, MAX_SYMBOLS
     T = "  - {translate: [X, Y1, 0], label: component 1 (X slide)}\n"
     text = edit(MACHINE, (T, T * (MAX_CHAIN_ELEMENTS + 1)))
     _cli_refuses(tmp_path, text, f"{MAX_CHAIN_ELEMENTS + 4} chain elements (at most {MAX_CHAIN_ELEMENTS})",
@@ -351,7 +351,7 @@ def _load_random(tmp_path, doc: dict, key: str, entries, load):
 @given(st.dictionaries(st.sampled_from(["machine", "values", "description", "extra"]), _YAML_VALUES, max_size=4),
        st.dictionaries(st.sampled_from(["dx1", "ey1", "tx", "X", "nope"]), _YAML_VALUES, max_size=4))
 def test_params_loader_property_random_yaml(tmp_path, top, values):
-    from chaincomp.params import load_params
+    from chaincomp.model.params import load_params
     out = _load_random(tmp_path, top, "values", values, load_params) or {}
     for v in out.values():
         assert not isinstance(v, float) or abs(v) <= 1e15
@@ -364,7 +364,7 @@ def test_params_loader_property_random_yaml(tmp_path, top, values):
                        st.dictionaries(st.sampled_from(["bound", "distribution", "normal_bound", "q"]), _YAML_VALUES,
                                        max_size=3), max_size=3))
 def test_tolerances_loader_property_random_yaml(tmp_path, top, tols):
-    from chaincomp.tolerances import load_tolerances
+    from chaincomp.analysis.tolerances import load_tolerances
     _load_random(tmp_path, top, "tolerances", tols, load_tolerances)
 
 
@@ -372,5 +372,5 @@ def test_tolerances_loader_property_random_yaml(tmp_path, top, tols):
 @given(st.dictionaries(st.sampled_from(["machine", "where", "formulas", "chain", "source"]), _YAML_VALUES, max_size=4),
        st.lists(st.dictionaries(st.sampled_from(["name", "of", "formula", "x"]), _YAML_VALUES, max_size=4), max_size=3))
 def test_check_loader_property_random_yaml(tmp_path, top, formulas):
-    from chaincomp.check import load_formulas
+    from chaincomp.analysis.check import load_formulas
     _load_random(tmp_path, top, "formulas", formulas, load_formulas)

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from chaincomp import load_machine, load_params
-from chaincomp.identify import Table, identify, simulate
-from chaincomp.numeric import ExactModel
+from chaincomp.measure.identify import Table, identify, simulate
+from chaincomp.symbolic.numeric import ExactModel
 
 from conftest import machine_path, run_cli
 from test_protocol import extended_head

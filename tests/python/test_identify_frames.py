@@ -18,7 +18,7 @@ import pytest
 
 from chaincomp import load_machine, load_params
 from chaincomp.cli.main import main
-from chaincomp.identify import read_table, residuals
+from chaincomp.measure.identify import read_table, residuals
 
 from conftest import ROOT
 

@@ -15,8 +15,8 @@ import pytest
 
 from chaincomp import load_machine, load_params
 from chaincomp.cli.main import main
-from chaincomp.identify import Table, Vary, identify
-from chaincomp.numeric import ExactModel
+from chaincomp.measure.identify import Table, Vary, identify
+from chaincomp.symbolic.numeric import ExactModel
 
 UM, ARCSEC = 1e-3, math.pi / 648000
 MACHINE = """\
@@ -246,7 +246,7 @@ def test_a_polynomial_needs_positions(machine, tmp_path, capsys):
 
 
 def test_the_fit_size_is_bounded(machine, tmp_path, capsys, monkeypatch):
-    import chaincomp.identify as identify_module
+    import chaincomp.measure.identify as identify_module
     monkeypatch.setattr(identify_module, "MAX_JACOBIAN", 500)
     path, m, _ = machine
     X, Y = setups()
@@ -297,7 +297,7 @@ def test_the_number_of_parameters_is_bounded(machine, tmp_path, capsys):
 
 
 def test_a_large_fit_reports_its_stages_on_stderr(machine, tmp_path, capsys, monkeypatch):
-    import chaincomp.identify as identify_module
+    import chaincomp.measure.identify as identify_module
     monkeypatch.setattr(identify_module, "PROGRESS_SIZE", 0)
     path, m, _ = machine
     X, Y = setups()

@@ -27,8 +27,8 @@ import yaml
 
 from chaincomp import load_machine, lint
 from chaincomp.cli.main import main as chaincomp_main
-from chaincomp.jets import JetModel
-from chaincomp.numeric import ExactModel
+from chaincomp.symbolic.jets import JetModel
+from chaincomp.symbolic.numeric import ExactModel
 
 from conftest import ROOT
 

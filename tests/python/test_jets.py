@@ -1,4 +1,4 @@
-"""Numeric jets through the chain (chaincomp.jets) against the symbolic derivation on every
+"""Numeric jets through the chain (chaincomp.symbolic.jets) against the symbolic derivation on every
 bundled machine, and on a six-joint arm (UR5, standard DH, 24 errors; Universal Robots'
 published parameters) against the exact model: residuals falling as eps^(k+1) and gains
 against central finite differences. The arm is written here, not bundled."""
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from chaincomp import ExactModel, load_machine
-from chaincomp.jets import JetModel
+from chaincomp.symbolic.jets import JetModel
 
 from arm_models import UR5_A, UR5_D, ur5 as ur5_frame
 from conftest import truncated

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from chaincomp.cli.main import main
-from chaincomp.machine import load_machine
-from chaincomp.numeric import ExactModel
-from chaincomp.params import load_params
-from chaincomp.varying import Table
+from chaincomp.model.machine import load_machine
+from chaincomp.symbolic.numeric import ExactModel
+from chaincomp.model.params import load_params
+from chaincomp.model.varying import Table
 from conftest import PARAMS, ROOT, machine_path
 
 MACHINE = machine_path("five_axis_ac")

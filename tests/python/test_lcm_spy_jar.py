@@ -90,7 +90,7 @@ def _doubles(text):
 
 
 def test_jar_decodes_a_corrected_target_and_a_status(decoder, tmp_path):
-    from chaincomp.buildtree import import_lcmtypes
+    from chaincomp.emit.buildtree import import_lcmtypes
     T = import_lcmtypes()
     t = T.lcmt_corrected_target()
     t.utime, t.seq, t.num_axes = 1_700_000_000_123_456, 42, 5
@@ -122,7 +122,7 @@ def test_jar_decodes_a_corrected_target_and_a_status(decoder, tmp_path):
 
 
 def test_a_message_of_another_type_is_not_taken_for_ours(decoder, tmp_path):
-    from chaincomp.buildtree import import_lcmtypes
+    from chaincomp.emit.buildtree import import_lcmtypes
     data = bytearray(import_lcmtypes().lcmt_corrected_target().encode())
     data[:8] = struct.pack(">q", 0x0123456789ABCDEF)     # a fingerprint no type of ours has
     (tmp_path / "x.bin").write_bytes(bytes(data))

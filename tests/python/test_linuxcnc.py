@@ -120,7 +120,7 @@ def test_realtime_component_corrects_as_chaincompd_on_the_same_commands(rt_run, 
 
     import lcm
 
-    from chaincomp.buildtree import import_lcmtypes
+    from chaincomp.emit.buildtree import import_lcmtypes
 
     types = import_lcmtypes()
     log_path, csv_path = str(tmp_path / "rt.lcmlog"), str(tmp_path / "rt.csv")

@@ -24,9 +24,9 @@ import yaml
 
 from chaincomp import load_machine, load_params
 from chaincomp.cli.main import main as chaincomp_main
-from chaincomp.numeric import ExactModel
-from chaincomp.pose_design import is_arm
-from chaincomp.units import unit
+from chaincomp.symbolic.numeric import ExactModel
+from chaincomp.measure.pose_design import is_arm
+from chaincomp.model.units import unit
 
 from conftest import MACHINES, PARAMS, ROOT, machine_path, needs_netns
 

@@ -17,7 +17,7 @@ import pytest
 import sympy as sp
 
 from chaincomp import load_machine, load_params
-from chaincomp.derive import derive
+from chaincomp.symbolic.derive import derive
 
 from conftest import PARAMS, eval_json, machine_path
 

@@ -7,8 +7,8 @@ import numpy as np
 import sympy as sp
 
 from chaincomp import load_machine
-from chaincomp.derive import derive
-from chaincomp.numeric import TruncatedModel
+from chaincomp.symbolic.derive import derive
+from chaincomp.symbolic.numeric import TruncatedModel
 
 from conftest import machine_path
 

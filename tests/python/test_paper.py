@@ -10,7 +10,7 @@ import pytest
 import sympy as sp
 
 from chaincomp import load_machine
-from chaincomp.derive import derive
+from chaincomp.symbolic.derive import derive
 
 from conftest import eval_json, machine_path
 

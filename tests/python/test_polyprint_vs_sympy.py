@@ -1,7 +1,7 @@
-"""chaincomp.polyprint against sympy's own printers, on generated series.
+"""chaincomp.symbolic.polyprint against sympy's own printers, on generated series.
 
 ``chaincomp derive`` prints its formulas straight from the series' ring terms
-(chaincomp.polyprint), imitating ``str`` and ``sympy.latex`` of the expressions it used to
+(chaincomp.symbolic.polyprint), imitating ``str`` and ``sympy.latex`` of the expressions it used to
 build: ``collect(expand(...), errors)`` of each error term, the nominal sums, their ``diff``
 in each axis, the gain matrix's coefficients (cli/derive.py's ``_report_sympy``). Here
 hypothesis builds series of the kind a derivation holds: monomials in error symbols (names
@@ -25,8 +25,8 @@ from hypothesis import strategies as st
 from sympy.polys.domains import QQ
 from sympy.polys.rings import ring as poly_ring
 
-from chaincomp.derive import Derivation
-from chaincomp.polyprint import RingPrinter, shown_collected, shown_plain
+from chaincomp.symbolic.derive import Derivation
+from chaincomp.symbolic.polyprint import RingPrinter, shown_collected, shown_plain
 from test_derive_fast import assert_prints_as_sympy
 
 # Error names: digits (dx1 < dx10 < dx2), underscores (sorted between upper and lower case),
@@ -46,7 +46,7 @@ COEFFS = [Fraction(1), Fraction(-1), Fraction(2), Fraction(-2), Fraction(1, 2), 
           Fraction(7), Fraction(-1, 3), Fraction(1, 180), Fraction(254, 10), Fraction(10 ** 15), Fraction(-7, 10 ** 15),
           Fraction(2 ** 70 + 1, 3)]
 
-# atoms: what chaincomp.series.Atoms makes of functions of large symbols
+# atoms: what chaincomp.symbolic.series.Atoms makes of functions of large symbols
 ATOM_KINDS = ["sin", "cos", "sin", "cos", "tan", "1/tan", "1/cos", "1/sin", "1/tan**2", "atan", "asin",
               "acos", "atan2"]
 
@@ -181,7 +181,7 @@ tool:
 def test_machine_file_prints_as_sympy(tmp_path, order):
     from chaincomp import load_machine
     from chaincomp.cli import derive as cli_derive
-    from chaincomp.derive import derive
+    from chaincomp.symbolic.derive import derive
 
     path = tmp_path / "lone_powers.yaml"
     path.write_text(LONE_POWERS)
@@ -250,7 +250,7 @@ def test_random_machine_files_print_as_sympy(tmp_path):
 
     from chaincomp import load_machine
     from chaincomp.cli import derive as cli_derive
-    from chaincomp.derive import derive
+    from chaincomp.symbolic.derive import derive
     from chaincomp.errors import ChaincompError
 
     compared = 0

@@ -14,7 +14,7 @@ import pytest
 import sympy as sp
 
 from chaincomp import load_machine
-from chaincomp.numeric import ExactModel
+from chaincomp.symbolic.numeric import ExactModel
 
 from conftest import cli, machine_path, run_cli
 

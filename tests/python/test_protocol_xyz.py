@@ -18,7 +18,7 @@ import pytest
 import sympy as sp
 
 from chaincomp import load_machine
-from chaincomp.machine import ROT_PLANE, Rotation
+from chaincomp.model.machine import ROT_PLANE, Rotation
 
 from conftest import cli, machine_path, run_cli
 

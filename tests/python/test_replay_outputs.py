@@ -44,8 +44,8 @@ def test_replay_counts_the_corrections_held_back(tmp_path):
     import lcm
     import numpy as np
     import yaml
-    from chaincomp.buildtree import import_lcmtypes
-    from chaincomp.machine import load_machine
+    from chaincomp.emit.buildtree import import_lcmtypes
+    from chaincomp.model.machine import load_machine
     types = import_lcmtypes()
     machine = load_machine(FIVE)
     # 20 um and 20 arcsec on every error, alternating signs by the symbol's place (as the C++ case)

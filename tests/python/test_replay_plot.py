@@ -52,7 +52,7 @@ def test_replay_matches_the_exact_model_on_every_record(tmp_path):
 
 def test_replay_reports_exactly_the_corrupted_records(tmp_path):
     import lcm
-    from chaincomp.buildtree import import_lcmtypes
+    from chaincomp.emit.buildtree import import_lcmtypes
     log, bad, table = tmp_path / "axes.lcmlog", tmp_path / "bad.lcmlog", tmp_path / "replay.csv"
     run_cli("simulate-log", FIVE, "-o", str(log), "--seconds", "0.5")
     types = import_lcmtypes()

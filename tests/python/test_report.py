@@ -10,7 +10,7 @@ import sympy as sp
 from sympy.parsing.sympy_parser import parse_expr
 
 from chaincomp import load_machine
-from chaincomp.numeric import ExactModel
+from chaincomp.symbolic.numeric import ExactModel
 
 from conftest import BUNDLED, machine_path, run_cli
 

@@ -136,7 +136,7 @@ def numpy_rank(kind, no_d, betas):
 @pytest.mark.parametrize("kind", ["dh", "mdh"])
 def test_following_the_parallel_axes_advice_adds_a_freedom_per_beta(tmp_path, kind):
     from chaincomp import load_machine
-    from chaincomp.lint import lint
+    from chaincomp.analysis.lint import lint
     path = tmp_path / "arm.yaml"
     path.write_text(arm_text(kind))
     advice = [f.message for f in lint(load_machine(str(path))) if "parallel" in f.message]
@@ -150,7 +150,7 @@ def test_following_the_parallel_axes_advice_adds_a_freedom_per_beta(tmp_path, ki
 def test_no_parallel_warning_against_the_base_frame(tmp_path):
     # mdh joint 1's alpha is the twist from the base frame, not from a joint: d1 is defined.
     from chaincomp import load_machine
-    from chaincomp.lint import lint
+    from chaincomp.analysis.lint import lint
     path = tmp_path / "arm.yaml"
     path.write_text(arm_text("mdh"))
     assert not [f for f in lint(load_machine(str(path))) if f.field == "symbols.dd1"]
@@ -161,7 +161,7 @@ def test_no_parallel_warning_against_the_base_frame(tmp_path):
 @pytest.mark.parametrize("text", ["\u0663", "1\u0663", "\u0663.5"])   # Arabic-Indic three
 def test_only_ascii_digits_are_numbers(text):
     # float('\u0663') is 3.0, but the grammar (and the C++ side, and parse_number) know 0-9 only
-    from chaincomp.expressions import ExpressionError, parse
+    from chaincomp.model.expressions import ExpressionError, parse
     with pytest.raises(ExpressionError):
         parse(text, {})
 
@@ -169,14 +169,14 @@ def test_only_ascii_digits_are_numbers(text):
 @pytest.mark.parametrize("text", ["(-8)^(1/3)", "acos(2)", "asin(3/2)", "2 + (-1)^(1/2)"])
 def test_complex_constants_are_not_real(text):
     # (-8)^(1/3) is 1 + 1.732i in sympy's principal branch; acos(2) is 1.317i
-    from chaincomp.expressions import ExpressionError, parse
+    from chaincomp.model.expressions import ExpressionError, parse
     with pytest.raises(ExpressionError, match="not real"):
         parse(text, {})
 
 
 def test_real_constants_still_parse():
     import sympy as sp
-    from chaincomp.expressions import parse
+    from chaincomp.model.expressions import parse
     assert parse("8^(1/3)", {}) == 2 and parse("acos(1/2)", {}) == sp.pi / 3 and parse("(-2)^2", {}) == 4
 
 
@@ -198,7 +198,7 @@ def test_exponent_numbers_are_numbers(tmp_path, written, value):
 def test_parallel_axes_lint_keeps_loop_branches_apart(tmp_path):
     # joints are numbered per branch: the workpiece's joint 2 is not the tool's
     from chaincomp import load_machine
-    from chaincomp.lint import lint
+    from chaincomp.analysis.lint import lint
     path = tmp_path / "loop.yaml"
     path.write_text("name: loop_dh\nsymbols:\n" + "".join(
         f"  - {{name: q{j}, role: axis, unit: deg, limits: [-360, 360]}}\n" for j in range(1, 5)) +

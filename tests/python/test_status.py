@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 from conftest import ROOT, machine_path, needs_netns, run_cli
-from chaincomp.buildtree import import_lcmtypes
+from chaincomp.emit.buildtree import import_lcmtypes
 from chaincomp.cli import status
 
 T = import_lcmtypes()

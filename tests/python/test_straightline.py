@@ -1,4 +1,4 @@
-"""The straight-line code of long chains (chaincomp.straightline), its IR evaluated node by
+"""The straight-line code of long chains (chaincomp.emit.straightline), its IR evaluated node by
 node, on every bundled machine and every benchmark chain (tools/bench_machines): the exact and
 nominal pose against the numpy exact model, error_order_k against the numeric jets (the order-k
 truncated series) to 1e-12 with its residual falling as eps^(k+1), the Jacobian against central
@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from chaincomp import ExactModel, load_machine
-from chaincomp import straightline as SL
-from chaincomp.emit import _Hoister
-from chaincomp.jets import JetModel
+from chaincomp.emit import straightline as SL
+from chaincomp.emit.cpp import _Hoister
+from chaincomp.symbolic.jets import JetModel
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 MACHINES = sorted(glob.glob(os.path.join(ROOT, "configs", "machines", "*.yaml"))

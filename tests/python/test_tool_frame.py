@@ -23,10 +23,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from chaincomp import load_machine
-from chaincomp.derive import derive
-from chaincomp.emit import generate
-from chaincomp.jets import JetModel
-from chaincomp.numeric import ExactModel, TruncatedModel
+from chaincomp.symbolic.derive import derive
+from chaincomp.emit.cpp import generate
+from chaincomp.symbolic.jets import JetModel
+from chaincomp.symbolic.numeric import ExactModel, TruncatedModel
 
 from conftest import ROOT, machine_path
 from test_demo_arm import UR5_A, UR5_ALPHA, UR5_D, rot, trans

@@ -6,7 +6,7 @@ import mpmath
 import numpy as np
 import pytest
 
-from chaincomp.numeric import ExactModel
+from chaincomp.symbolic.numeric import ExactModel
 
 from conftest import truncated
 

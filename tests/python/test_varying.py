@@ -69,7 +69,7 @@ def pchip_reference(x, y, t):
 
 def _table(x, y, interpolation, outside="hold"):
     from chaincomp import load_machine
-    from chaincomp.varying import parse_varying
+    from chaincomp.model.varying import parse_varying
     node = dict(axis="X", units=["mm", "um"], interpolation=interpolation, outside=outside,
                 table=[[float(a), float(b)] for a, b in zip(x, y)])
     return parse_varying(node, "EXX", "test.yaml", 1, load_machine(FIVE))
@@ -184,7 +184,7 @@ def _write(tmp_path, text, name="p.yaml"):
 
 def test_load_params_reads_tables_and_polynomials_in_their_units(tmp_path):
     from chaincomp import load_machine, load_params
-    from chaincomp.varying import Polynomial, Table
+    from chaincomp.model.varying import Polynomial, Table
     m = load_machine(FIVE)
     p = load_params(_write(tmp_path, TABLES), m)
     exx, ebx = p["EXX"], p["EBX"]
@@ -200,7 +200,7 @@ def test_load_params_reads_tables_and_polynomials_in_their_units(tmp_path):
 
 def test_the_bundled_laser_calibration(tmp_path):
     from chaincomp import load_machine, load_params
-    from chaincomp.varying import Table
+    from chaincomp.model.varying import Table
     m = load_machine(FIVE)
     p = load_params(LASER, m)
     tables = {k: v for k, v in p.items() if isinstance(v, Table)}
@@ -276,7 +276,7 @@ def test_eval_outside_a_rejecting_range_exits_2(tmp_path):
 def test_exact_model_evaluates_tables_with_numpy_arrays_and_mpmath(tmp_path):
     import mpmath
     from chaincomp import load_machine, load_params
-    from chaincomp.numeric import ExactModel
+    from chaincomp.symbolic.numeric import ExactModel
     m = load_machine(FIVE)
     values = m.nominal_values()
     values.update(load_params(LASER, m))
@@ -401,7 +401,7 @@ def _htm_tool_point(machine, values):
     """The tool point by a product of 4x4 homogeneous transforms, one per elementary
     transform of the chain (numpy; each entry's expression evaluated with lambdify)."""
     import sympy as sp
-    from chaincomp.machine import Rotation
+    from chaincomp.model.machine import Rotation
     names = [s.name for s in machine.symbols]
     args = [values[n] for n in names]
     n = len(np.atleast_1d(values["X"]))

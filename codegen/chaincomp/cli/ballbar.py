@@ -10,19 +10,19 @@ import sys
 
 import numpy as np
 
-from .. import ballbar as bb
-from ..calibration import _write_loadable
-from ..display import fixed, plus_minus
-from .figures import save
 from ..errors import ChaincompError
-from ..expressions import MAX_LITERAL
-from ..jets import JetModel
-from ..numeric import ExactModel
-from ..varying import Varying
+from ..measure import ballbar as bb
+from ..measure.calibration import _write_loadable
+from ..measure.protocol import check_errors
+from ..model.display import fixed, plus_minus
+from ..model.expressions import MAX_LITERAL
+from ..model.varying import Varying
+from ..symbolic.jets import JetModel
+from ..symbolic.numeric import ExactModel
 from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, add_values_arguments,
                      _same_file, check_image, check_output, integer, load, number, refuse_empty, to_json,
                      values_for)
-from ..protocol import check_errors
+from .figures import save
 from .laser_to_params import _one_line, merge
 from .protocol import names
 
@@ -310,7 +310,7 @@ def params_text(machine, fit: bb.Fit, start: dict, source: str, merge_from: str 
                 if src != merge_from:
                     os.remove(src)
         if text is None:
-            from ..yamlsource import read_text
+            from ..model.yamlsource import read_text
             text = read_text(merge_from)
         return text
     body = [f"# Written by: {_one_line(command)}",
@@ -455,7 +455,7 @@ def run_fit(args) -> int:
                            + ([f"--prefer={','.join(prefer)}"] if prefer else []) + ["-o", args.output])
         start_vals = {}
         if args.params:
-            from ..params import load_params
+            from ..model.params import load_params
             start_vals = load_params(args.params, machine)
         text = params_text(machine, fit, start_vals, args.fit, args.params, command)
         _write_loadable(args.output, text, machine)

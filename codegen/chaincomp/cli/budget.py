@@ -7,10 +7,10 @@ import sys
 
 import numpy as np
 
-from .. import budget as B
-from ..display import add_units_argument
+from ..analysis import budget as B
+from ..analysis.tolerances import from_params, load_tolerances
 from ..errors import ChaincompError
-from ..tolerances import from_params, load_tolerances
+from ..model.display import add_units_argument
 from . import figures as F
 from .common import (add_format_argument, add_machine_argument, add_model_argument, add_seed_argument,
                      add_values_arguments, check_finite, check_image, integer, load, to_json, values_for)

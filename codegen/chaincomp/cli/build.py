@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import sys
 
-from ..build import RT_MODULE, build, build_linuxcnc, copy_to, install_rt
+from ..emit.build import RT_MODULE, build, build_linuxcnc, copy_to, install_rt
 from ..errors import ChaincompError
 from .common import _same_file, refuse_empty
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..check import Result, check, load_formulas
+from ..analysis.check import Result, check, load_formulas
 from .common import add_format_argument, add_machine_argument, add_order_argument, load, to_json
 
 

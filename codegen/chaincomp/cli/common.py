@@ -10,8 +10,8 @@ import re
 import sys
 
 from ..errors import ChaincompError
-from ..machine import Machine, load_machine
-from ..params import load_params, parse_sets
+from ..model.machine import Machine, load_machine
+from ..model.params import load_params, parse_sets
 
 
 def add_machine_argument(p, optional: bool = False, alias: bool = False) -> None:
@@ -124,7 +124,7 @@ def values_for(machine: Machine, params_path: str | None, sets: list[str]) -> tu
 def load(path: str) -> Machine:
     """The machine, with chaincomp.lint's warnings on stderr (``chaincomp lint`` shows them too)."""
     machine = load_machine(path)
-    from ..lint import lint
+    from ..analysis.lint import lint
     for f in lint(machine):
         print(f"chaincomp: {f.level}: {machine.file}:{f}", file=sys.stderr)
     return machine

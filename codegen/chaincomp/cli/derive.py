@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import sympy as sp
 
-from ..derive import COMPONENTS, EXPANDED_TERMS_LIMIT, Derivation, Progress, derive
-from ..machine import Rotation
-from ..orientation import ROWS as ORIENTATION_ROWS
-from ..polyprint import RingPrinter, shown_collected, shown_plain, shown_sympy
+from ..model.machine import Rotation
+from ..symbolic.derive import COMPONENTS, EXPANDED_TERMS_LIMIT, Derivation, Progress, derive
+from ..symbolic.orientation import ROWS as ORIENTATION_ROWS
+from ..symbolic.polyprint import RingPrinter, shown_collected, shown_plain, shown_sympy
 from .common import add_format_argument, add_machine_argument, add_order_argument, load, to_json
 
 

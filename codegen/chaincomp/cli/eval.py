@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..display import add_units_argument, convert, display_unit, fixed
 from ..errors import ChaincompError
-from ..expressions import MAX_LITERAL
-from ..jets import JetModel
-from ..numeric import ExactModel
-from ..units import UNITS
-from ..varying import check_inside, resolve, varying_errors
+from ..model.display import add_units_argument, convert, display_unit, fixed
+from ..model.expressions import MAX_LITERAL
+from ..model.units import UNITS
+from ..model.varying import check_inside, resolve, varying_errors
+from ..symbolic.jets import JetModel
+from ..symbolic.numeric import ExactModel
 from .common import (add_format_argument, add_machine_argument, add_values_arguments, check_finite, load, to_json,
                      values_for)
 

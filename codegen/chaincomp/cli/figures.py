@@ -8,10 +8,10 @@ import io
 import os
 import sys
 
-from ..display import DEFAULT_UNITS, display_unit
 from ..errors import ChaincompError
-from ..yamlsource import write_checked
-from ..units import UNITS
+from ..model.display import DEFAULT_UNITS, display_unit
+from ..model.units import UNITS
+from ..model.yamlsource import write_checked
 
 ORDER_TEXT = {"1": "first-order", "2": "second-order", "exact": "exact",
               "first": "first-order", "second": "second-order"}

@@ -6,9 +6,9 @@ import os
 import sys
 import time
 
-from ..emit import generate, registry, solver_shape, solvers
+from ..emit.cpp import generate, registry, solver_shape, solvers
 from ..errors import ChaincompError
-from ..yamlsource import write_checked
+from ..model.yamlsource import write_checked
 from .common import add_order_argument, check_output, load
 
 

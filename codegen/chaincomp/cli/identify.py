@@ -5,16 +5,16 @@ from __future__ import annotations
 import re
 import sys
 
-from ..calibration import _write_loadable, slide_axis
-from ..display import add_units_argument
 from ..errors import ChaincompError
-from ..identify import (COMPONENTS, DIRECTIONS, MAX_SMOOTH, ROTATION, Vary, identify, outside_limits, params_yaml,
+from ..measure.calibration import _write_loadable, slide_axis
+from ..measure.identify import (COMPONENTS, DIRECTIONS, MAX_SMOOTH, ROTATION, Vary, identify, outside_limits, params_yaml,
                         read_table, to_json, to_text)
-from ..machine import Symbol
-from ..params import parse_value
-from ..protocol import check_errors
-from ..units import UNITS
-from ..varying import MAX_POLYNOMIAL_COEFFICIENTS, MAX_TABLE_KNOTS
+from ..measure.protocol import check_errors
+from ..model.display import add_units_argument
+from ..model.machine import Symbol
+from ..model.params import parse_value
+from ..model.units import UNITS
+from ..model.varying import MAX_POLYNOMIAL_COEFFICIENTS, MAX_TABLE_KNOTS
 from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, check_output, load,
                      number, number_list, refuse_empty, to_json as json_text)
 from .protocol import names

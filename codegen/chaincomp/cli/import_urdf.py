@@ -7,11 +7,11 @@ import math
 import sys
 
 from .. import __version__
+from ..analysis.lint import lint
 from ..errors import ChaincompError
-from ..lint import lint
-from ..machine import load_machine
-from ..urdf import ERROR_MODES, machine_text
-from ..yamlsource import write_checked
+from ..model.machine import load_machine
+from ..model.urdf import ERROR_MODES, machine_text
+from ..model.yamlsource import write_checked
 from .common import add_format_argument, check_output, number_list
 
 

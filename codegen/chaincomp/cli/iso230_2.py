@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 import unicodedata
 
-from .. import iso230_2 as iso
+from ..measure import iso230_2 as iso
 from . import figures as F
 from .common import add_format_argument, check_image, to_json
 

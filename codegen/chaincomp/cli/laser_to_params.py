@@ -9,14 +9,14 @@ import sys
 
 import numpy as np
 
-from .. import iso230_2 as iso
-from ..calibration import _write_loadable, varying_axis
 from ..errors import ChaincompError
-from ..machine import ROT_PLANE, Machine, Rotation
-from ..numeric import ExactModel
-from ..params import load_params
-from ..varying import INTERPOLATIONS, MAX_TABLE_KNOTS, OUTSIDE
-from ..yamlsource import load_yaml, read_text
+from ..measure import iso230_2 as iso
+from ..measure.calibration import _write_loadable, varying_axis
+from ..model.machine import ROT_PLANE, Machine, Rotation
+from ..model.params import load_params
+from ..model.varying import INTERPOLATIONS, MAX_TABLE_KNOTS, OUTSIDE
+from ..model.yamlsource import load_yaml, read_text
+from ..symbolic.numeric import ExactModel
 from .common import add_machine_argument, check_output, load, resolve_machine
 from .iso230_2 import add_columns_arguments, read
 

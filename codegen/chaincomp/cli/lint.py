@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import sys
 
+from ..analysis.lint import lint
 from ..errors import ChaincompError
-from ..lint import lint
-from ..machine import load_machine
+from ..model.machine import load_machine
 from .common import add_machine_argument
 
 

@@ -13,12 +13,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..display import add_units_argument, display_unit
 from ..errors import ChaincompError
-from ..expressions import MAX_LITERAL
-from ..jets import JetModel
-from ..numeric import ExactModel
-from ..units import UNITS
+from ..model.display import add_units_argument, display_unit
+from ..model.expressions import MAX_LITERAL
+from ..model.units import UNITS
+from ..symbolic.jets import JetModel
+from ..symbolic.numeric import ExactModel
 from . import figures as F
 from .common import (MODEL_NAMES, add_machine_argument, add_model_argument, add_values_arguments, check_image,
                      check_output, integer, load, parse_number, refuse_empty, values_for)
@@ -577,8 +577,8 @@ def _read_replay_csv(path: str) -> tuple[int, dict[str, np.ndarray]]:
 def _table_figure(args):
     """Points, interpolant and slope of one varying error, 5 % past both ends."""
     import matplotlib.pyplot as plt
-    from ..varying import Table, parse_varying
-    from ..yamlsource import load_yaml
+    from ..model.varying import Table, parse_varying
+    from ..model.yamlsource import load_yaml
     if not (args.table and args.error):
         raise ChaincompError("--table P.yaml and --error NAME go together")
     machine = load(args.machine) if args.machine else None
@@ -591,7 +591,7 @@ def _table_figure(args):
         raise ChaincompError(f"{args.error} is a constant here, not a table or polynomial", args.table,
                              values.lines[args.error], f"values.{args.error}")
     if machine is not None:
-        from ..params import load_params
+        from ..model.params import load_params
         v = load_params(args.table, machine)[args.error]  # the whole file checked against the machine
     else:
         v = parse_varying(raw, args.error, args.table, values.lines[args.error])

@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 from ..errors import ChaincompError
-from ..params import parse_sets
-from ..pose_design import (DEFAULT_POSES, INDICES, MAX_POOL, MAX_POSES, design_json, design_poses, design_text,
+from ..measure.pose_design import (DEFAULT_POSES, INDICES, MAX_POOL, MAX_POSES, design_json, design_poses, design_text,
                            is_arm, write_poses)
-from ..protocol import build_protocol, check_errors, check_measure, to_text
-from ..protocol import to_json as protocol_json
-from ..protocol_linear import build_linear_protocol, linear_only
-from ..protocol_linear import to_json as linear_json
-from ..protocol_linear import to_text as linear_text
+from ..measure.protocol import build_protocol, check_errors, check_measure, to_text
+from ..measure.protocol import to_json as protocol_json
+from ..measure.protocol_linear import build_linear_protocol, linear_only
+from ..measure.protocol_linear import to_json as linear_json
+from ..measure.protocol_linear import to_text as linear_text
+from ..model.params import parse_sets
 from .common import (DEFAULT_SEED, MAX_ORDER, add_assume_zero_argument, add_format_argument, add_machine_argument,
                      add_seed_argument, check_output, integer, load, number_list, to_json)
 
@@ -24,6 +24,17 @@ def names(text: str | None, option: str = "list") -> list[str]:
     if not all(out):
         raise ChaincompError(f"{option}: empty name in {text!r}")
     return out
+
+
+def plan_text(machine, assume_zero=()) -> str:
+    """What ``chaincomp protocol MACHINE`` prints with its defaults, whatever the machine: the
+    laser runs, diagonals and tracker points of a machine with linear axes only, the pose design
+    of an arm, else the search over the angle grid."""
+    if is_arm(machine):
+        return design_text(design_poses(machine, DEFAULT_POSES, DEFAULT_SEED, assume_zero=assume_zero), None)
+    if linear_only(machine):
+        return linear_text(build_linear_protocol(machine, assume_zero=assume_zero))
+    return to_text(build_protocol(machine, assume_zero=assume_zero))
 
 
 def add_parser(sub) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import subprocess
 
-from ..buildtree import binary
+from ..emit.buildtree import binary
 from ..errors import ChaincompError
 from .common import add_machine_argument, check_output, load, resolve_machine
 

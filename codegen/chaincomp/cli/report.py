@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import sys
 
-from .. import report
-from ..derive import derive
+from ..analysis import report
 from ..errors import ChaincompError
-from ..yamlsource import write_checked
+from ..model.yamlsource import write_checked
+from ..symbolic.derive import derive
 from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, add_order_argument,
                      check_output, load)
 
@@ -36,8 +36,7 @@ def run(args) -> int:
     fmt = args.format or ("latex" if (args.output or "").lower().endswith(".tex") else "markdown")
     proto = None
     if args.protocol:
-        from ..protocol import plan_text
-        from .protocol import names
+        from .protocol import names, plan_text
         zero = names(",".join(args.assume_zero), "--assume-zero")
         proto = plan_text(machine, zero)
     text = (report.latex if fmt == "latex" else report.markdown)(d, proto, progress=True)

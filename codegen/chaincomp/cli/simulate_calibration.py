@@ -7,9 +7,9 @@ import sys
 
 import numpy as np
 
-from .. import calibration
-from ..params import load_params
-from ..varying import INTERPOLATIONS, MAX_TABLE_KNOTS, OUTSIDE
+from ..measure import calibration
+from ..model.params import load_params
+from ..model.varying import INTERPOLATIONS, MAX_TABLE_KNOTS, OUTSIDE
 from .common import add_machine_argument, add_seed_argument, check_output, integer, load
 
 # Plausible sizes of the errors that are not tabulated, without --base (internal units).

@@ -11,9 +11,9 @@ import tempfile
 
 import lcm
 
-from ..buildtree import import_lcmtypes
+from ..emit.buildtree import import_lcmtypes
 from ..errors import ChaincompError
-from ..toolpath import MAX_SAMPLES, toolpath
+from ..measure.toolpath import MAX_SAMPLES, toolpath
 from .common import add_machine_argument, check_output, integer, load, number
 
 

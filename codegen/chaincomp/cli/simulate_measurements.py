@@ -10,14 +10,14 @@ import sys
 import numpy as np
 
 from ..errors import ChaincompError
-from ..expressions import MAX_LITERAL
-from ..identify import (COMPONENTS, MAX_ROWS, QUATERNION, coordinate_named_axes, outside_limits, read_table,
+from ..measure.identify import (COMPONENTS, MAX_ROWS, QUATERNION, coordinate_named_axes, outside_limits, read_table,
                         simulate, simulate_orientations, write_table)
-from ..machine import Symbol
-from ..params import load_params, parse_sets, parse_value
-from ..protocol import check_measure
-from ..protocol_linear import auto_levels
-from ..units import UNITS
+from ..measure.protocol import check_measure
+from ..measure.protocol_linear import auto_levels
+from ..model.expressions import MAX_LITERAL
+from ..model.machine import Symbol
+from ..model.params import load_params, parse_sets, parse_value
+from ..model.units import UNITS
 from .common import add_machine_argument, add_seed_argument, check_output, load, number_list, refuse_empty
 from .identify import length
 from .protocol import names

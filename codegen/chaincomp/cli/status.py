@@ -9,9 +9,9 @@ import struct
 import sys
 import time
 
-from ..buildtree import _ROOT, import_lcmtypes
+from ..emit.buildtree import _ROOT, import_lcmtypes
 from ..errors import ChaincompError
-from ..units import UNITS
+from ..model.units import UNITS
 from .common import number, to_json
 
 # configs/runtime/default.yaml's lcm_url and channels: where a daemon with default settings is
@@ -112,7 +112,7 @@ class Axes:
     this checkout's configs/machines/NAME.yaml; unknown machines get numbered axes."""
 
     def __init__(self, paths: list[str]):
-        from ..machine import load_machine
+        from ..model.machine import load_machine
         self._load = load_machine
         self.known = {}
         for path in paths:

@@ -7,10 +7,10 @@ import random
 
 import mpmath
 
-from ..jets import JetModel
-from ..numeric import ExactModel
 from ..errors import ChaincompError
-from ..yamlsource import write_checked
+from ..model.yamlsource import write_checked
+from ..symbolic.jets import JetModel
+from ..symbolic.numeric import ExactModel
 from .common import add_machine_argument, add_seed_argument, check_output, integer, load
 
 # Realistic error sizes: lengths of a few µm, angles of a few arcsec (internal units).

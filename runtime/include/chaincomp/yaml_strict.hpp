@@ -1,5 +1,5 @@
 // YAML read the one way both of the project's loaders read it: the Python one
-// (codegen/chaincomp/yamlsource.py, PyYAML, YAML 1.1) and this one (yaml-cpp, YAML 1.2) take
+// (codegen/chaincomp/model/yamlsource.py, PyYAML, YAML 1.1) and this one (yaml-cpp, YAML 1.2) take
 // the same documents to the same values, or refuse them with the same file:line: message.
 // Refused here, before any value is read: explicit tags (!!str 12), merge keys (<<), keys
 // that are lists or mappings, duplicate keys, numbers the two YAML versions read differently

@@ -17,7 +17,7 @@ import sympy as sp
 from sympy.polys.rings import ring as poly_ring
 from sympy.polys.domains import QQ
 
-from .jetmath import mul_all  # the product of truncated series, numeric or symbolic: one place
+from ..model.jetmath import mul_all  # the product of truncated series, numeric or symbolic: one place
 
 Monomial = tuple[int, ...]
 

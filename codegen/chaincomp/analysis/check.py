@@ -18,12 +18,12 @@ from dataclasses import dataclass, field
 import mpmath
 import sympy as sp
 
-from . import series
-from .derive import COMPONENTS, Derivation, derive
-from .errors import ChaincompError
-from .expressions import NAME, RESERVED, ExpressionError, parse
-from .machine import Machine
-from .yamlsource import LineDict, LineList, load_yaml
+from ..errors import ChaincompError
+from ..model.expressions import NAME, RESERVED, ExpressionError, parse
+from ..model.machine import Machine
+from ..model.yamlsource import LineDict, LineList, load_yaml
+from ..symbolic import series
+from ..symbolic.derive import COMPONENTS, Derivation, derive
 
 # Which product of the branches the formulas describe. T: reference -> tool, W: reference ->
 # workpiece (identity for a serial chain). The machine's own model is inv(W)*T.

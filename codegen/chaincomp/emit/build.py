@@ -23,10 +23,10 @@ import tempfile
 import time
 from dataclasses import dataclass
 
+from ..errors import ChaincompError
+from ..model.machine import load_machine
 from .buildtree import build_dir
-from .emit import fnv1a64, generate, library, solver_shape, solvers
-from .errors import ChaincompError
-from .machine import load_machine
+from .cpp import fnv1a64, generate, library, solver_shape, solvers
 
 
 @dataclass(frozen=True)
@@ -269,7 +269,7 @@ _RT_RAMP_TIME = 0.5
 
 
 def _runtime_dir() -> str:
-    return os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", "runtime"))
+    return os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", "..", "runtime"))
 
 
 def rt_model_header(machine, values: dict, params_file: str) -> str:
@@ -304,8 +304,8 @@ def build_linuxcnc(machine_path: str, params_path: str | None, module: str = RT_
     (loaded by prepare() at module load), built with LinuxCNC's Makefile.modinc and cached
     like the model libraries (ROOT/linuxcnc/NAME-HASH/MODULE.so, the hash over machine,
     params, module name, sources and toolchain). Returns its path and whether it was cached."""
-    from .params import load_params
-    from .varying import Varying
+    from ..model.params import load_params
+    from ..model.varying import Varying
 
     if not re.fullmatch(r"[a-z][a-z0-9_]{0,39}", module):
         raise ChaincompError(f"--name {module!r}: a module name is a lower-case letter, then up to 39 lower-case "
@@ -334,8 +334,8 @@ def build_linuxcnc(machine_path: str, params_path: str | None, module: str = RT_
     sources = b"".join(open(os.path.join(hal, n), "rb").read() for n in _HAL_SOURCES)
     # and what the module's code comes from: the runtime headers, the compensator, the emitter
     here = os.path.dirname(os.path.abspath(__file__))
-    inputs = [os.path.join(_runtime_dir(), "src", "compensator.cpp"), os.path.join(here, "emit.py"),
-              os.path.join(here, "jets.py")]
+    inputs = [os.path.join(_runtime_dir(), "src", "compensator.cpp"), os.path.join(here, "cpp.py"),
+              os.path.join(here, "..", "symbolic", "jets.py")]
     include_dir = os.path.join(_runtime_dir(), "include", "chaincomp")
     inputs += sorted(os.path.join(include_dir, n) for n in os.listdir(include_dir) if n.endswith(".hpp"))
     for name in inputs:

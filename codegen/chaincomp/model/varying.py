@@ -29,8 +29,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import ChaincompError
 from . import units as U
-from .errors import ChaincompError
 from .yamlsource import describe, line_of
 
 MAX_TABLE_KNOTS = 4096            # runtime: kMaxTableKnots

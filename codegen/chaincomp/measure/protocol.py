@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import sympy as sp
 
-from .derive import COMPONENTS, derive
-from .errors import ChaincompError
-from .machine import Machine, Symbol
+from ..errors import ChaincompError
+from ..model.machine import Machine, Symbol
+from ..symbolic.derive import COMPONENTS, derive
 
 _TOL = 1e-9          # relative: coefficient zero tests and ranks
 # The search pairs every two set-ups: 168 set-ups of five_axis_ac take 19 s and 230 MB,
@@ -121,21 +121,6 @@ class Protocol:
         a, b = eq.setups
         return (f"{eq.coord.upper()}{'diff' if eq.sign < 0 else 'sum'} {self.label(a)} "
                 f"{'-' if eq.sign < 0 else '+'} {self.label(b)}")
-
-
-def plan_text(machine: Machine, assume_zero=()) -> str:
-    """What ``chaincomp protocol MACHINE`` prints with its defaults, whatever the machine: the
-    laser runs, diagonals and tracker points of a machine with linear axes only, the pose design
-    of an arm, else the search over the angle grid."""
-    from .cli.common import DEFAULT_SEED
-    from .pose_design import DEFAULT_POSES, design_poses, design_text, is_arm
-    from .protocol_linear import build_linear_protocol, linear_only
-    from .protocol_linear import to_text as linear_text
-    if is_arm(machine):
-        return design_text(design_poses(machine, DEFAULT_POSES, DEFAULT_SEED, assume_zero=assume_zero), None)
-    if linear_only(machine):
-        return linear_text(build_linear_protocol(machine, assume_zero=assume_zero))
-    return to_text(build_protocol(machine, assume_zero=assume_zero))
 
 
 def build_protocol(machine: Machine, angles=(0.0, 90.0, 180.0, 270.0), assume_zero=(),

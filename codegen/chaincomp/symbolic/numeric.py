@@ -7,10 +7,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from .errors import ChaincompError
-from .machine import ROT_PLANE, Machine, Rotation
+from ..errors import ChaincompError
+from ..model.machine import ROT_PLANE, Machine, Rotation
+from ..model.varying import resolve
 from .orientation import rotation_vector
-from .varying import resolve
 
 if TYPE_CHECKING:
     from .derive import Derivation

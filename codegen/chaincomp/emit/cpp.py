@@ -14,10 +14,10 @@ from dataclasses import dataclass
 import sympy as sp
 from sympy.printing.cxx import CXX17CodePrinter
 
+from ..model.machine import ROT_PLANE, Machine, Rotation
+from ..model.units import UNITS
+from ..symbolic.derive import EXPANDED_TERMS_LIMIT, derive
 from . import straightline
-from .derive import EXPANDED_TERMS_LIMIT, derive
-from .machine import ROT_PLANE, Machine, Rotation
-from .units import UNITS
 
 GENERATOR = "chaincomp generate"
 

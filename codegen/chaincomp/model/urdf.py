@@ -39,7 +39,7 @@ import re
 from dataclasses import dataclass
 from decimal import Decimal
 
-from .errors import ChaincompError
+from ..errors import ChaincompError
 from .expressions import MAX_LITERAL, NAME, RESERVED
 from .machine import MAX_CHAIN_ELEMENTS, MAX_SYMBOLS
 from .yamlsource import read_text

@@ -12,11 +12,11 @@ minutes to derive.
 
 from __future__ import annotations
 
-from .jetmath import lin as _lin, mul_all, sin_cos as _sin_cos
-from .machine import ROT_PLANE, Machine, Rotation
+from ..model.jetmath import lin as _lin, mul_all, sin_cos as _sin_cos
+from ..model.machine import ROT_PLANE, Machine, Rotation
+from ..model.varying import resolve
 from .numeric import _lib, complete
 from .orientation import ROWS as ORIENTATION_ROWS, rotation_vector_series
-from .varying import resolve
 
 
 class JetModel:

@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 
-from .errors import ChaincompError
-from .machine import Machine
+from ..errors import ChaincompError
+from ..model.machine import Machine
 
 # Samples per path: 1 M take 4 s and 85 MB to log (2 cores, 2026-12); 4 M is over an hour
 # at 1 kHz.

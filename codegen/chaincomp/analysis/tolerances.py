@@ -23,10 +23,10 @@ import math
 import re
 from dataclasses import dataclass
 
-from .errors import ChaincompError
-from .machine import Machine
-from .params import parse_value
-from .yamlsource import load_yaml
+from ..errors import ChaincompError
+from ..model.machine import Machine
+from ..model.params import parse_value
+from ..model.yamlsource import load_yaml
 
 DISTRIBUTIONS = ("uniform", "normal")
 _SIGMAS = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(?:sigma|σ)?\s*$")

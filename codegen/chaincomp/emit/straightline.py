@@ -22,8 +22,8 @@ import math
 
 import sympy as sp
 
-from .errors import ChaincompError
-from .machine import ROT_PLANE, Machine, Rotation
+from ..errors import ChaincompError
+from ..model.machine import ROT_PLANE, Machine, Rotation
 
 _FUNCTIONS = {sp.sin: "std::sin", sp.cos: "std::cos", sp.tan: "std::tan", sp.asin: "std::asin",
               sp.acos: "std::acos", sp.atan: "std::atan", sp.atan2: "std::atan2"}

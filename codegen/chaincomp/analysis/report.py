@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import sympy as sp
 
-from .derive import COMPONENTS, Derivation, Progress
-from .machine import Machine, Rotation
+from ..model.machine import Machine, Rotation
+from ..symbolic.derive import COMPONENTS, Derivation, Progress
 
 _SENSE_NOTE = ("Sign: the sign with which the symbol enters a rotation of the chain, rotations "
                "right-handed with the senses the file states applied; blank where it enters no rotation.")

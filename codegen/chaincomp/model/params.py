@@ -7,8 +7,8 @@ from __future__ import annotations
 import math
 import re
 
+from ..errors import ChaincompError
 from . import units
-from .errors import ChaincompError
 from .expressions import MAX_LITERAL
 from .machine import Machine, Symbol
 from .varying import MAX_VARYING_ERRORS, Varying, parse_varying

@@ -27,9 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 import sympy as sp
 
-from .errors import ChaincompError
-from .machine import Machine, Rotation, Translation
-from .varying import MAX_TABLE_KNOTS, MAX_VARYING_ERRORS, Varying
+from ..errors import ChaincompError
+from ..model.machine import Machine, Rotation, Translation
+from ..model.varying import MAX_TABLE_KNOTS, MAX_VARYING_ERRORS, Varying
 
 ARCSEC = math.pi / 648000.0
 # The table's value unit per error kind (values written with 4 decimals: 0.1 nm, 0.0001")
@@ -243,8 +243,8 @@ def write(path: str, machine: Machine, tables: dict, constants: dict, header: li
 def _write_loadable(path: str, text: str, machine: Machine) -> None:
     """Write text to path only once the product's own loader reads it back: written beside
     it first, loaded, then renamed over it (an old file at path stays whole until then)."""
-    from .params import load_params
-    from .yamlsource import write_checked
+    from ..model.params import load_params
+    from ..model.yamlsource import write_checked
 
     def check(tmp: str) -> None:
         try:

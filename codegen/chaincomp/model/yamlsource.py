@@ -12,7 +12,7 @@ from typing import Any
 
 import yaml
 
-from .errors import ChaincompError
+from ..errors import ChaincompError
 
 
 class LineDict(dict):

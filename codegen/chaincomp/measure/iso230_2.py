@@ -30,10 +30,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import units as U
-from .errors import ChaincompError
-from .expressions import MAX_LITERAL
-from .yamlsource import read_text
+from ..errors import ChaincompError
+from ..model import units as U
+from ..model.expressions import MAX_LITERAL
+from ..model.yamlsource import read_text
 
 FIELDS = ("target", "run", "direction", "deviation", "actual")
 UP, DOWN = "up", "down"

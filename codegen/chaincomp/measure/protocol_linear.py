@@ -31,13 +31,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import sympy as sp
 
-from .derive import COMPONENTS
-from .errors import ChaincompError
+from ..errors import ChaincompError
+from ..model.machine import Machine
+from ..symbolic.derive import COMPONENTS
+from ..symbolic.numeric import ExactModel
 from .calibration import varying_axis
 from .identify import numeric_rank, pose_points
-from .machine import Machine
-from .numeric import ExactModel
 from .pose_design import point_jacobian
+from .protocol import check_errors, check_measure
 
 RUN_POINTS = 11          # targets per laser run and per diagonal
 PARTS = ("offset", "slope", "shape")
@@ -147,7 +148,6 @@ def pose_gains(models: list[tuple[Machine, ExactModel]], axes: dict[str, np.ndar
 def build_linear_protocol(machine: Machine, measure=COMPONENTS, assume_zero=(),
                           fixed: dict[str, float] | None = None) -> LinearProtocol:
     """The laser runs, diagonals and tracker points of ``machine`` and what each identifies."""
-    from .protocol import check_errors, check_measure
     assume_zero = check_errors(machine, assume_zero, "--assume-zero")
     measure = check_measure(measure)
     errors = [s.name for s in machine.errors if s.name not in assume_zero]

@@ -39,17 +39,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import units as U
+from ..errors import ChaincompError
+from ..model import units as U
+from ..model.expressions import MAX_LITERAL
+from ..model.machine import Machine
+from ..model.params import parse_value
+from ..model.varying import Varying
+from ..model.yamlsource import read_text, write_checked
+from ..symbolic.jets import JetModel
+from ..symbolic.numeric import ExactModel
 from .calibration import find_slides
-from .errors import ChaincompError
-from .expressions import MAX_LITERAL
 from .iso230_2 import _number, _split
-from .jets import JetModel
-from .machine import Machine
-from .numeric import ExactModel
-from .params import parse_value
-from .varying import Varying
-from .yamlsource import read_text, write_checked
 
 # plane -> (first in-plane coordinate, second, normal): the angle turns from the first towards the second
 PLANES = {"XY": (0, 1, 2), "YZ": (1, 2, 0), "ZX": (2, 0, 1)}

@@ -32,16 +32,16 @@ from dataclasses import dataclass, field
 import numpy as np
 import sympy as sp
 
-from .derive import EXPANDED_TERMS_LIMIT, Derivation, derive
-from .display import display_unit
-from .errors import ChaincompError
-from .jets import JetModel
-from .machine import Machine, Symbol
-from .numeric import ExactModel, TruncatedModel
-from .orientation import ROWS as ORIENTATION_ROWS, rotation_vector
+from ..errors import ChaincompError
+from ..model.display import display_unit
+from ..model.machine import Machine, Symbol
+from ..model.units import UNITS
+from ..model.varying import Table, Varying, varying_errors
+from ..symbolic.derive import EXPANDED_TERMS_LIMIT, Derivation, derive
+from ..symbolic.jets import JetModel
+from ..symbolic.numeric import ExactModel, TruncatedModel
+from ..symbolic.orientation import ROWS as ORIENTATION_ROWS, rotation_vector
 from .tolerances import Tolerance, Tolerances
-from .units import UNITS
-from .varying import Table, Varying, varying_errors
 
 POSITION = ("dx", "dy", "dz")
 DIRECTION = ("dkx", "dky", "dkz")

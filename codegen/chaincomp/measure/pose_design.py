@@ -27,12 +27,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .derive import COMPONENTS
-from .errors import ChaincompError
+from ..errors import ChaincompError
+from ..model.machine import Machine
+from ..model.yamlsource import write_checked
+from ..symbolic.derive import COMPONENTS
+from ..symbolic.numeric import ExactModel
 from .identify import numeric_rank, pose_points, step_derivatives
-from .machine import Machine
-from .numeric import ExactModel
-from .yamlsource import write_checked
 
 MAX_POSES = 20_000
 DEFAULT_POSES = 50

@@ -32,16 +32,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .derive import COMPONENTS
-from .display import DEFAULT_UNITS, display_unit, plus_minus, quantity
-from .errors import ChaincompError
-from .expressions import MAX_LITERAL
-from .machine import Machine
-from .numeric import ExactModel
-from .orientation import ROWS as ROTATION, cross, rotation_vector
-from .units import INTERNAL, UNITS
-from .varying import MAX_POLYNOMIAL_COEFFICIENTS, MAX_TABLE_KNOTS, MAX_VARYING_ERRORS
-from .yamlsource import read_text, write_checked
+from ..errors import ChaincompError
+from ..model.display import DEFAULT_UNITS, display_unit, plus_minus, quantity
+from ..model.expressions import MAX_LITERAL
+from ..model.machine import Machine
+from ..model.units import INTERNAL, UNITS
+from ..model.varying import MAX_POLYNOMIAL_COEFFICIENTS, MAX_TABLE_KNOTS, MAX_VARYING_ERRORS
+from ..model.yamlsource import read_text, write_checked
+from ..symbolic.derive import COMPONENTS
+from ..symbolic.numeric import ExactModel
+from ..symbolic.orientation import ROWS as ROTATION, cross, rotation_vector
 
 CSTEP = 1e-20     # complex step, internal units (mm, rad): any tiny value gives the same digits
 STEP = 1e-6       # central-difference step, where the chain cannot take complex values

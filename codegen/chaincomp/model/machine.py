@@ -13,8 +13,8 @@ from fractions import Fraction
 from functools import cache, cached_property, partial
 from typing import Union
 
+from ..errors import ChaincompError
 from . import units
-from .errors import ChaincompError
 from .expressions import (MAX_LITERAL, NAME, RESERVED, ZERO, Expr, ExpressionError, check_sympy, constant,
                           from_sympy, linear_names, parse_tree, plausible)
 from .yamlsource import describe, line_of, load_yaml, read_text

@@ -5,9 +5,9 @@ from __future__ import annotations
 import os
 import sys
 
-from .errors import ChaincompError
+from ..errors import ChaincompError
 
-_ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
+_ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
 
 
 def build_dir() -> str:

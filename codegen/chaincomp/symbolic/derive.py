@@ -14,8 +14,8 @@ from typing import Callable
 
 import sympy as sp
 
+from ..model.machine import ROT_PLANE, Machine, Rotation
 from . import series as S
-from .machine import ROT_PLANE, Machine, Rotation
 from .orientation import ROWS as ORIENTATION_ROWS, rotation_vector_series
 
 COMPONENTS = ("x", "y", "z")

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .machine import Machine, Rotation
-from .numeric import ExactModel
+from ..model.machine import Machine, Rotation
+from ..symbolic.numeric import ExactModel
 
 POSES = 8
 _STEP = 1e-6          # internal units (mm, rad)
