@@ -92,3 +92,8 @@ def _netns_available() -> bool:
 # LCM tests across processes run inside a network namespace they make (tests/e2e/netns.sh)
 needs_netns = pytest.mark.skipif(not _netns_available(),
                                  reason="unprivileged network namespaces (unshare -rn) are not permitted here")
+
+
+def pytest_configure(config):
+    # the fast tier (tools/test --fast) leaves these out; CI runs every test
+    config.addinivalue_line("markers", "slow: a heavy end-to-end test (builds, daemons, LinuxCNC, long sweeps)")
