@@ -53,7 +53,8 @@ _chaincomp() {
           esac;;
         replay)
           case "$prev" in
-            *) words='-h --help --machine --model --params --config -o --output --csv --channel'; [[ $cur == -* ]] || return 0;;
+            --format) words='text json';;
+            *) words='-h --help --machine --model --params --config -o --output --csv --channel --format --json'; [[ $cur == -* ]] || return 0;;
           esac;;
         plot)
           case "$prev" in

@@ -22,6 +22,7 @@ namespace {
 const char* kUsage =
     "usage: chaincomp_replay --machine M.yaml --params P.yaml --in IN.lcmlog [--out OUT.lcmlog]\n"
     "                        [--csv OUT.csv] [--config R.yaml] [--channel NAME] [--model LIB.so] [--quiet]\n"
+    "                        [--format text|json]\n"
     "       chaincomp_replay --version\n";
 
 int fail(const std::string& msg) {
@@ -57,6 +58,24 @@ struct Line {
   }
 };
 
+// A JSON string: the machine's name and the channel come from the user.
+std::string json_string(const std::string& s) {
+  std::string out = "\"";
+  for (const unsigned char c : s) {
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += static_cast<char>(c);
+    } else if (c < 0x20) {
+      char esc[8];
+      std::snprintf(esc, sizeof esc, "\\u%04x", c);
+      out += esc;
+    } else {
+      out += static_cast<char>(c);
+    }
+  }
+  return out + "\"";
+}
+
 // Whether both paths name one existing file (links and other spellings included).
 bool same_file(const std::string& a, const std::string& b) {
   struct stat sa {}, sb {};
@@ -67,7 +86,7 @@ bool same_file(const std::string& a, const std::string& b) {
 
 int main(int argc, char** argv) {
   std::string machine_path, params_path, config_path, in_path, out_path, csv_path, model_path,
-      channel = "CHAINCOMP_COMMAND";
+      channel = "CHAINCOMP_COMMAND", format = "text";
   bool quiet = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -75,7 +94,7 @@ int main(int argc, char** argv) {
                      : a == "--config"  ? &config_path  : a == "--in"     ? &in_path
                      : a == "--out"     ? &out_path     : a == "--csv"    ? &csv_path
                      : a == "--channel" ? &channel      : a == "--model"  ? &model_path
-                                                        : nullptr;
+                     : a == "--format"  ? &format       : nullptr;
     if (a == "-h" || a == "--help") {
       std::fputs(kUsage, stdout);
       return 0;
@@ -91,6 +110,7 @@ int main(int argc, char** argv) {
       return fail("unexpected argument '" + a + "'");
     }
   }
+  if (format != "text" && format != "json") return fail("--format " + format + ": expected text or json");
   if (machine_path.empty() || params_path.empty() || in_path.empty()) {
     std::fputs(kUsage, stderr);
     return fail("--machine, --params and --in are required");
@@ -230,14 +250,37 @@ int main(int argc, char** argv) {
   const auto& k = comp.counters();
   long long rejected = 0;
   for (auto r : k.rejected) rejected += r;
+  unsigned long long damaged_bytes = 0;
+  for (const auto& d : in.damage()) damaged_bytes += d.bytes;
+  if (format == "json") {  // the same summary, on stdout, every counter present
+    std::printf("{\"machine\": %s, \"channel\": %s, \"events\": %lld, \"commands\": %lld, \"corrected\": %lld, "
+                "\"rejected_total\": %lld, \"commands_per_s\": %.6g,\n \"rejected\": {",
+                json_string(entry->info->name).c_str(), json_string(channel).c_str(), events, commands,
+                static_cast<long long>(k.published), rejected, commands / std::max(seconds, 1e-9));
+    for (int r = 0; r < chaincomp::kNumReasons; ++r) {
+      std::printf("%s\"%s\": %lld", r ? ", " : "", chaincomp::reject_name(static_cast<chaincomp::Reject>(r)),
+                  static_cast<long long>(k.rejected[r]));
+    }
+    std::printf("},\n \"damaged\": {\"stretches\": %zu, \"bytes\": %llu}, \"seq_gaps\": %lld, \"seq_missing\": %lld, "
+                "\"stream_restarts\": %lld, \"clamped\": %lld, \"held_back\": %lld, \"clamped_input\": %lld,\n "
+                "\"correction\": [", in.damage().size(), damaged_bytes, static_cast<long long>(k.seq_gaps),
+                static_cast<long long>(k.seq_missing), static_cast<long long>(k.stream_restarts),
+                static_cast<long long>(k.clamped), static_cast<long long>(k.held_back),
+                static_cast<long long>(k.clamped_input));
+    for (int i = 0; i < n; ++i) {
+      std::printf("%s{\"axis\": %s, \"unit\": %s, \"max_abs\": %.17g, \"rms\": %.17g}", i ? ", " : "",
+                  json_string(entry->info->axes[i].name).c_str(), json_string(entry->info->axes[i].unit).c_str(),
+                  max_abs[i], k.published ? std::sqrt(sum_sq[i] / k.published) : 0.0);
+    }
+    std::printf("]}\n");
+    return std::fflush(stdout) == 0 ? 0 : fail("cannot write the summary to standard output");
+  }
   std::fprintf(stderr, "chaincomp replay: %lld events, %lld commands on %s, %lld corrected, %lld rejected "
                "(%.0f commands/s)\n", events, commands, channel.c_str(), static_cast<long long>(k.published),
                rejected, commands / std::max(seconds, 1e-9));
   if (!in.damage().empty()) {
-    unsigned long long bytes = 0;
-    for (const auto& d : in.damage()) bytes += d.bytes;
     std::fprintf(stderr, "  damaged: %zu stretches of the log (%llu bytes) skipped, not events\n",
-                 in.damage().size(), bytes);
+                 in.damage().size(), damaged_bytes);
   }
   // the stream rule (compensator.hpp, kRestartRun) is the daemon's: its events counted alike
   if (k.seq_gaps || k.stream_restarts) {

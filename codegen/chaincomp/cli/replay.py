@@ -7,7 +7,7 @@ import subprocess
 
 from ..emit.buildtree import binary
 from ..errors import ChaincompError
-from .common import add_machine_argument, check_output, load, resolve_machine
+from .common import add_format_argument, add_machine_argument, check_output, load, resolve_machine
 
 
 def add_parser(sub) -> None:
@@ -19,7 +19,8 @@ def add_parser(sub) -> None:
                                    "event, utime, seq, result, commanded, corrected, correction, residuals, "
                                    "flags, status. Rejected records are listed and counted by reason; targets "
                                    "the limits clamped, those of them held back towards no correction, and "
-                                   "commands clamped into limits are counted.")
+                                   "commands clamped into limits are counted; --format json prints that "
+                                   "summary as one JSON object on standard output.")
     add_machine_argument(p, alias=True)
     p.add_argument("input", metavar="IN.lcmlog", help="lcm-logger log of commands")
     p.add_argument("--model", metavar="LIB.so", help="a model library made by chaincomp build for this machine file")
@@ -28,6 +29,7 @@ def add_parser(sub) -> None:
     p.add_argument("-o", "--output", metavar="OUT.lcmlog", help="corrected log")
     p.add_argument("--csv", metavar="OUT.csv", help="CSV of every command")
     p.add_argument("--channel", default="CHAINCOMP_COMMAND", help="command channel (default CHAINCOMP_COMMAND)")
+    add_format_argument(p, what="summary format: text on standard error, or json on standard output")
     p.set_defaults(run=run)
 
 
@@ -46,7 +48,7 @@ def run(args) -> int:
     cmd = [binary("chaincomp_replay"), "--machine", args.machine, "--params", args.params, "--in", args.input,
            "--channel", args.channel]
     for flag, value in (("--config", args.config), ("--out", args.output), ("--csv", args.csv),
-                        ("--model", args.model)):
+                        ("--model", args.model), ("--format", args.format)):
         if value:
             cmd += [flag, value]
     return subprocess.run(cmd).returncode
