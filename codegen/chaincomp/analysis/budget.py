@@ -36,7 +36,7 @@ from ..errors import ChaincompError
 from ..model.display import display_unit
 from ..model.machine import Machine, Symbol
 from ..model.units import UNITS
-from ..model.varying import Table, Varying, varying_errors
+from ..model.varying import Table, varying_errors
 from ..symbolic.derive import EXPANDED_TERMS_LIMIT, Derivation, derive
 from ..symbolic.jets import JetModel
 from ..symbolic.numeric import ExactModel, TruncatedModel

@@ -16,15 +16,14 @@ from ..measure.calibration import _write_loadable
 from ..measure.protocol import check_errors
 from ..model.display import fixed, plus_minus
 from ..model.expressions import MAX_LITERAL
+from ..model.params_merge import merge, one_line
 from ..model.varying import Varying
 from ..symbolic.jets import JetModel
 from ..symbolic.numeric import ExactModel
 from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, add_values_arguments,
-                     _same_file, check_image, check_output, integer, load, number, refuse_empty, to_json,
+                     _same_file, check_image, check_output, integer, load, names, number, refuse_empty, to_json,
                      values_for)
 from .figures import save
-from .laser_to_params import _one_line, merge
-from .protocol import names
 
 UM = bb.UM
 
@@ -285,7 +284,7 @@ def params_text(machine, fit: bb.Fit, start: dict, source: str, merge_from: str 
         coeffs[0] = coeffs.get(0, 0.0) + (base if not isinstance(base, Varying) else 0.0)
         note = "; ".join(("constant" if k == 0 else f"{e['axis']}^{k}") + ": standard uncertainty "
                          + _sigma_text(machine, name, e["axis"], k, sd) for k, sd in sorted(e["sigma"].items()))
-        head = [f"{indent}# {name}: {_one_line(comment)}; {note}"]
+        head = [f"{indent}# {name}: {one_line(comment)}; {note}"]
         if e["axis"] is None:
             return head + [f'{indent}{name}: "{_fmt(s.from_internal(coeffs[0]))} {s.unit.name}"']
         a = machine.symbol(e["axis"])
@@ -313,7 +312,7 @@ def params_text(machine, fit: bb.Fit, start: dict, source: str, merge_from: str 
             from ..model.yamlsource import read_text
             text = read_text(merge_from)
         return text
-    body = [f"# Written by: {_one_line(command)}",
+    body = [f"# Written by: {one_line(command)}",
             f"# rms residual {fit.rms / UM:.4g} µm over {fit.points} points; each value stands also for the terms",
             "# that move the trace as it does (see the report)",
             f"machine: {machine.name}", f"description: errors fitted to a ballbar trace (chaincomp ballbar)",
@@ -384,7 +383,7 @@ def run(args) -> int:
                          where] + _figures_text(fig)))
     if args.output:
         bb.write_trace(args.output, machine, trace,
-                       [_one_line(f"predicted by chaincomp ballbar from {args.params or 'no params'}")])
+                       [one_line(f"predicted by chaincomp ballbar from {args.params or 'no params'}")])
         print(f"ballbar: trace -> {args.output}", file=sys.stderr)
     if args.plot:
         plot(trace, ev, fig, f"ISO 230-4 circular test predicted for {machine.name}"

@@ -10,8 +10,9 @@ import re
 import sys
 
 from ..errors import ChaincompError
-from ..model.machine import Machine, load_machine
-from ..model.params import load_params, parse_sets
+from ..model.machine import Machine, Symbol, load_machine
+from ..model.params import load_params, parse_sets, parse_value
+from ..model.units import UNITS
 
 
 def add_machine_argument(p, optional: bool = False, alias: bool = False) -> None:
@@ -277,3 +278,26 @@ def to_json(doc) -> str:
     """Valid JSON always: a non-finite number is refused (check_finite), never printed as NaN."""
     check_finite(doc)
     return json.dumps(doc, indent=2, allow_nan=False)
+
+
+def names(text: str | None, option: str = "list") -> list[str]:
+    """'A, B,C' -> ['A', 'B', 'C']; repeated options arrive joined by commas; an empty name
+    ('A,,B', 'A,') is refused: it is a typo, not a request."""
+    if not text:
+        return []
+    out = [t.strip() for t in text.split(",")]
+    if not all(out):
+        raise ChaincompError(f"{option}: empty name in {text!r}")
+    return out
+
+
+def length(machine, option: str, raw: str, positive: bool = False) -> float:
+    """'1um', '0.001 mm' or a bare number in the machine's length unit -> mm, finite and >= 0
+    (> 0 if ``positive``)."""
+    try:
+        value = parse_value(Symbol(option, "constant", UNITS[machine.length_unit], ""), raw)
+    except ValueError as exc:
+        raise ChaincompError(f"{option}: {exc}") from None
+    if value < 0 or (positive and value == 0):
+        raise ChaincompError(f"{option}: must be {'positive' if positive else 'zero or positive'}, got {raw!r}")
+    return value

@@ -11,6 +11,7 @@ from ..model.units import UNITS
 from ..model.varying import check_inside, resolve, varying_errors
 from ..symbolic.jets import JetModel
 from ..symbolic.numeric import ExactModel
+from ..symbolic.orientation import angle_between
 from .common import (add_format_argument, add_machine_argument, add_values_arguments, check_finite, load, to_json,
                      values_for)
 
@@ -89,12 +90,6 @@ def check_varying_bound(machine, values: dict) -> None:
             raise ChaincompError(f"{name} = {s.from_internal(float(at[name])):.6g} {s.unit.name} at {v.axis} = "
                                  f"{axis.from_internal(values[v.axis]):g} {axis.unit.name}: beyond "
                                  f"{MAX_LITERAL:g} (mm, rad) in magnitude", v.file, v.line, v.key)
-
-
-def angle_between(a, b):
-    """Angle (rad) between vectors a and b (along the last axis), stable for tiny angles."""
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
 
 
 def run(args) -> int:

@@ -16,20 +16,7 @@ from ..model.params import parse_value
 from ..model.units import UNITS
 from ..model.varying import MAX_POLYNOMIAL_COEFFICIENTS, MAX_TABLE_KNOTS
 from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, check_output, load,
-                     number, number_list, refuse_empty, to_json as json_text)
-from .protocol import names
-
-
-def length(machine, option: str, raw: str, positive: bool = False) -> float:
-    """'1um', '0.001 mm' or a bare number in the machine's length unit -> mm, finite and >= 0
-    (> 0 if ``positive``)."""
-    try:
-        value = parse_value(Symbol(option, "constant", UNITS[machine.length_unit], ""), raw)
-    except ValueError as exc:
-        raise ChaincompError(f"{option}: {exc}") from None
-    if value < 0 or (positive and value == 0):
-        raise ChaincompError(f"{option}: must be {'positive' if positive else 'zero or positive'}, got {raw!r}")
-    return value
+                     names, number, number_list, refuse_empty, to_json as json_text)
 
 
 MIN_SIGMA = 1e-30   # internal units (mm, rad), as the smallest number a machine file may hold

@@ -19,10 +19,10 @@ from ..model.expressions import MAX_LITERAL
 from ..model.units import UNITS
 from ..symbolic.jets import JetModel
 from ..symbolic.numeric import ExactModel
+from ..symbolic.orientation import angle_between
 from . import figures as F
 from .common import (MODEL_NAMES, add_machine_argument, add_model_argument, add_values_arguments, check_image,
                      check_output, integer, load, parse_number, refuse_empty, values_for)
-from .eval import angle_between
 
 COMPONENTS = ("dx", "dy", "dz", "dkx", "dky", "dkz", "norm")
 # 1000 x 1000 points: 4-5 s for one model, 39 s for exact minus second (five_axis_ac, 2026-12)

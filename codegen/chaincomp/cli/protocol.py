@@ -12,18 +12,7 @@ from ..measure.protocol_linear import to_json as linear_json
 from ..measure.protocol_linear import to_text as linear_text
 from ..model.params import parse_sets
 from .common import (DEFAULT_SEED, MAX_ORDER, add_assume_zero_argument, add_format_argument, add_machine_argument,
-                     add_seed_argument, check_output, integer, load, number_list, to_json)
-
-
-def names(text: str | None, option: str = "list") -> list[str]:
-    """'A, B,C' -> ['A', 'B', 'C']; repeated options arrive joined by commas; an empty name
-    ('A,,B', 'A,') is refused: it is a typo, not a request."""
-    if not text:
-        return []
-    out = [t.strip() for t in text.split(",")]
-    if not all(out):
-        raise ChaincompError(f"{option}: empty name in {text!r}")
-    return out
+                     add_seed_argument, check_output, integer, load, names, number_list, to_json)
 
 
 def plan_text(machine, assume_zero=()) -> str:

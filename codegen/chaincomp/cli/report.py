@@ -9,7 +9,7 @@ from ..errors import ChaincompError
 from ..model.yamlsource import write_checked
 from ..symbolic.derive import derive
 from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, add_order_argument,
-                     check_output, load)
+                     check_output, load, names)
 
 
 def add_parser(sub) -> None:
@@ -36,7 +36,7 @@ def run(args) -> int:
     fmt = args.format or ("latex" if (args.output or "").lower().endswith(".tex") else "markdown")
     proto = None
     if args.protocol:
-        from .protocol import names, plan_text
+        from .protocol import plan_text
         zero = names(",".join(args.assume_zero), "--assume-zero")
         proto = plan_text(machine, zero)
     text = (report.latex if fmt == "latex" else report.markdown)(d, proto, progress=True)

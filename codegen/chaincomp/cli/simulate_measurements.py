@@ -18,9 +18,8 @@ from ..model.expressions import MAX_LITERAL
 from ..model.machine import Symbol
 from ..model.params import load_params, parse_sets, parse_value
 from ..model.units import UNITS
-from .common import add_machine_argument, add_seed_argument, check_output, load, number_list, refuse_empty
-from .identify import length
-from .protocol import names
+from .common import (add_machine_argument, add_seed_argument, check_output, length, load, names, number_list,
+                     refuse_empty)
 
 _SPECS = "'auto', 'grid:A,B,...', 'random:N' or a CSV file of set-ups"
 

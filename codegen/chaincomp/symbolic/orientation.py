@@ -17,6 +17,8 @@ from __future__ import annotations
 import math
 from fractions import Fraction
 
+import numpy as np
+
 ROWS = ("wx", "wy", "wz")
 
 
@@ -94,3 +96,9 @@ def rotation_vector(actual: tuple, nominal: tuple, lib=None):
     else:
         ratio = 1 + theta ** 2 / 6 if sin_t < 1e-4 else theta / sin_t
     return [ratio * c for c in s]
+
+
+def angle_between(a, b):
+    """Angle (rad) between vectors a and b (along the last axis), stable for tiny angles."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
