@@ -15,17 +15,6 @@ from .common import (DEFAULT_SEED, MAX_ORDER, add_assume_zero_argument, add_form
                      add_seed_argument, check_output, integer, load, names, number_list, to_json)
 
 
-def plan_text(machine, assume_zero=()) -> str:
-    """What ``chaincomp protocol MACHINE`` prints with its defaults, whatever the machine: the
-    laser runs, diagonals and tracker points of a machine with linear axes only, the pose design
-    of an arm, else the search over the angle grid."""
-    if is_arm(machine):
-        return design_text(design_poses(machine, DEFAULT_POSES, DEFAULT_SEED, assume_zero=assume_zero), None)
-    if linear_only(machine):
-        return linear_text(build_linear_protocol(machine, assume_zero=assume_zero))
-    return to_text(build_protocol(machine, assume_zero=assume_zero))
-
-
 def add_parser(sub) -> None:
     p = sub.add_parser("protocol", help="plan the measurements that identify each error",
                        description="Plan a calibration. Machines with rotary axes: write the first-order "

@@ -8,8 +8,8 @@ from ..analysis import report
 from ..errors import ChaincompError
 from ..model.yamlsource import write_checked
 from ..symbolic.derive import derive
-from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, add_order_argument,
-                     check_output, load, names)
+from .common import (DEFAULT_SEED, add_assume_zero_argument, add_format_argument, add_machine_argument,
+                     add_order_argument, check_output, load, names)
 
 
 def add_parser(sub) -> None:
@@ -36,9 +36,9 @@ def run(args) -> int:
     fmt = args.format or ("latex" if (args.output or "").lower().endswith(".tex") else "markdown")
     proto = None
     if args.protocol:
-        from .protocol import plan_text
+        from ..measure.plan import plan_text
         zero = names(",".join(args.assume_zero), "--assume-zero")
-        proto = plan_text(machine, zero)
+        proto = plan_text(machine, DEFAULT_SEED, zero)
     text = (report.latex if fmt == "latex" else report.markdown)(d, proto, progress=True)
     if not args.output:
         sys.stdout.write(text)
