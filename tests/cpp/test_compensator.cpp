@@ -411,7 +411,7 @@ TEST_CASE("near a singular pose the rate-limited target is never further off tha
 namespace {
 
 // The wanted correction, the correction published before, and what the limits make of it, as
-// the README's "Truthful targets" states the rule: the size limit scales the whole wanted
+// docs/guide/daemon.md's "Truthful targets" states the rule: the size limit scales the whole wanted
 // correction, the rate limit the whole change from the one before; where that target is
 // further off than the command itself, the step back towards none (the one before, scaled
 // down by the rate limit) is published instead if it is better.

@@ -99,7 +99,7 @@ PathStats run_path(Machine& m, int steps, bool stream, const std::function<void(
 // step (both as fractions of the bounds), at a coarse and a ten times finer sampling; a
 // jump would not shrink with the step.
 // A redundant arm's stream is checked for its bounds and residuals only: a warm start may land
-// elsewhere on the set of equally good corrections than a cold one (README, "Arms").
+// elsewhere on the set of equally good corrections than a cold one (docs/guide/daemon.md, "Arms").
 void check_continuous(Machine& m, int steps, double lipschitz, const std::function<void(double, double*)>& path,
                       bool damped = true, bool redundant = false) {
   for (bool stream : {false, true}) {

@@ -31,7 +31,7 @@ PER_TARGET = [("mean_up", "x̄↑"), ("mean_down", "x̄↓"), ("mean", "x̄"), (
 def add_columns_arguments(p) -> None:
     """The CSV options shared with laser-to-params."""
     p.add_argument("runs", metavar="RUNS.csv", help="laser readings: target, run, direction, deviation or actual "
-                   "(see the README's 'CSV formats')")
+                   "(see docs/reference/formats.md)")
     p.add_argument("--columns", metavar="MAP", help="header names of another program's export, e.g. "
                    "'target=Target Position,actual=Measured,run=Run,direction=Dir' (fields: "
                    f"{', '.join(iso.FIELDS)})")

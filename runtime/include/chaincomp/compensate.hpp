@@ -18,7 +18,7 @@
 
 namespace chaincomp {
 
-// Status codes of compensate(); the README lists them.
+// Status codes of compensate(); docs/guide/daemon.md ("Generated C++ and compensation") lists them.
 enum class Status : int {
   kOk = 0,             // corrected: residual within tolerance
   kResidual = 1,       // best correction found, but a residual remains (fewer DOF than errors)

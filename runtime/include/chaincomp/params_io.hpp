@@ -33,8 +33,8 @@ const ModelEntry* open_machine(const std::string& path, std::string& error);
 // Parameter values (internal units, kParams order) from a params file: nominal values for
 // constants and 0 for errors the file does not list. Unknown names, axes, null or non-finite
 // values, unparsable text and units of the wrong kind are errors naming file, line and key.
-// An error may also vary along an axis (a table or a polynomial, README "Errors that vary
-// along an axis"): it goes into `varying` (emptied first; its value in `values` is 0), and
+// An error may also vary along an axis (a table or a polynomial, docs/reference/varying.md, "Errors that
+// vary along an axis"): it goes into `varying` (emptied first; its value in `values` is 0), and
 // every mistake in a table is an error naming file, line and key as well.
 bool load_params(const MachineInfo& info, const std::string& path, std::vector<double>& values,
                  VaryingErrors& varying, std::string& error);
