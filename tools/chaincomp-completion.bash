@@ -1,6 +1,6 @@
 # bash completion for chaincomp; generated from its parser by
 #   python -m chaincomp.cli.completion > tools/chaincomp-completion.bash
-# (tests/python/test_cli_consistency.py checks that it is up to date). Source it, or copy it
+# (tests/python/cli/test_cli_consistency.py checks that it is up to date). Source it, or copy it
 # to /etc/bash_completion.d/chaincomp.
 _chaincomp() {
     local cur="${COMP_WORDS[COMP_CWORD]}" prev="${COMP_WORDS[COMP_CWORD-1]}" verb="" words i

@@ -1,5 +1,5 @@
 """Runs chaincomp's LinuxCNC configurations headless and reads what the simulated machine did
-(used by tests/python/test_linuxcnc.py and tools/linuxcnc-demo).
+(used by tests/python/runtime/test_linuxcnc.py and tools/linuxcnc-demo).
 
 run() copies a configuration (configs/linuxcnc/NAME/) to a fresh work folder, writes the NML
 file without its TCP socket, picks the route (off | rt | bridge), and runs LinuxCNC once as an

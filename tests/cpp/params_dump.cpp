@@ -1,5 +1,5 @@
 // chaincomp_params_dump: what the C++ loaders make of a params file (or a runtime config) for a
-// compiled-in machine, for tests/python/test_conformance.py to compare with the Python loaders.
+// compiled-in machine, for tests/python/model/test_conformance.py to compare with the Python loaders.
 //   chaincomp_params_dump MACHINE params FILE   ->  NAME VALUE (internal units, 17 digits) per line
 //   chaincomp_params_dump MACHINE config FILE   ->  ok
 // A refusal is the loader's message on stderr, exit 2.

@@ -1,5 +1,5 @@
 // open_model: which model a machine file gets, and the cache key of runtime-built ones
-// (the build itself and its loading are tested end to end in tests/python/test_build.py).
+// (the build itself and its loading are tested end to end in tests/python/emit/test_build.py).
 #include <catch2/catch.hpp>
 
 #include <cmath>

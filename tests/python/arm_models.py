@@ -142,3 +142,38 @@ def ur5(q, e=None, names=DH_ERRORS, betas=()):
 def panda(q, e=None, names=DH_ERRORS):
     """The Panda's flange frame (base to flange, 107 mm past joint 7), q: seven joint angles."""
     return mdh_chain(q, PANDA_ALPHA, PANDA_A, PANDA_D, e, names) @ tr(0.0, 0.0, PANDA_FLANGE)
+
+
+# The arms with the tool frames the tests give them (tests/python/helpers.py writes their files)
+UR5_FRAME = np.array([[1, -1, 0], [1, 1, 0], [0, 0, math.sqrt(2)]]) / math.sqrt(2)   # columns x, y, z
+
+
+UR5_POINT = np.array([40.0, 0.0, 100.0])
+
+
+
+def ur5_frame(q, e=None):
+    """(R, p): the tool frame (N x 3 x 3, columns x, y, z) and point (N x 3) of the UR5 variant."""
+    e = e or {}
+    g = lambda name: e.get(name, 0.0)  # noqa: E731
+    t = np.broadcast_to(np.eye(4), (len(q), 4, 4))
+    for j in range(6):
+        n = j + 1
+        t = t @ rot("z", q[:, j] + g(f"dtheta{n}")) @ trans("z", UR5_D[j] + g(f"dd{n}")) \
+            @ trans("x", UR5_A[j] + g(f"da{n}")) @ rot("x", UR5_ALPHA[j] + g(f"dalpha{n}"))
+        if n in (2, 3):
+            t = t @ rot("y", g(f"dbeta{n}"))
+    return t[:, :3, :3] @ UR5_FRAME, t[:, :3, :3] @ UR5_POINT + t[:, :3, 3]
+
+
+PANDA_FRAME = np.array([[0, 1, 0], [0, 0, 1], [1, 0, 0.0]])   # columns x, y, z in the flange frame
+
+
+PANDA_POINT = np.array([40.0, 0.0, 103.4])
+
+
+
+def panda_frame(q, e=None):
+    """(R, p): the Panda variant's tool frame (N x 3 x 3) and point (N x 3); q: N x 7 (rad)."""
+    t = panda(q.T, e)
+    return t[:, :3, :3] @ PANDA_FRAME, t[:, :3, :3] @ PANDA_POINT + t[:, :3, 3]

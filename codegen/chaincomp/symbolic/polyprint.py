@@ -19,8 +19,8 @@ printed directly, with sympy's own rules for the shapes they take:
 - the strings of each base and power from sympy itself (``str(b**e)``, ``latex(b**e)``, once).
 
 The same text, character for character, as ``str`` / ``sympy.latex`` of the collected sympy
-expression (tests/python/test_derive_fast.py holds it against sympy on every bundled machine,
-tests/python/test_polyprint_vs_sympy.py on generated series and random machine files).
+expression (tests/python/symbolic/test_derive_fast.py holds it against sympy on every bundled machine,
+tests/python/symbolic/test_polyprint_vs_sympy.py on generated series and random machine files).
 Atoms it does not know (a number such as sqrt(2), a root of a symbol) make ``supported``
 False, and the caller builds sympy expressions as before.
 """

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-from conftest import PARAMS, ROOT, cli, machine_path, run_cli
+from helpers import PARAMS, ROOT, cli, line_of, machine_path, run_cli
 
 from chaincomp.analysis import budget as B
 from chaincomp.model.machine import load_machine
@@ -99,6 +99,7 @@ def reference_figures(gains, tol, machine, k):
 
 # ----------------------------------------------------------------------------- the notes' §7
 
+@pytest.mark.slow
 def test_mori_seiki_dz3_alone_gives_4um_in_z_everywhere():
     """With only delta_z^3 = 4 um the z error is 4 um at every grid point, x and y nothing.
     The sign of the systematic error is the exact chain's (tool relative to workpiece), checked
@@ -131,6 +132,7 @@ def test_mori_seiki_dz3_alone_gives_4um_in_z_everywhere():
         assert out["grid"]["points"] == 343
 
 
+@pytest.mark.slow
 def test_mori_seiki_text_says_everywhere():
     proc = run_cli("budget", MORI, "--tolerances", MORI_TOL, "--params", MORI_PARAMS, "--samples", "1000")
     dz = next(line for line in proc.stdout.splitlines() if line.strip().startswith("dz "))
@@ -168,6 +170,7 @@ def test_worst_rss_sigma_equal_independent_numpy_on_every_grid_point(over, fixed
                                    rtol=1e-6, atol=1e-9, err_msg=c)
 
 
+@pytest.mark.slow
 def test_cli_json_figures_match_numpy_and_exact_and_second_order_agree():
     machine = load_machine(FIVE)
     tol, k = read_tolerances(FIVE_TOL)
@@ -198,6 +201,7 @@ def _normal_file(tmp_path) -> str:
     return str(path)
 
 
+@pytest.mark.slow
 def test_monte_carlo_1e5_within_worst_and_matches_rss_for_normal_inputs(tmp_path):
     out = budget_json(FIVE, "--tolerances", _normal_file(tmp_path), "--over", "X,Ap,Cp", "--grid", "5",
                       "--set", "Y=200", "--set", "Z=-300", "--samples", "100000", "--seed", "11")
@@ -215,6 +219,7 @@ def test_monte_carlo_1e5_within_worst_and_matches_rss_for_normal_inputs(tmp_path
         assert at["rss"] == pytest.approx(3 * at["sigma"], rel=1e-12)
 
 
+@pytest.mark.slow
 def test_monte_carlo_independent_of_the_budget_code():
     """A numpy Monte Carlo of the exact model, written here, agrees with the reported one."""
     machine = load_machine(FIVE)
@@ -242,6 +247,7 @@ def test_monte_carlo_independent_of_the_budget_code():
 
 # ----------------------------------------------------------------------------- contributors
 
+@pytest.mark.slow
 def test_ranking_stable_under_a_fixed_seed_and_equal_to_numpy_ranking():
     args = (FIVE, "--tolerances", FIVE_TOL, "--over", "X,Z,Cp", "--grid", "5", "--set", "Y=150",
             "--set", "Ap=60", "--samples", "3000")
@@ -281,6 +287,7 @@ def test_ranking_stable_under_a_fixed_seed_and_equal_to_numpy_ranking():
 
 # ----------------------------------------------------------------------------- plots, options
 
+@pytest.mark.slow
 def test_plot_maps_and_bars(tmp_path):
     png = tmp_path / "budget.png"
     proc = run_cli("budget", FIVE, "--tolerances", FIVE_TOL, "--over", "X,Y,Cp", "--grid", "5",
@@ -305,6 +312,7 @@ def test_bad_options_exit_2(args, word):
     assert proc.returncode == 2 and word in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
 
 
+@pytest.mark.slow
 def test_nothing_to_budget_exits_2():
     proc = run_cli("budget", MORI, check=False)
     assert proc.returncode == 2 and "nothing to budget" in proc.stderr
@@ -321,11 +329,6 @@ tolerances:
   ey3: {bound: 2 arcsec, distribution: normal}
   dx7: {bound: 1.5, distribution: normal, normal_bound: 2 sigma}
 """
-
-
-def line_of(text: str, at: str) -> int:
-    assert text.count(at) == 1, at
-    return text[:text.index(at)].count("\n") + 1
 
 
 BAD = [
@@ -397,6 +400,7 @@ def test_bundled_tolerance_files_cover_their_machines():
     assert len(five.items) == 29
 
 
+@pytest.mark.slow
 def test_systematic_error_at_the_params_values_is_the_exact_models():
     """With --params error values, the systematic figure at the worst point is the tool error
     of the exact model there (order exact), and the second-order model's within its own order."""

@@ -8,7 +8,9 @@ from __future__ import annotations
 import json
 import math
 
-from test_tool_frame import head_file, run
+import pytest
+
+from helpers import head_file, run_verb
 
 ARCSEC = math.pi / (180 * 3600)
 TOLERANCES = """machine: head
@@ -20,11 +22,12 @@ tolerances:
 """
 
 
+@pytest.mark.slow
 def test_budget_of_the_rotation_vector_and_its_plot(tmp_path):
     tol = tmp_path / "tol.yaml"
     tol.write_text(TOLERANCES)
     png = tmp_path / "wz.png"
-    code, out, err = run("budget", head_file(tmp_path), "--tolerances", tol, "--component", "wz",
+    code, out, err = run_verb("budget", head_file(tmp_path), "--tolerances", tol, "--component", "wz",
                          "--plot", png, "--format", "json")
     assert code == 0, err
     wz = json.loads(out)["components"]["wz"]
@@ -33,12 +36,13 @@ def test_budget_of_the_rotation_vector_and_its_plot(tmp_path):
     assert png.stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_component_w_needs_a_tool_frame(tmp_path):
     tol = tmp_path / "tol.yaml"
     tol.write_text(TOLERANCES)
     head = head_file(tmp_path)
     head.write_text(head.read_text().replace(", reference: [0, 1, 0]", ""))
-    code, _, err = run("budget", head, "--tolerances", tol, "--component", "wx", "--plot", tmp_path / "x.png")
+    code, _, err = run_verb("budget", head, "--tolerances", tol, "--component", "wx", "--plot", tmp_path / "x.png")
     assert code == 2
     assert "--component wx: this machine has no tool frame (tool.reference or tool.rotation)" in err, err
     assert not (tmp_path / "x.png").exists()

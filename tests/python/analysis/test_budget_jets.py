@@ -9,7 +9,7 @@ import os
 import numpy as np
 import pytest
 
-from conftest import ROOT, machine_path
+from helpers import ROOT, machine_path
 from test_budget import FIVE_TOL, fd_gains, grid_values, read_tolerances, reference_figures
 
 from chaincomp.analysis import budget as B
@@ -56,6 +56,7 @@ def test_ur5_worst_rss_sigma_equal_central_differences_of_the_exact_model(tmp_pa
         np.testing.assert_allclose(cb.sigma, sigma, rtol=1e-6, atol=1e-9 * scale, err_msg=c)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("order", [1, 2])
 def test_jets_give_the_expanded_series_figures(order):
     machine = load_machine(machine_path("five_axis_ac"))

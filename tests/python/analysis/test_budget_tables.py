@@ -14,8 +14,9 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers import ROOT as HELPERS_ROOT
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(HELPERS_ROOT)
 VMC = str(ROOT / "configs/machines/vmc_xyz.yaml")
 
 TABLE = """machine: vmc_xyz
@@ -42,6 +43,7 @@ def budget(tmp_path, *args, table_lo=-400, outside="hold", check=True):
     return proc
 
 
+@pytest.mark.slow
 def test_a_table_is_bounded_by_its_largest_value_over_the_grid(tmp_path):
     # grid 2: X at -400 and 400 only (0 and 3 um there), yet the table peaks at 8 um at X = 0
     out = json.loads(budget(tmp_path, "--grid", "2", "--format", "json").stdout)
@@ -56,6 +58,7 @@ def test_a_table_is_bounded_by_its_largest_value_over_the_grid(tmp_path):
         assert c["at_worst"]["monte_carlo"]["bracketed"] is None, comp
 
 
+@pytest.mark.slow
 def test_a_table_on_a_held_axis_is_bounded_by_its_value_there(tmp_path):
     # X = 200 mm: 8 + (200 / 400) * (-3 - 8) = 2.5 um
     out = json.loads(budget(tmp_path, "--over", "Y,Z", "--set", "X=200", "--grid", "3", "--format", "json").stdout)
@@ -63,6 +66,7 @@ def test_a_table_on_a_held_axis_is_bounded_by_its_value_there(tmp_path):
     assert out["components"]["dx"]["worst"]["max"] == pytest.approx(2.5e-3)
 
 
+@pytest.mark.slow
 def test_the_tolerance_files_bound_wins_over_the_tables_range(tmp_path):
     tol = tmp_path / "t.yaml"
     tol.write_text("machine: vmc_xyz\nnormal_bound: 3 sigma\ntolerances:\n  EXX: {bound: 2 um, distribution: uniform}\n")
@@ -70,12 +74,14 @@ def test_the_tolerance_files_bound_wins_over_the_tables_range(tmp_path):
     assert out["components"]["dx"]["worst"]["max"] == pytest.approx(2e-3)
 
 
+@pytest.mark.slow
 def test_a_rejecting_table_shorter_than_the_grid_is_refused_with_its_line(tmp_path):
     proc = budget(tmp_path, "--grid", "2", table_lo=-100, outside="reject", check=False)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr and proc.stderr.count("\n") == 1
     assert "p.yaml:3: values.EXX: X = -400 mm lies outside the table [-100, 400] mm" in proc.stderr
 
 
+@pytest.mark.slow
 def test_text_shows_zero_components_as_zero_not_as_a_failure(tmp_path):
     text = budget(tmp_path, "--grid", "2").stdout
     assert "EXX 8 um" in text

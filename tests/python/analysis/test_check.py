@@ -24,7 +24,7 @@ from sympy.parsing.sympy_parser import parse_expr
 from chaincomp import load_machine
 from chaincomp.model.machine import Rotation
 
-from conftest import ROOT, cli, machine_path, run_cli
+from helpers import ROOT, cli, machine_path, run_cli
 
 CHECKS = os.path.join(ROOT, "configs", "checks")
 BUNDLED = [("angle_head", "paper_table2"), ("me220_xz", "me220_eq17"), ("mori_seiki_nv1500", "mori_seiki_5T6")]
@@ -185,6 +185,7 @@ def _check_json(machine_name, check_file, *extra):
 
 # ----------------------------------------------------------------------------- bundled checks
 
+@pytest.mark.slow
 @pytest.mark.parametrize("machine_name, check_name", BUNDLED)
 def test_bundled_findings_confirmed_numerically(machine_name, check_name):
     path = os.path.join(CHECKS, check_name + ".yaml")
@@ -198,6 +199,7 @@ def _summary(report):
             for f in report["formulas"]}
 
 
+@pytest.mark.slow
 def test_paper_table2_findings():
     """Table 2: X, Y, Z and DX as the chain; DY and DZ with ThetaCv of the wrong sign, DZ
     without +Oas*sin(Yp)*cos(Yp)."""
@@ -213,6 +215,7 @@ def test_paper_table2_findings():
     assert dz["printed"] == "0"
 
 
+@pytest.mark.slow
 def test_me220_eq17_findings():
     """Eq. 17's first component has -ey2*tz where eq. 12 gives +ey2*tz; the products of two
     errors are left out at first order and listed."""
@@ -223,6 +226,7 @@ def test_me220_eq17_findings():
     assert sorted(first["not_compared"]) == sorted(["dz2*ey1", "-ey1*ey2*tx"])
 
 
+@pytest.mark.slow
 def test_mori_seiki_5T6_findings():
     """The notes' 0T6·inv(0T5): the printed rotation part lacks ez4 (which the printed
     translation part keeps); "d_z^12" is defined as d_x^12; the gain matrix agrees."""
@@ -234,6 +238,7 @@ def test_mori_seiki_5T6_findings():
     assert report["formulas"][0]["defined"] == [{"name": "dz12", "as": "dx12", "line": 25}]
 
 
+@pytest.mark.slow
 def test_other_conventions_do_not_match_the_print(tmp_path):
     """Only 0T6·inv(0T5) reproduces the printed 5T6: the machine's own inv(0T6)·0T5 and the
     inverse of it differ in many more terms."""
@@ -247,6 +252,7 @@ def test_other_conventions_do_not_match_the_print(tmp_path):
     assert counts["W*inv(T)"] == 2 and counts["inv(W)*T"] > 2 and counts["inv(T)*W"] > 2
 
 
+@pytest.mark.slow
 def test_text_output_and_exit_codes():
     proc = run_cli("check", machine_path("angle_head"), os.path.join(CHECKS, "paper_table2.yaml"), check=False)
     assert proc.returncode == 1
@@ -275,6 +281,7 @@ formulas:
 """
 
 
+@pytest.mark.slow
 def test_three_deliberate_slips_exactly(tmp_path):
     path = tmp_path / "slips.yaml"
     path.write_text(MISTAKES)
@@ -298,6 +305,7 @@ def test_three_deliberate_slips_exactly(tmp_path):
     assert _confirm("angle_head", str(path), report)
 
 
+@pytest.mark.slow
 def test_equal_in_other_forms(tmp_path):
     """Trig identities, other groupings, tan written as sin/cos and substitutions: equal."""
     path = tmp_path / "forms.yaml"
@@ -317,6 +325,7 @@ formulas:
     assert _confirm("angle_head", str(path), report)
 
 
+@pytest.mark.slow
 def test_whole_coefficients(tmp_path):
     """A coefficient of several terms that is wholly of the wrong sign, extra, missing or a
     multiple of the chain's is told as one finding; a one-term slip as a term."""
@@ -344,6 +353,7 @@ formulas:
     assert _confirm("angle_head", str(path), report)
 
 
+@pytest.mark.slow
 def test_order_two_compares_products(tmp_path):
     """At --order 2 the products of two errors in eq. 17 are compared: the -ey2 slip shows in
     them too (eq. 17 used -ey2 in both off-diagonal places of 1T2)."""

@@ -4,14 +4,11 @@ is decided here by hand from the geometry, not by the code under test."""
 
 import glob
 import os
-import subprocess
-import sys
 
 import pytest
 
-from conftest import cli
+from helpers import ROOT, cli, line_of, run_cli
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 
 # A rotary table C with a point on it at radius R, then an error rotation ez about the
 # tool point's own z axis (cannot move a point), and a slide X along the chain.
@@ -40,31 +37,22 @@ def run(*args):
     return cli(*args, check=False)
 
 
-def run_process(*args):
-    return subprocess.run([sys.executable, "-m", "chaincomp.cli.main", *args], capture_output=True, text=True,
-                          cwd=ROOT, timeout=120)
-
-
 def write(tmp_path, text):
     path = tmp_path / "m.yaml"
     path.write_text(text)
     return path
 
 
-def line_of(text, at):
-    return text[:text.index(at)].count("\n") + 1
-
-
 def test_error_that_cannot_move_the_point(tmp_path):
     path = write(tmp_path, MACHINE)
-    proc = run_process("lint", str(path))   # real processes here: the exit path (0, and 2 with --strict)
+    proc = run_cli("lint", str(path), check=False)   # real processes here: the exit path (0, and 2 with --strict)
     assert proc.returncode == 0, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr
     assert lines[0].startswith(f"chaincomp lint: warning: {path}:{line_of(MACHINE, '{name: ez')}: symbols.ez: "
                                f"error ez never moves the tool point: its gain is zero at every pose "
                                f"(line {line_of(MACHINE, '{errors:')})"), lines[0]
-    strict = run_process("lint", "--strict", str(path))
+    strict = run_cli("lint", "--strict", str(path), check=False)
     assert strict.returncode == 2 and "1 warning (--strict)" in strict.stderr, strict.stderr
     # every verb that loads the machine prints it too, and still works
     proc = run("derive", str(path))

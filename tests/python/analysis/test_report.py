@@ -12,7 +12,7 @@ from sympy.parsing.sympy_parser import parse_expr
 from chaincomp import load_machine
 from chaincomp.symbolic.numeric import ExactModel
 
-from conftest import BUNDLED, machine_path, run_cli
+from helpers import BUNDLED, machine_path, run_cli
 
 H = 1e-30
 
@@ -48,6 +48,7 @@ def _gain_cells(md: str, machine) -> dict:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", BUNDLED)
 def test_markdown_formulas_equal_the_exact_model(name):
     machine = load_machine(machine_path(name))
@@ -94,6 +95,7 @@ def test_markdown_formulas_equal_the_exact_model(name):
                     assert got == pytest.approx(w[i], abs=1e-9), (c, e.name)
 
 
+@pytest.mark.slow
 def test_markdown_reads_like_the_paper():
     md = _report("angle_head")
     # Table 1: name, size, sign, unit, meaning
@@ -108,12 +110,14 @@ def test_markdown_reads_like_the_paper():
     assert "| Ocx | `cos(Cp)` | `sin(Cp)` | 0 | 0 | 0 | 0 |" in md
 
 
+@pytest.mark.slow
 def test_order_two_and_loops():
     md = _report("mori_seiki_nv1500", "--order", "2")
     assert "## Tool point error, terms of degree 2 in the errors" in md
     assert "inv(reference→workpiece) · (reference→tool)" in md
 
 
+@pytest.mark.slow
 def test_latex_document(tmp_path):
     out = tmp_path / "angle_head.tex"
     proc = run_cli("report", machine_path("angle_head"), "-o", str(out))
@@ -128,6 +132,7 @@ def test_latex_document(tmp_path):
     assert _report("angle_head", "--format", "latex") == tex
 
 
+@pytest.mark.slow
 def test_unwritable_output_exits_2(tmp_path):
     target = tmp_path / "missing" / "r.md"
     proc = run_cli("report", machine_path("angle_head"), "-o", str(target), check=False)
@@ -135,8 +140,9 @@ def test_unwritable_output_exits_2(tmp_path):
     assert proc.stderr.startswith(f"chaincomp report: error: -o {target}: folder {target.parent} does not exist")
 
 
+@pytest.mark.slow
 def test_report_appends_the_protocol(tmp_path):
-    from conftest import machine_path, run_cli
+    from helpers import machine_path, run_cli
     out = tmp_path / "r.md"
     run_cli("report", machine_path("angle_head"), "--protocol", "--assume-zero", "DY", "-o", str(out))
     proto = run_cli("protocol", machine_path("angle_head"), "--assume-zero", "DY").stdout

@@ -15,8 +15,9 @@ import pytest
 from chaincomp.cli.common import resolve_machine
 from chaincomp.errors import ChaincompError
 from chaincomp.cli.main import build_parser, main
+from helpers import ROOT as HELPERS_ROOT
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(HELPERS_ROOT)
 M = str(ROOT / "configs/machines/five_axis_ac.yaml")
 
 # The shared ideas: option -> what every verb that has it must agree on.
@@ -170,6 +171,7 @@ def _pyproject_version() -> str:
         re.search(r'__version__ = "([^"]+)"', (ROOT / "codegen/chaincomp/__init__.py").read_text()).group(1)
 
 
+@pytest.mark.slow
 def test_version():
     out = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "--version"], capture_output=True,
                          text=True, check=True).stdout

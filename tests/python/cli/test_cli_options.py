@@ -14,7 +14,7 @@ import subprocess
 import sys
 
 import pytest
-from conftest import MACHINES, PARAMS, ROOT, machine_path
+from helpers import PARAMS, ROOT, machine_path
 
 from chaincomp.cli import main as cli
 
@@ -133,7 +133,7 @@ CASES = (
     + _opt(["report"] + AH, "--assume-zero", ["ThetaAs"])
 )
 # The first input file: missing, not UTF-8, a folder, for every verb that takes one (replay
-# hands it to the C++ loader: tests/python/test_replay_plot.py).
+# hands it to the C++ loader: tests/python/runtime/test_replay_plot.py).
 for verb, tail in (("derive", []), ("eval", []), ("generate", ["-o", "{folder}"]), ("testvectors", ["-o", "{out}"]),
                    ("protocol", []), ("plot", ["-o", "{out}"]), ("check", ["{check}"]), ("report", []),
                    ("budget", ["--params", "{ahp}"]), ("simulate-calibration", ["-o", "{out}.yaml"]),
@@ -227,6 +227,7 @@ def test_json_output_is_strict_json(ws, capsys):
         json.loads(out, parse_constant=refuse)
 
 
+@pytest.mark.slow
 def test_simulate_calibration_at_the_knot_limit_loads_back(ws, capsys):
     from chaincomp.model.machine import load_machine
     from chaincomp.model.params import load_params
@@ -260,6 +261,7 @@ def test_protocol_bounds_its_set_ups(ws, capsys):
     assert code == 2 and f"{n * n} set-ups, at most {MAX_SETUPS}" in err
 
 
+@pytest.mark.slow
 def test_a_subprocess_sees_no_traceback_either(ws):
     """The entry point as a user runs it: argparse's error and a verb's error, one line each."""
     for argv in (["protocol", ws["ah"], "--angles", "nan,inf"], ["simulate-log", ws["five"], "-o", ws["out"],
@@ -270,6 +272,7 @@ def test_a_subprocess_sees_no_traceback_either(ws):
             proc.stderr
 
 
+@pytest.mark.slow
 def test_number_parsers_take_every_float_and_refuse_everything_else_cleanly():
     """parse_number reads back any finite float's repr exactly, and on any other text either
     returns a finite number or raises ValueError: never another exception."""
@@ -302,6 +305,7 @@ def test_number_parsers_take_every_float_and_refuse_everything_else_cleanly():
     assert parse_number(" -1.5e3 ") == -1500.0 and integer(0, 9)("+7") == 7
 
 
+@pytest.mark.slow
 def test_replay_checks_machine_and_outputs_before_the_binary(tmp_path):
     """replay: the machine file validated as every verb validates it, and an output that is an
     input (or -o and --csv the same file) refused before the C++ binary runs."""

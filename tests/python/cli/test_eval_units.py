@@ -7,7 +7,9 @@ by EBZ towards x, and moving the tool point by -L sin(EBZ) in x (L = 100 mm from
 import json
 import math
 
-from conftest import machine_path, run_cli
+import pytest
+
+from helpers import machine_path, run_cli
 
 VMC = machine_path("vmc_xyz")
 
@@ -16,6 +18,7 @@ def _lines(*args):
     return run_cli("eval", VMC, *args).stdout.splitlines()
 
 
+@pytest.mark.slow
 def test_a_positioning_error_reads_in_um():
     lines = _lines("--set", "EXX=4.6")
     i = lines.index("  tool point error (µm): dx, dy, dz")
@@ -35,6 +38,7 @@ def test_a_tilt_reads_in_arcsec_as_components_and_angle():
     assert exact[2] == f"{dx:.3f}," and dx < -4.8
 
 
+@pytest.mark.slow
 def test_json_stays_internal_and_names_its_units():
     out = json.loads(run_cli("eval", VMC, "--set", "EXX=4.6", "--set", "EBZ=10", "--json").stdout)
     assert out["units"] == {"length": "mm", "direction": "1", "angle": "rad"}

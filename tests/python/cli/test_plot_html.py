@@ -14,7 +14,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from conftest import PARAMS, machine_path, run_cli
+from helpers import PARAMS, machine_path, run_cli
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 needs_chromium = pytest.mark.skipif(CHROMIUM is None, reason="no chromium (tools/setup installs Debian's chromium)")
@@ -54,6 +54,7 @@ def _chromium(tmp_path, *args):
     return subprocess.run(cmd, capture_output=True, text=True, timeout=180)
 
 
+@pytest.mark.slow
 def test_the_file_is_self_contained(html):
     text = html.read_text(encoding="utf-8")
     assert len(text) > 1_000_000                                      # plotly.js inside

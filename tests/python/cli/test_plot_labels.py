@@ -21,7 +21,7 @@ import yaml
 matplotlib.use("Agg")
 from matplotlib.figure import Figure  # noqa: E402
 
-from conftest import BUNDLED as MACHINES, PARAMS, ROOT, machine_path, run_cli  # noqa: E402
+from helpers import BUNDLED as MACHINES, PARAMS, ROOT, machine_path, run_cli  # noqa: E402
 
 UNIT = re.compile(r"^[^\[\]]+ \[([^\[\]]+)\]$")   # 'quantity [unit]': exactly one unit
 
@@ -188,6 +188,7 @@ def test_volume_arrows_of_a_pure_positioning_error(figures):
 
 @pytest.mark.parametrize("name", [n for n in MACHINES if os.path.exists(os.path.join(ROOT, "configs",
                                                                                      "tolerances", f"{n}.yaml"))])
+@pytest.mark.slow
 def test_budget_plot_on_every_machine_with_tolerances(figures, name, tmp_path):
     tol = os.path.join(ROOT, "configs", "tolerances", f"{name}.yaml")
     axes = _axes(name)
@@ -212,6 +213,7 @@ def test_budget_maps_have_their_own_colour_scales(figures, tmp_path):
     assert r1 < w0 or r1 < 0.8 * w1   # RSS below the worst case: one scale would have flattened it
 
 
+@pytest.mark.slow
 def test_table_plot(figures):
     params = os.path.join(PARAMS, "five_axis_ac-laser.yaml")
     fig = figures("plot", "--table", params, "--error", "EXX", machine_path("five_axis_ac"))
@@ -230,6 +232,7 @@ def replay_csv(tmp_path_factory):
     return str(table)
 
 
+@pytest.mark.slow
 def test_replay_plot_one_unit_per_panel_and_the_error_with_and_without(figures, replay_csv):
     params = _params("five_axis_ac")
     fig = figures("plot", machine_path("five_axis_ac"), "--params", params, "--replay", replay_csv)
@@ -253,6 +256,7 @@ def test_replay_plot_one_unit_per_panel_and_the_error_with_and_without(figures, 
     assert np.max(with_[len(with_) // 2:]) < 1e-3 * np.min(without)
 
 
+@pytest.mark.slow
 def test_replay_plot_of_a_three_axis_machine_leaves_the_tilt(figures, tmp_path):
     """vmc_xyz's slides cannot turn the tool axis: its tilt is the same with and without
     compensation, while the tool point error drops."""
@@ -283,6 +287,7 @@ def test_nothing_to_draw_is_a_warning(figures, capsys):
     assert "warning" not in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_plot_option_mistakes_exit_2(tmp_path):
     m = machine_path("five_axis_ac")
     for argv, word in ((["--view", "volume", "--grid", "13"], "volume view takes 2 to 12"),

@@ -1,7 +1,6 @@
 """The Python API: the README's example runs and prints the paper's Table 3 row; values
 default sensibly and a misspelt name is refused."""
 
-import math
 import os
 import re
 import subprocess
@@ -11,8 +10,8 @@ import numpy as np
 import pytest
 
 import chaincomp
+from helpers import ROOT
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 
 
 def readme_example() -> str:
@@ -21,6 +20,7 @@ def readme_example() -> str:
     return re.search(r"```python\n(.*?)```", section, re.S).group(1)
 
 
+@pytest.mark.slow
 def test_readme_example_reproduces_table3_and_truncation_order():
     proc = subprocess.run([sys.executable, "-c", readme_example()], cwd=ROOT, capture_output=True, text=True,
                           timeout=120)

@@ -22,40 +22,20 @@ from scipy.spatial.transform import Rotation
 
 from chaincomp import load_machine, load_params
 
-from arm_models import panda
-from conftest import PARAMS, ROOT, machine_path
-from test_tool_frame import UR5_FRAME, arr, ur5_frame, ur5_frame_file
+from helpers import PARAMS, ROOT
+from helpers import FRAME_ARMS as ARMS
+from model_library import Library, arr
 
 INT, VOID_P, DBL_P = ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(ctypes.c_double)
 COMPENSATE = ctypes.CFUNCTYPE(INT, VOID_P, VOID_P, DBL_P, DBL_P, DBL_P)
 INIT = ctypes.CFUNCTYPE(None, VOID_P)
 BOUND = 0.0175   # rad: kMaxAngularCorrection
-PANDA_FRAME = np.array([[0, 1, 0], [0, 0, 1], [1, 0, 0.0]])   # columns x, y, z in the flange frame
-PANDA_POINT = np.array([40.0, 0.0, 103.4])
-
-
-def panda_frame(q, e=None):
-    """(R, p): the Panda variant's tool frame (N x 3 x 3) and point (N x 3); q: N x 7 (rad)."""
-    t = panda(q.T, e)
-    return t[:, :3, :3] @ PANDA_FRAME, t[:, :3, :3] @ PANDA_POINT + t[:, :3, 3]
-
-
-def panda_frame_file(tmp_path):
-    with open(machine_path("panda")) as f:
-        head, _ = f.read().split("\ntool:\n")
-    path = tmp_path / "panda_frame.yaml"
-    path.write_text(head + "\ntool:\n  point: [40, 0, 103.4]\n  direction: [0, 1, 0]\n  reference: [0, 0, 1]\n")
-    return path
-
-
-ARMS = {"ur5": (ur5_frame_file, ur5_frame), "panda": (panda_frame_file, panda_frame)}
 
 
 class Arm:
     """An arm's library through its function table, with the bundled synthetic errors."""
 
     def __init__(self, name, tmp):
-        from test_generated_jets import Library
         self.machine = load_machine(str(ARMS[name][0](tmp)))
         self.numpy = ARMS[name][1]
         env = dict(os.environ, XDG_CACHE_HOME=str(tmp / "cache"))
@@ -130,6 +110,7 @@ def regular_poses(arm, rng, count):
     return out[:count]
 
 
+@pytest.mark.slow
 def test_away_from_singularities_point_to_1_nm_and_orientation_to_1e_9_rad(arm):
     rng = np.random.default_rng(17)
     q = regular_poses(arm, rng, 2000)
@@ -164,6 +145,7 @@ def closest_correction(arm, c):
     return q_next
 
 
+@pytest.mark.slow
 def test_a_redundant_arm_takes_the_correction_closest_to_the_command(arm):
     """Seven joints, six conditions: the correction is the smallest that holds the pose (the
     step is the least-squares one of the Jacobian at the command: no part along its null
@@ -183,6 +165,7 @@ def test_a_redundant_arm_takes_the_correction_closest_to_the_command(arm):
             assert np.linalg.norm(null @ dq) < 1e-2 * np.linalg.norm(dq)
 
 
+@pytest.mark.slow
 def test_near_singular_poses_each_correction_within_its_bound_and_the_residual_reported(arm):
     """The wrist straight (UR5 q5 = 0, Panda q6 = 0 is off its limit: q4 near its -4 deg
     stop with q6 near 0 instead), the elbow stretched (UR5 q3 = 0): either corrected (0) or

@@ -15,8 +15,8 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT, machine_path
-from test_daemon import DAEMON, NETNS, PY, needs_netns
+from helpers import ROOT, machine_path
+from helpers import DAEMON, NETNS, PY, needs_netns
 
 SOURCE = machine_path("trunnion_ac")
 HEADER = os.path.join(ROOT, "runtime", "include", "chaincomp", "model_library.hpp")
@@ -85,6 +85,7 @@ def built(tmp_path_factory):
             "path": outs[0][0].strip(), "folder": str(folder)}
 
 
+@pytest.mark.slow
 def test_concurrent_builds_compile_once_and_agree(built):
     assert built["rcs"] == [0, 0], built["outs"]
     paths = {out.strip() for out, _ in built["outs"]}
@@ -107,6 +108,7 @@ class _Library(ctypes.Structure):
                 ("source_size", ctypes.c_size_t), ("toolchain", ctypes.c_char_p), ("entry", ctypes.c_void_p)]
 
 
+@pytest.mark.slow
 def test_library_has_one_entry_point_with_name_hash_text_abi(built):
     lib = ctypes.CDLL(built["path"])
     lib.chaincomp_model_library.restype = ctypes.POINTER(_Library)
@@ -139,6 +141,7 @@ def sources_digest() -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+@pytest.mark.slow
 def test_a_library_of_older_chaincomp_code_is_not_reused(built, tmp_path):
     # The same machine file and compiler, but another code generator or runtime headers (an
     # upgrade of chaincomp: here another digest in model_build.json): a new library, compiled.
@@ -170,6 +173,7 @@ def test_a_library_of_older_chaincomp_code_is_not_reused(built, tmp_path):
     assert proc.stderr.splitlines()[-1].endswith("is from an older chaincomp: re-configure the C++ build (tools/setup)")
 
 
+@pytest.mark.slow
 def test_cached_build_is_reused_and_copied(built, tmp_path):
     before = os.stat(built["path"]).st_mtime_ns
     proc = chaincomp(built["env"], "build", built["machine"], "-o", str(tmp_path / "out"))
@@ -182,6 +186,7 @@ def test_cached_build_is_reused_and_copied(built, tmp_path):
         assert a.read() == b.read()
 
 
+@pytest.mark.slow
 def test_no_compiler_names_the_debian_package(built, tmp_path):
     with open(os.path.join(ROOT, "build", "model_build.json")) as f:
         cfg = json.load(f)
@@ -196,6 +201,7 @@ def test_no_compiler_names_the_debian_package(built, tmp_path):
     assert not (tmp_path / "cache").exists()
 
 
+@pytest.mark.slow
 def test_bad_machine_file_is_one_line(built, tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("name: bad\nsymbols: 3\n")
@@ -231,6 +237,7 @@ def _fake_library(tmp_path, abi_expr: str) -> str:
     return out
 
 
+@pytest.mark.slow
 def test_library_of_another_abi_is_refused(built, tmp_path):
     fake = _fake_library(tmp_path, "chaincomp::kModelAbi + 1")
     with open(HEADER) as f:
@@ -270,6 +277,7 @@ def _replay_exact(built, machine, tmp_path, extra=()):
     return exact_check(cmd, cor, machine, params_of(machine))[0], proc.stderr
 
 
+@pytest.mark.slow
 def test_replay_on_a_built_machine(built, tmp_path):
     dp, err = _replay_exact(built, built["machine"], tmp_path)
     assert "chaincomp build:" not in err  # the cached library
@@ -284,6 +292,7 @@ def _scenario(env, *args):
     return proc.stdout
 
 
+@pytest.mark.slow
 @needs_netns
 def test_daemon_on_a_built_machine_then_a_changed_constant(built, tmp_path):
     env = built["env"]
@@ -325,6 +334,7 @@ def test_daemon_on_a_built_machine_then_a_changed_constant(built, tmp_path):
     assert os.path.isfile(new_path)
 
 
+@pytest.mark.slow
 def test_the_solver_is_compiled_once_per_machine_shape(built):
     """The compensation solver depends on the machine's shape alone: the first build compiled
     it (trunnion_ac: 5 axes, the last two rotary (kind mask 0b11000 = 24), tool point and
@@ -345,6 +355,7 @@ def test_the_solver_is_compiled_once_per_machine_shape(built):
     assert "chaincomp::Core<5, 24u, 6, 6, false>::compensate" in defined
 
 
+@pytest.mark.slow
 def test_build_output_folder_is_checked_before_the_build(tmp_path):
     """-o creates at most the folder itself, never missing parents, and says so before compiling."""
     proc = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "build", os.path.join(ROOT, "configs",
@@ -365,6 +376,7 @@ FIVE = os.path.join(ROOT, "configs", "machines", "five_axis_ac.yaml")
 DEMO = os.path.join(ROOT, "configs", "params", "five_axis_ac-demo.yaml")
 
 
+@pytest.mark.slow
 def test_linuxcnc_options_are_checked_before_any_work(tmp_path):
     env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path)}
     proc = chaincomp(env, "build", FIVE, "--params", DEMO)

@@ -15,7 +15,7 @@ import time
 import numpy as np
 import pytest
 
-from conftest import ROOT
+from helpers import ROOT
 from test_build import PY, chaincomp, variant
 
 CONFIG = os.path.join(ROOT, "build", "model_build.json")
@@ -78,6 +78,7 @@ def failed_solver_build(tmp_path, on_solver: str, name: str):
     return proc.stderr
 
 
+@pytest.mark.slow
 def test_a_failed_solver_compile_names_the_first_error_and_leaves_no_half_object(tmp_path):
     # the compiler writes half an object, then fails (as one that runs out of memory late)
     err = failed_solver_build(tmp_path, 'echo half > "$out"; echo "x.cpp: In function:" >&2; '
@@ -89,12 +90,14 @@ def test_a_failed_solver_compile_names_the_first_error_and_leaves_no_half_object
     assert not any(os.path.basename(e).startswith(".") for e in left), left  # no temporary model folder
 
 
+@pytest.mark.slow
 def test_a_killed_solver_compile_says_so(tmp_path):
     err = failed_solver_build(tmp_path, 'echo half > "$out"; kill -9 $$', "solver_killed")
     assert err.splitlines()[-1].endswith(".cpp): killed by signal 9, no message")
     assert not any(e.endswith((".o", ".tmp", ".so")) for e in cache_entries(tmp_path))
 
 
+@pytest.mark.slow
 def test_two_machines_of_one_shape_built_at_once_compile_the_solver_once(tmp_path):
     # the solver's compile is slowed, so that the second build arrives while it runs
     cxx = wrapper(tmp_path, "sleep 4")
@@ -115,6 +118,7 @@ def test_two_machines_of_one_shape_built_at_once_compile_the_solver_once(tmp_pat
         assert_compensates(load(out.strip()))
 
 
+@pytest.mark.slow
 def test_the_solver_key_covers_the_headers_and_skips_what_is_no_header(tmp_path):
     include = tmp_path / "include"
     shutil.copytree(os.path.join(ROOT, "runtime", "include"), include)
@@ -137,6 +141,7 @@ def test_the_solver_key_covers_the_headers_and_skips_what_is_no_header(tmp_path)
     assert first[0].split("/")[0] != next(e for e in second if e != first[0]).split("/")[0]
 
 
+@pytest.mark.slow
 def test_no_runtime_headers_is_one_line(tmp_path):
     env = env_for(tmp_path, toolchain_dir(tmp_path, include=str(tmp_path / "nowhere" / "runtime" / "include")))
     proc = chaincomp(env, "build", variant(str(tmp_path), "no_headers"))
@@ -146,6 +151,7 @@ def test_no_runtime_headers_is_one_line(tmp_path):
     assert "Traceback" not in proc.stderr
 
 
+@pytest.mark.slow
 def test_a_solver_folder_deleted_by_hand_is_compiled_again(tmp_path):
     env = env_for(tmp_path, toolchain_dir(tmp_path))
     assert chaincomp(env, "build", variant(str(tmp_path), "gone_a")).returncode == 0
@@ -259,13 +265,14 @@ def assert_compensates(m, commands=COMMANDS):
 
 ALONE = """
 import sys
-sys.path.insert(0, {tests!r})
+sys.path[:0] = [{tests!r}, {here!r}]
 from test_build_solver import load, COMMANDS
 m = load({path!r}, {scale!r})
 print(repr([[float(x) for x in m.compensate(c)[1]] for c in COMMANDS]))
 """
 
 
+@pytest.mark.slow
 def test_two_libraries_of_one_shape_in_one_process(tmp_path):
     """Each library keeps its own copy of the solver (hidden: only the entry point is
     exported, so neither binds to the other's); in one process both correct with their own
@@ -289,7 +296,7 @@ def test_two_libraries_of_one_shape_in_one_process(tmp_path):
     qa, qb = np.array(qa), np.array(qb)
     assert np.max(np.abs(qa - qb)) > 1e-3  # each with its own model
     for path, q, scale in zip(paths, (qa, qb), (1.0, 2.0)):
-        proc = subprocess.run([PY, "-c", ALONE.format(tests=os.path.dirname(__file__), path=path, scale=scale)],
+        proc = subprocess.run([PY, "-c", ALONE.format(tests=os.path.dirname(os.path.dirname(os.path.abspath(__file__))), here=os.path.dirname(os.path.abspath(__file__)), path=path, scale=scale)],
                               capture_output=True, text=True, check=True)
         assert np.array_equal(np.array(eval(proc.stdout)), q)
 
@@ -332,6 +339,7 @@ int main() {{
 """
 
 
+@pytest.mark.slow
 def test_generated_models_compile_alone_without_the_macro(tmp_path):
     """A user's program of two generated models of one shape, compiled without
     CHAINCOMP_PREBUILT_CORE: each NAME.cpp carries the solver; nothing else is linked."""
@@ -353,6 +361,7 @@ def test_generated_models_compile_alone_without_the_macro(tmp_path):
         assert status == "0" and float(worst) <= 1e-7, line
 
 
+@pytest.mark.slow
 def test_a_compiler_left_by_a_killed_build_cannot_write_into_the_next_ones_object(tmp_path):
     """A build killed (SIGKILL) while its solver compiles releases its locks, but the compiler
     it started runs on and writes its output late. The next build's object must not be that

@@ -4,7 +4,9 @@ import os
 import subprocess
 import sys
 
-from conftest import BUNDLED, ROOT, machine_path, run_cli
+import pytest
+
+from helpers import BUNDLED, ROOT, machine_path, run_cli
 
 
 def _generate(out_dir, hash_seed):
@@ -15,6 +17,7 @@ def _generate(out_dir, hash_seed):
     return {f: (out_dir / f).read_bytes() for f in sorted(os.listdir(out_dir))}
 
 
+@pytest.mark.slow
 def test_generate_is_byte_identical_across_runs(tmp_path):
     # Different hash seeds change set and dict iteration orders that could leak into output.
     first = _generate(tmp_path / "a", 1)
@@ -24,6 +27,7 @@ def test_generate_is_byte_identical_across_runs(tmp_path):
         assert first[name] == second[name], name
 
 
+@pytest.mark.slow
 def test_generated_header_names_its_source_and_hash(tmp_path):
     from chaincomp.emit.cpp import fnv1a64
     run_cli("generate", machine_path("me220_xz"), "-o", str(tmp_path))
@@ -36,6 +40,7 @@ def test_generated_header_names_its_source_and_hash(tmp_path):
     assert f"0x{want:016x}ull" in text
 
 
+@pytest.mark.slow
 def test_generate_bad_input(tmp_path):
     proc = run_cli("generate", machine_path("me220_xz"), "-o", str(tmp_path), "--order", "0", check=False)
     assert proc.returncode == 2 and "--order: must be between 1 and 4, got 0" in proc.stderr
@@ -55,6 +60,7 @@ def test_bundled_machine_names_match_file_names():
         assert load_machine(machine_path(name)).name == name
 
 
+@pytest.mark.slow
 def test_long_chain_straight_line_code_is_byte_identical_across_runs(tmp_path):
     """The benchmark UR5 (past the expansion limit: the straight-line emitter) under two hash seeds."""
     outs = []
@@ -68,6 +74,7 @@ def test_long_chain_straight_line_code_is_byte_identical_across_runs(tmp_path):
     assert outs[0] == outs[1] and sorted(outs[0]) == ["ur5.cpp", "ur5.hpp"]
 
 
+@pytest.mark.slow
 def test_a_write_that_fails_midway_leaves_the_old_header_whole(tmp_path):
     """A file size limit of 3 kB (RLIMIT_FSIZE, as a full disk would): before, generate exited 2
     but left the first 3000 bytes of the header, which a build then read as the model."""

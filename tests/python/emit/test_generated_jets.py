@@ -16,33 +16,8 @@ from chaincomp import ExactModel, load_machine
 from chaincomp.symbolic.derive import EXPANDED_TERMS_LIMIT
 from chaincomp.emit.cpp import generate
 from chaincomp.symbolic.jets import JetModel
-
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
-VOID_P, DBL_P = ctypes.c_void_p, ctypes.POINTER(ctypes.c_double)
-
-
-class Entry(ctypes.Structure):
-    """runtime/include/chaincomp/model_info.hpp: ModelEntry."""
-    _fields_ = [("info", VOID_P), ("model_size", ctypes.c_size_t), ("model_align", ctypes.c_size_t),
-                ("prepare", ctypes.CFUNCTYPE(None, DBL_P, VOID_P)),
-                ("pose_exact", ctypes.CFUNCTYPE(None, VOID_P, DBL_P, DBL_P)),
-                ("pose_nominal", ctypes.CFUNCTYPE(None, VOID_P, DBL_P, DBL_P)),
-                ("pose_jacobian", ctypes.CFUNCTYPE(None, VOID_P, DBL_P, DBL_P, DBL_P)),
-                ("error", ctypes.CFUNCTYPE(ctypes.c_bool, VOID_P, DBL_P, ctypes.c_int, DBL_P)),
-                ("max_order", ctypes.c_int),
-                ("compensate", VOID_P), ("workspace_size", ctypes.c_size_t), ("workspace_align", ctypes.c_size_t),
-                ("init_workspace", VOID_P), ("num_errors", ctypes.c_int), ("attach_varying", VOID_P),
-                ("pose_jacobian_gain", ctypes.CFUNCTYPE(None, VOID_P, DBL_P, DBL_P, DBL_P, DBL_P))]
-
-
-class Library(ctypes.Structure):
-    _fields_ = [("abi", ctypes.c_int), ("layout", ctypes.c_uint32 * 6), ("name", ctypes.c_char_p),
-                ("source_hash", ctypes.c_uint64), ("source_text", VOID_P), ("source_size", ctypes.c_size_t),
-                ("toolchain", ctypes.c_char_p), ("entry", ctypes.POINTER(Entry))]
-
-
-def arr(values):
-    return (ctypes.c_double * len(values))(*values)
+from helpers import ROOT
+from model_library import Library, arr
 
 
 @pytest.fixture(scope="module")
@@ -62,6 +37,7 @@ def ur5c(tmp_path_factory):
     return m, entry, ctypes.c_void_p(addr), lib, model  # lib and model kept alive with it
 
 
+@pytest.mark.slow
 def test_the_chain_is_past_the_expansion_limit(ur5c):
     from chaincomp import derive
     m = ur5c[0]
@@ -69,6 +45,7 @@ def test_the_chain_is_past_the_expansion_limit(ur5c):
     assert derive(m, 1, max_terms=10**6) is not None
 
 
+@pytest.mark.slow
 def test_generated_jets_against_python(ur5c):
     m, entry, model, *_ = ur5c
     rng = np.random.default_rng(9)
@@ -138,6 +115,7 @@ def test_generated_source_size_and_operations(ur5c):
     assert "new " not in text.split("namespace {")[0] and "noexcept" in text
 
 
+@pytest.mark.slow
 def test_straight_line_code_compiles_without_warnings(tmp_path):
     """The bundled UR5's numbers fold whole functions into constants (pose_nominal reads no
     parameter): the model flags' -Wall -Wextra stay quiet all the same."""

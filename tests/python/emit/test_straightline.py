@@ -16,8 +16,8 @@ from chaincomp import ExactModel, load_machine
 from chaincomp.emit import straightline as SL
 from chaincomp.emit.cpp import _Hoister
 from chaincomp.symbolic.jets import JetModel
+from helpers import ROOT
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 MACHINES = sorted(glob.glob(os.path.join(ROOT, "configs", "machines", "*.yaml"))
                   + glob.glob(os.path.join(ROOT, "tools", "bench_machines", "*.yaml")))
 
@@ -59,6 +59,7 @@ def machine(request):
     return m, Straight(m, 2), JetModel(m, 2), ExactModel(m)
 
 
+@pytest.mark.slow
 def test_pose_and_truncated_errors(machine):
     m, f, jets, exact = machine
     rng = np.random.default_rng(3)

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from test_tool_frame import head_file, run
+import pytest
+
+from helpers import head_file, run_verb
 
 L = 100.0
 
@@ -26,9 +28,10 @@ def head(A, B, e1, e2, e3, d1):
     return np.concatenate([r @ [d1, 0, L + 10], r @ [0, 0, 1], r @ [0, 1, 0]])
 
 
+@pytest.mark.slow
 def test_testvectors_of_a_frame_are_point_direction_and_x_axis(tmp_path):
     out = tmp_path / "head.vectors"
-    code, _, err = run("testvectors", head_file(tmp_path), "--count", 5, "--seed", 3, "-o", out)
+    code, _, err = run_verb("testvectors", head_file(tmp_path), "--count", 5, "--seed", 3, "-o", out)
     assert code == 0, err
     lines = [ln for ln in out.read_text().splitlines() if not ln.startswith("#")]
     count, n_axes, n_params, pose_size = map(int, lines[0].split())

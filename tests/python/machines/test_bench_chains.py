@@ -14,8 +14,8 @@ from chaincomp import ExactModel, load_machine
 from chaincomp.analysis.lint import lint
 
 from arm_models import panda, rx, rz, tr, ur5
+from helpers import ROOT
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 MACHINES = os.path.join(ROOT, "tools", "bench_machines")
 RNG = np.random.default_rng(16)
 

@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 import yaml
 
-from arm_models import UR5_A, UR5_ALPHA, UR5_D, rot, trans, ur5  # noqa: F401 (test_tool_frame imports these from here)
-from conftest import ROOT
+from arm_models import ur5
+from helpers import ROOT
 
 DEMO = os.path.join(ROOT, "tools", "demo-arm")
 PARAMS = os.path.join(ROOT, "configs", "params", "ur5-demo.yaml")
@@ -65,6 +65,7 @@ def demo(tmp_path_factory):
     return work, done.stdout + done.stderr
 
 
+@pytest.mark.slow
 def test_the_numpy_model_is_the_bundled_ur5(demo):
     """The simulated tracker readings are the true tool points plus 20 um of noise: the
     model here agrees with chaincomp's to 1e-9 mm at the held-out poses (no noise), and
@@ -79,9 +80,10 @@ def test_the_numpy_model_is_the_bundled_ur5(demo):
     assert len(tracker) == 50 and 0.8 * NOISE < noise.std() < 1.2 * NOISE
 
 
+@pytest.mark.slow
 def test_the_urdf_import_step(demo):
     """The demo's import of UR's URDF is the DH model turned by 180 deg about z (UR's
-    base_link; tests/python/test_arms.py), ee_link's origin on flange frame 6's, and each
+    base_link; tests/python/model/test_arms.py), ee_link's origin on flange frame 6's, and each
     joint's zero offset adds to its angle. The URDF writes pi/2 as 1.57079632679: 2e-8 mm."""
     from chaincomp import load_machine
     from chaincomp.symbolic.numeric import ExactModel
@@ -135,6 +137,7 @@ def test_calibration_makes_the_held_out_error_20_times_smaller(demo):
                        [before.max(), rms(before), after.max(), rms(after)], rtol=1e-6, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_compensation_with_the_identified_values(demo):
     """Through replay (the daemon's compensator), against the true errors. With the default
     config, every command replay reports corrected puts the identified model's tool point on

@@ -28,15 +28,13 @@ from chaincomp.symbolic.numeric import ExactModel
 from chaincomp.measure.pose_design import is_arm
 from chaincomp.model.units import unit
 
-from conftest import MACHINES, PARAMS, ROOT, machine_path, needs_netns
+from helpers import MACHINES, NETNS, PARAMS, PY, ROOT, machine_path, needs_netns
 
 NAMES = sorted(os.path.splitext(os.path.basename(p))[0] for p in glob.glob(os.path.join(MACHINES, "*.yaml")))
 TOLERANCES = os.path.join(ROOT, "configs", "tolerances")
 CHECKS = os.path.join(ROOT, "configs", "checks")
 BUILD = os.path.join(ROOT, "build")
-NETNS = os.path.join(ROOT, "tests", "e2e", "netns.sh")
 E2E_CONFIG = os.path.join(ROOT, "tests", "e2e", "config_test.yaml")
-PY = os.path.join(ROOT, ".venv", "bin", "python")
 
 
 class Run:
@@ -131,6 +129,7 @@ machine = pytest.mark.parametrize("name", NAMES)
 
 # ---------------------------------------------------------------- derive, eval, generate
 
+@pytest.mark.slow
 @machine
 def test_derive(name):
     out = json.loads(run_cli("derive", machine_path(name), "--format", "json").stdout)
@@ -173,6 +172,7 @@ def _newest_source(name):
     return max(os.path.getmtime(p) for p in paths + [machine_path(name)])
 
 
+@pytest.mark.slow
 @machine
 def test_generate_is_the_compiled_model(name, tmp_path):
     """generate writes the machine's C++ in its own namespace, under a banner naming the
@@ -227,6 +227,7 @@ def test_check(name, path):
         assert proc.returncode == 0, proc.stdout
 
 
+@pytest.mark.slow
 @machine
 def test_protocol(name):
     """An arm gets a pose design, a machine without rotary axes a plan of laser runs,
@@ -286,6 +287,7 @@ def test_simulate_measurements_identify_round_trip(name, tmp_path):
 
 # ---------------------------------------------------------------- budget
 
+@pytest.mark.slow
 @machine
 def test_budget(name):
     """At each position component's worst point, the worst case is the sum over errors of

@@ -10,7 +10,7 @@ from chaincomp import load_machine
 from chaincomp.symbolic.derive import derive
 from chaincomp.symbolic.numeric import TruncatedModel
 
-from conftest import machine_path
+from helpers import machine_path
 
 
 def first_order_part(f, errors: dict) -> np.ndarray:

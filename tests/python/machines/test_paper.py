@@ -12,7 +12,7 @@ import sympy as sp
 from chaincomp import load_machine
 from chaincomp.symbolic.derive import derive
 
-from conftest import eval_json, machine_path
+from helpers import eval_json, machine_path
 
 # Table 3: A (deg), C (deg), computer X, Y, Z (mm), with G = 20 mm, e = 10 mm, Yp = 50°.
 TABLE3 = [

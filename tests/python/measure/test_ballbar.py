@@ -14,7 +14,7 @@ from chaincomp.measure import ballbar as bb
 from chaincomp.cli.main import main
 from chaincomp.model.machine import load_machine
 from chaincomp.symbolic.numeric import ExactModel
-from conftest import PARAMS, machine_path, run_cli
+from helpers import PARAMS, machine_path, run_cli
 
 ARCSEC = math.pi / 648000
 
@@ -89,6 +89,7 @@ def geometric_circle(x, y):
 
 # ----------------------------------------------------------------------------- the trace
 
+@pytest.mark.slow
 def test_trace_is_the_actual_tool_point_along_the_nominal_circle(machine_file, tmp_path):
     p = params_file(tmp_path, {"SV": "12 ppm", "SU": "-7 ppm", "SQ": "9 arcsec", "OX": "3 um"})
     out = json.loads(run_cli("ballbar", machine_file, "--params", p, "--plane", "XY", "--radius", "120",
@@ -109,6 +110,7 @@ def test_trace_is_the_actual_tool_point_along_the_nominal_circle(machine_file, t
 @pytest.mark.parametrize("plane,axes,held", [("XY", ("X", "Y"), {"Z": -150.0}),
                                              ("YZ", ("Y", "Z"), {"X": 120.0, "Z": -200.0}),
                                              ("ZX", ("Z", "X"), {"Y": -80.0, "Z": -200.0})])
+@pytest.mark.slow
 def test_trace_on_vmc_xyz_against_the_exact_model(plane, axes, held):
     machine = load_machine(machine_path("vmc_xyz"))
     model = ExactModel(machine)
@@ -142,6 +144,7 @@ def test_trace_on_vmc_xyz_against_the_exact_model(plane, axes, held):
         assert np.abs(got - in_plane - normal ** 2 / (2 * (60 + in_plane))).max() < 1e-12
 
 
+@pytest.mark.slow
 def test_g_and_f_against_a_kasa_circle(machine_file, tmp_path):
     rng = np.random.default_rng(3)
     n = 500
@@ -177,6 +180,7 @@ def test_g_and_f_against_a_kasa_circle(machine_file, tmp_path):
 
 # ----------------------------------------------------------------------------- the fit
 
+@pytest.mark.slow
 def test_fit_recovers_squareness_and_scale_mismatch(machine_file, tmp_path):
     truth = {"SV": 15e-6, "SU": -8e-6, "SQ": 12 * ARCSEC}
     rng = np.random.default_rng(7)
@@ -216,6 +220,7 @@ def test_fit_recovers_squareness_and_scale_mismatch(machine_file, tmp_path):
     assert got["SQ"] == pytest.approx(terms["SQ"]["value"] * ARCSEC, rel=1e-8)
 
 
+@pytest.mark.slow
 def test_fit_on_vmc_xyz_recovers_squareness_and_scale_as_polynomials(tmp_path):
     """EC0Y and the slopes of EXX along X and EYY along Y (scale errors) injected in the exact model."""
     machine = load_machine(machine_path("vmc_xyz"))
@@ -300,6 +305,7 @@ def test_refused_options(capsys, machine_file, options, match):
     _refused(capsys, "ballbar", machine_file, *options, match=match)
 
 
+@pytest.mark.slow
 def test_plane_without_axes_refused(capsys):
     _refused(capsys, "ballbar", machine_path("me220_xz"), "--plane", "XY", "--radius", "50",
              match="no linear axis of me220_xz moves the tool along y")
@@ -351,6 +357,7 @@ def test_fit_refuses_setup_options(capsys, machine_file, tmp_path):
     _refused(capsys, "ballbar", machine_file, "--fit", str(path), "-o", str(path), match="is also an input")
 
 
+@pytest.mark.slow
 def test_trace_round_trip(machine_file, tmp_path):
     """-o writes what --fit reads: the set-up and every point (to the written 1e-6 µm)."""
     p = params_file(tmp_path, {"SV": "5 ppm", "SQ": "-4 arcsec"})
@@ -366,6 +373,7 @@ def test_trace_round_trip(machine_file, tmp_path):
     assert len(t.angle) == 180
 
 
+@pytest.mark.slow
 def test_a_params_file_name_cannot_write_the_set_up(machine_file, tmp_path):
     """The trace's comment names the params file: its line breaks are escaped, so that a name
     cannot add a '# plane: ...' line."""
@@ -386,6 +394,7 @@ def test_a_half_circle_is_fitted_with_a_warning(capsys, machine_file, tmp_path):
     assert (tmp_path / "half.png").stat().st_size > 1000      # a scale of a few divisions, whatever the values
 
 
+@pytest.mark.slow
 def test_an_axis_that_moves_the_tool_backwards(tmp_path):
     """A table axis moving the tool along -x (the machine file writes -V): the commands are the
     circle's coordinates negated, and the trace is still the actual tool point's distance."""

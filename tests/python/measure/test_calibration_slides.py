@@ -10,7 +10,7 @@ from chaincomp import ExactModel, load_machine, load_params
 from chaincomp.measure.calibration import find_slides
 from chaincomp.cli.main import main
 
-from conftest import machine_path
+from helpers import machine_path
 
 KIND = {("X", "X"): "positioning", ("Y", "Y"): "positioning", ("Z", "Z"): "positioning",
         ("A", "X"): "roll", ("B", "Y"): "roll", ("C", "Z"): "roll"}

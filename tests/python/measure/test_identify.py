@@ -17,7 +17,7 @@ from chaincomp import load_machine, load_params
 from chaincomp.measure.identify import Table, identify, simulate
 from chaincomp.symbolic.numeric import ExactModel
 
-from conftest import machine_path, run_cli
+from helpers import machine_path, run_cli
 from test_protocol import extended_head
 
 HEAD = machine_path("angle_head")
@@ -41,6 +41,7 @@ def grid_axes(m, angles=(0.0, 90.0, 180.0, 270.0)):
     return {"Ap": a.ravel(), "Cp": c.ravel()}
 
 
+@pytest.mark.slow
 def test_noise_free_recovery_through_the_cli(tmp_path):
     m = load_machine(HEAD)
     truth = injected(m, np.random.default_rng(1))
@@ -66,6 +67,7 @@ def test_noise_free_recovery_through_the_cli(tmp_path):
     assert "machine: angle_head" in out.read_text()
 
 
+@pytest.mark.slow
 def test_noisy_estimates_within_three_standard_uncertainties():
     m = load_machine(HEAD)
     rng = np.random.default_rng(12345)
@@ -96,6 +98,7 @@ def test_known_sigma_is_used():
         assert b.uncertainties[name] == pytest.approx(2 * a.uncertainties[name], rel=1e-9)
 
 
+@pytest.mark.slow
 def test_unidentifiable_errors_get_no_value(tmp_path):
     """Ocz shifts the tool only along the C axis (z) at every set-up and is not seen without z;
     Rs turns the spindle about its own axis and never moves the tool tip; ThetaAs/ThetaAv
@@ -127,6 +130,7 @@ def test_unidentifiable_errors_get_no_value(tmp_path):
     assert "Rs: does not move" in text
 
 
+@pytest.mark.slow
 def test_simulate_random_setups_and_a_setups_file(tmp_path):
     run_cli("simulate-measurements", HEAD, "--setups", "random:7", "--seed", "4", "-o", str(tmp_path / "r.csv"))
     rows = [r for r in open(tmp_path / "r.csv").read().splitlines() if r and not r.startswith("#")]
@@ -153,6 +157,7 @@ def bad(tmp_path, csv_text, *args):
 GOOD = "# measured\nAp,Cp,x,y,z\n0,0,0,-10,-28\n90,0,15,-5,-22\n"
 
 
+@pytest.mark.slow
 def test_malformed_row_names_its_line(tmp_path):
     err = bad(tmp_path, GOOD + "180,0,1,2\n")
     assert err.endswith("m.csv:5: expected 5 values (Ap, Cp, x, y, z), got 4")
@@ -160,6 +165,7 @@ def test_malformed_row_names_its_line(tmp_path):
     assert err.endswith("m.csv:5: Cp: expected a number, got 'zero'")
 
 
+@pytest.mark.slow
 def test_unknown_axis_column(tmp_path):
     err = bad(tmp_path, "Ap,Bp,x\n0,0,1\n")
     assert err.endswith("m.csv:1: header: unknown column 'Bp' (expected the axes Ap, Cp and measured "
@@ -168,11 +174,13 @@ def test_unknown_axis_column(tmp_path):
     assert "m.csv:1: header: missing column for axis Cp" in err
 
 
+@pytest.mark.slow
 def test_unknown_error_in_assume_zero(tmp_path):
     err = bad(tmp_path, GOOD, "--assume-zero", "DY,Ocz")
     assert err == ("chaincomp identify: error: --assume-zero: unknown error 'Ocz' for machine 'angle_head' "
                    "(errors: ThetaAs, Oas, ThetaAv, DY, Ocx, Ocy, ThetaCh, ThetaCv)")
 
 
+@pytest.mark.slow
 def test_no_data_rows(tmp_path):
     assert "no measurements" in bad(tmp_path, "# nothing\nAp,Cp,x\n")

@@ -21,7 +21,7 @@ from chaincomp import load_machine, load_params
 from chaincomp.cli.main import main
 
 from arm_models import block, rx, ry, rz, tr
-from conftest import machine_path
+from helpers import machine_path
 
 FIVE = machine_path("five_axis_ac")
 UM, ARCSEC, DEG = 1e-3, math.pi / 180 / 3600, math.pi / 180      # to mm, rad

@@ -18,7 +18,7 @@ from chaincomp import load_machine, load_params
 from chaincomp.cli.main import main
 
 from arm_models import block, ur5
-from conftest import ROOT
+from helpers import ROOT
 
 UR5 = f"{ROOT}/tools/bench_machines/ur5_blocks.yaml"
 UM, ARCSEC, DEG = 1e-3, math.pi / 648000, math.pi / 180

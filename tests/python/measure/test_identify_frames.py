@@ -20,7 +20,7 @@ from chaincomp import load_machine, load_params
 from chaincomp.cli.main import main
 from chaincomp.measure.identify import read_table, residuals
 
-from conftest import ROOT
+from helpers import ROOT
 
 ARCSEC, DEG = math.pi / 648000, math.pi / 180
 SIG_P, SIG_W = 0.02, 10 * ARCSEC         # mm per coordinate, rad per rotation-vector component
@@ -297,6 +297,7 @@ def test_bad_quaternions_are_refused_with_line_and_column(framed, tmp_path, caps
     assert len(err.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_orientation_columns_refused_where_they_cannot_mean_anything(framed, tmp_path, capsys):
     q_deg = poses(np.random.default_rng(2), 12)
     body = "\n".join(",".join([repr(float(v)) for v in q_deg[:, r]] + [GOOD]) for r in range(12)) + "\n"

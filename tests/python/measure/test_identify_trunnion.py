@@ -7,9 +7,9 @@ import numpy as np
 
 from chaincomp import load_machine
 
-from conftest import machine_path
+from helpers import machine_path
 from test_identify_any_machine import declared_value, fit_json, injected, in_internal, own_analysis, random_setups, write_csv
-from test_new_machines import trunnion_pose
+from machine_models import trunnion_pose
 
 TRUNNION = machine_path("trunnion_ac")
 

@@ -86,6 +86,7 @@ def table_trial(m, model, rng, smooth=0.0, knots=KNOTS, shape=None):
     return fit, truth
 
 
+@pytest.mark.slow
 def test_tables_recovered_within_their_uncertainty(machine):
     """200 seeded trials, three tables of 4 knots each: the injected knot values lie within 3
     reported standard uncertainties in at least 99 % of the cases."""
@@ -101,6 +102,7 @@ def test_tables_recovered_within_their_uncertainty(machine):
     assert total == 200 * 12 and inside / total >= 0.99, (inside, total)
 
 
+@pytest.mark.slow
 def test_polynomials_recovered_within_their_uncertainty(machine):
     _, m, model = machine
     rng = np.random.default_rng(21)
@@ -122,6 +124,7 @@ def test_polynomials_recovered_within_their_uncertainty(machine):
     assert total == 200 * 7 and inside / total >= 0.99, (inside, total)
 
 
+@pytest.mark.slow
 def test_smoothing_reduces_the_variance(machine):
     """Seven knots, a straight positioning error (no second difference: smoothing adds no bias):
     with --smooth the knot values scatter less over 60 trials, and the reported uncertainties

@@ -4,13 +4,13 @@ known systematic deviation, reversal and noise."""
 
 import json
 import math
-import os
 import random
 import statistics
 
 import pytest
 
 from chaincomp.cli.main import main
+from helpers import RUNS
 
 
 def systematic(p):          # µm: a scale error of 12 µm/m and a wave, as a ball screw gives
@@ -263,8 +263,7 @@ def test_bad_columns_option(tmp_path, capsys, value, message):
 
 
 def test_bundled_example_is_synthetic_and_evaluates(capsys):
-    path = os.path.join(os.path.dirname(__file__), "..", "..", "configs", "measurements",
-                        "five_axis_ac-X-positioning.csv")
+    path = RUNS
     with open(path) as f:
         assert "SYNTHETIC" in f.readline()
     doc = evaluate(capsys, path)

@@ -16,12 +16,11 @@ from chaincomp.model.machine import load_machine
 from chaincomp.symbolic.numeric import ExactModel
 from chaincomp.model.params import load_params
 from chaincomp.model.varying import Table
-from conftest import PARAMS, ROOT, machine_path
+from helpers import DAEMON, PARAMS, machine_path
 
 MACHINE = machine_path("five_axis_ac")
 LASER = os.path.join(PARAMS, "five_axis_ac-laser.yaml")
 DEMO = os.path.join(PARAMS, "five_axis_ac-demo.yaml")
-DAEMON = os.path.join(ROOT, "build", "bin", "chaincompd")
 UNIT = {"length": ("um", 1e-3), "angle": ("arcsec", math.pi / 648000)}
 N, SIGMA, BACKLASH = 5, 0.1, 0.8   # runs, noise (µm or arcsec), reversal
 
@@ -120,6 +119,7 @@ def _entry_range(lines, name, following):
     return start, end
 
 
+@pytest.mark.slow
 def test_merge_replaces_one_table_and_keeps_every_other_line(tmp_path, capsys, machine, truth):
     targets = np.linspace(-400, 400, 41)
     csv = simulate(tmp_path / "runs.csv", machine, truth, "EXX", targets)
@@ -242,6 +242,7 @@ def test_a_broken_merge_file_is_reported_as_itself(tmp_path, capsys, machine, tr
     assert f"{p0}:2: values: --merge: 'values' must be a block mapping" in line
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not os.path.exists(DAEMON), reason="chaincompd is not built")
 def test_daemon_loads_the_merged_file(tmp_path, capsys, machine, truth):
     """chaincompd reads the machine, then the params, then opens LCM: with an LCM URL nobody can

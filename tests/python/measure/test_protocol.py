@@ -16,7 +16,7 @@ import sympy as sp
 from chaincomp import load_machine
 from chaincomp.symbolic.numeric import ExactModel
 
-from conftest import cli, machine_path, run_cli
+from helpers import cli, machine_path, run_cli
 
 AXES = ("Ap", "Cp")
 COORD = {"x": 0, "y": 1, "z": 2}
@@ -62,6 +62,7 @@ def every_equation(doc):
             yield t, eq
 
 
+@pytest.mark.slow
 def test_every_equation_holds_to_first_order(angle_head):
     m, model, doc = angle_head
     rng = np.random.default_rng(20030901)
@@ -78,6 +79,7 @@ def test_every_equation_holds_to_first_order(angle_head):
         assert np.all(r2 <= r1 / 50 + 1e-12), (r1, r2)
 
 
+@pytest.mark.slow
 def test_finds_a_test_for_each_error_and_the_theta_pair(angle_head):
     m, model, doc = angle_head
     assert doc["assumed_zero"] == ["DY"]
@@ -127,6 +129,7 @@ def test_theta_pair_is_truly_inseparable(angle_head):
     assert np.abs(np.array(model.pose(values)[0]) - p0).max() > 20 * a * 0.5   # ThetaAs alone is seen
 
 
+@pytest.mark.slow
 def test_without_dy_oas_pairs_with_dy():
     doc = protocol_json(machine_path("angle_head"))
     assert set(doc["unidentifiable"]) == {"ThetaAs", "ThetaAv", "Oas", "DY"}
@@ -134,6 +137,7 @@ def test_without_dy_oas_pairs_with_dy():
     assert kinds[("DY", "Oas")] == "combination"
 
 
+@pytest.mark.slow
 def test_text_report(angle_head):
     out = run_cli("protocol", machine_path("angle_head"), "--assume-zero", "DY").stdout
     assert "Parameters assumed zero: DY" in out
@@ -141,6 +145,7 @@ def test_text_report(angle_head):
     assert "Not identifiable:" in out and "ThetaAs: cannot be told apart from ThetaAv" in out
 
 
+@pytest.mark.slow
 def test_prefer_steers_the_order():
     doc = protocol_json(machine_path("angle_head"), "--assume-zero", "DY", "--prefer", "Oas,Ocy")
     assert [t["errors"] for t in doc["tests"][:2]] == [["Oas"], ["Ocy"]]
@@ -162,6 +167,7 @@ def extended_head(tmp_path):
     return str(path)
 
 
+@pytest.mark.slow
 def test_unidentifiable_errors_with_reasons(tmp_path):
     path = extended_head(tmp_path)
     doc = protocol_json(path, "--assume-zero", "DY", "--measure", "x,y")

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from arm_models import UR5_A, UR5_ALPHA, UR5_D, dh_chain
-from conftest import ROOT, cli, run_cli
+from helpers import ROOT, cli, run_cli
 
 UR5_FILE = f"{ROOT}/tools/bench_machines/ur5.yaml"
 UR5 = {"d": UR5_D, "a": UR5_A, "alpha": UR5_ALPHA, "tool": [30.0, 0.0, 120.0], "limits": [(-360.0, 360.0)] * 6}
@@ -111,6 +111,7 @@ def beats_random(index, poses, which, rng, trials=20):
     return mine, float(np.median(others))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_ur5_poses_beat_random_sets(seed, tmp_path, indices):
     index = indices["ur5"]
@@ -124,6 +125,7 @@ def test_ur5_poses_beat_random_sets(seed, tmp_path, indices):
     assert doc["ratio"] > 1.05 and doc["value"] == pytest.approx(mine, rel=0.15)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("which", ["min-sv", "o1"])
 def test_three_joint_arm_is_an_arm_and_its_poses_beat_random_sets(which, arm3, tmp_path, indices):
     index = indices["arm3"]
@@ -138,6 +140,7 @@ def test_three_joint_arm_is_an_arm_and_its_poses_beat_random_sets(which, arm3, t
         assert mine > median * (1.05 if which == "min-sv" else 1.01), (seed, mine, median)
 
 
+@pytest.mark.slow
 def test_same_seed_same_file_and_the_file_feeds_identify(arm3, tmp_path):
     doc, _, _, a = design(arm3, tmp_path, "--poses", "12", "--seed", "7")
     b = design(arm3, tmp_path, "--poses", "12", "--seed", "7")[3]
@@ -175,11 +178,13 @@ def test_bad_options_exit_2(args, word):
     assert word in proc.stderr and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
 
 
+@pytest.mark.slow
 def test_a_bad_option_exits_2_from_a_process():
     proc = run_cli("protocol", UR5_FILE, "--poses", "2", check=False)   # the others run in this process
     assert proc.returncode == 2 and proc.stdout == "" and "21 combinations" in proc.stderr, proc.stderr
 
 
+@pytest.mark.slow
 def test_text_report_and_held_joint(tmp_path):
     out = tmp_path / "p.csv"
     text = run_cli("protocol", UR5_FILE, "--poses", "25", "--set", "q6=0", "-o", str(out)).stdout

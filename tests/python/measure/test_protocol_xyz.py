@@ -20,7 +20,7 @@ import sympy as sp
 from chaincomp import load_machine
 from chaincomp.model.machine import ROT_PLANE, Rotation
 
-from conftest import cli, machine_path, run_cli
+from helpers import cli, machine_path, run_cli
 
 GANTRY = """\
 name: gantry_xyz
@@ -196,11 +196,13 @@ def check_against_own_analysis(path):
     return m, doc
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["vmc_xyz", "me220_xz"])
 def test_ranks_match_an_own_analysis_bundled(name):
     check_against_own_analysis(machine_path(name))
 
 
+@pytest.mark.slow
 def test_vmc_xyz_what_each_measurement_identifies():
     m, doc = check_against_own_analysis(machine_path("vmc_xyz"))
     runs = {r["name"]: r for r in doc["laser_runs"]}
@@ -219,6 +221,7 @@ def test_vmc_xyz_what_each_measurement_identifies():
     assert doc["stages"][1]["name"] == "diagonals" and doc["stages"][1]["identified"] == ["EC0Y", "EB0Z", "EA0Z"]
 
 
+@pytest.mark.slow
 def test_gantry_written_here(gantry):
     m, doc = check_against_own_analysis(gantry)
     found = {p["label"]: p["identified_by"] for p in doc["parameters"]}
@@ -230,6 +233,7 @@ def test_gantry_written_here(gantry):
     assert "+ diagonals" in text and "EC0Y" in text
 
 
+@pytest.mark.slow
 def test_measured_coordinates_and_assumed_zero(gantry):
     doc = protocol_json(gantry, "--measure", "x,y", "--assume-zero", "EC0Y")
     assert doc["tracker"]["measured"] == ["x", "y"] and doc["assumed_zero"] == ["EC0Y"]
@@ -261,6 +265,7 @@ def setups_of(path):
     return rows[0].split(","), [tuple(float(c) for c in r.split(",")) for r in rows[1:]]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, counts", [("vmc_xyz", (3, 3, 3)), ("me220_xz", (3, 3))])
 def test_auto_setups_span_the_travel(name, counts, tmp_path):
     """Never one silent set-up at the origin: every axis at both limits and mid-range."""
@@ -276,6 +281,7 @@ def test_auto_setups_span_the_travel(name, counts, tmp_path):
     assert f"{n} set-ups" in proc.stderr
 
 
+@pytest.mark.slow
 def test_setups_that_cannot_move_are_refused(tmp_path):
     out = tmp_path / "one.csv"
     for spec in ("auto", "random:5"):

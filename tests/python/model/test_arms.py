@@ -29,7 +29,8 @@ from chaincomp import load_machine, load_params
 from chaincomp.symbolic.numeric import ExactModel
 
 from arm_models import UR5_A, UR5_D
-from conftest import PARAMS, ROOT, machine_path
+from helpers import PARAMS, ROOT, machine_path
+from helpers import FRAME_ARMS, no_frame_file
 from test_import_urdf import ARMS, random_configurations, run
 
 BUILD = os.path.join(ROOT, "build")
@@ -106,6 +107,7 @@ def test_panda_equals_frankas_urdf_frame_for_frame(tmp_path):
 
 # ---------------------------------------------------------------- compensation today
 
+@pytest.mark.slow
 @pytest.mark.parametrize("arm", ["panda", "ur5"])
 def test_compensation_of_an_arm_holds_point_and_direction_or_reports_the_residual(arm, tmp_path):
     """What chaincompd / replay do on an arm without a tool frame (with one, the next test):
@@ -118,7 +120,6 @@ def test_compensation_of_an_arm_holds_point_and_direction_or_reports_the_residua
     exact chain leaves. Never another status, never a correction beyond 1 degree."""
     if not os.path.isfile(os.path.join(BUILD, "bin", "chaincomp_replay")):
         pytest.skip("no C++ build (tools/setup)")
-    from test_tool_frame import no_frame_file
     path = str(no_frame_file(tmp_path, arm))     # the bundled arm without its tool frame
     m = load_machine(path)
     params = os.path.join(PARAMS, f"{arm}-demo.yaml")
@@ -148,6 +149,7 @@ def test_compensation_of_an_arm_holds_point_and_direction_or_reports_the_residua
     assert np.allclose(miss[~ok], reported[~ok], rtol=1e-6, atol=1e-10)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("arm", ["panda", "ur5"])
 def test_replay_of_an_arm_with_a_tool_frame_corrects_point_and_orientation(arm, tmp_path):
     """The same through replay with the arm's tool given a frame (tests/python/
@@ -159,7 +161,6 @@ def test_replay_of_an_arm_with_a_tool_frame_corrects_point_and_orientation(arm, 
     if not os.path.isfile(os.path.join(BUILD, "bin", "chaincomp_replay")):
         pytest.skip("no C++ build (tools/setup)")
     from scipy.spatial.transform import Rotation
-    from test_arm_compensation import ARMS as FRAME_ARMS
     write, numpy_arm = FRAME_ARMS[arm]
     path = write(tmp_path)
     m = load_machine(str(path))

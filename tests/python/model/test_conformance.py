@@ -24,8 +24,8 @@ from chaincomp.model.machine import load_machine
 from chaincomp.model.params import load_params
 from chaincomp.analysis.tolerances import load_tolerances
 from chaincomp.model.varying import Varying
+from helpers import ROOT
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 CORPUS = os.path.join(ROOT, "tests", "conformance")
 DUMP = os.path.join(ROOT, "build", "bin", "chaincomp_params_dump")
 MACHINE = "five_axis_ac"

@@ -4,7 +4,6 @@ Rz(theta) Tz(d); Hayati's beta: Ry(beta)), on Universal Robots' published UR5 ta
 Franka's published Panda table; auto-named errors; the parallel-axes lint; bad elements."""
 
 import math
-import os
 import subprocess
 import sys
 
@@ -16,8 +15,8 @@ from chaincomp.symbolic.jets import JetModel
 from chaincomp.analysis.lint import lint
 
 from arm_models import PANDA_A, PANDA_ALPHA, PANDA_D, PANDA_FLANGE, UR5_A, UR5_ALPHA, UR5_D, panda, ur5
+from helpers import ROOT
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 UR5 = {"d": UR5_D, "a": UR5_A, "alpha": UR5_ALPHA}
 PANDA = {"a": PANDA_A, "d": PANDA_D, "alpha": PANDA_ALPHA}
 FLANGE = PANDA_FLANGE
@@ -125,6 +124,7 @@ def test_named_errors_and_truncation(tmp_path):
     ("errors: auto}\n", "errors: {theta: 'a b'}}\n", "chain[0].errors.theta", "an error name or 'auto'"),
     ("alpha: 1.5707963267948966}", "alpha: Q}", "chain[0].dh.alpha", "unknown symbol 'Q'"),
 ])
+@pytest.mark.slow
 def test_bad_joint_elements(tmp_path, old, new, field, word):
     text = ur5_text()
     assert old in text

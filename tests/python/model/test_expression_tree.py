@@ -24,8 +24,8 @@ from chaincomp.model.expressions import ExpressionError, check_sympy, parse_tree
 from chaincomp.symbolic.jets import JetModel
 from chaincomp.model.machine import ROT_PLANE, Rotation, _check_at_nominal, load_machine
 from chaincomp.symbolic.numeric import ExactModel
+from helpers import ROOT
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 MACHINES = sorted(glob.glob(os.path.join(ROOT, "configs", "machines", "*.yaml")))
 LARGE, SMALL = ("x", "y"), ("e", "f")
 SYMS = {n: sp.Symbol(n, real=True) for n in LARGE + SMALL}
@@ -138,6 +138,7 @@ def _close(a, b, rel=1e-12):
 AT = st.fixed_dictionaries({"x": st.floats(0.3, 1.4), "y": st.floats(-1.4, -0.3)})
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(texts(), AT, st.floats(-0.2, 0.2), st.floats(-0.2, 0.2))
 def test_the_tree_builds_the_sympy_expression_and_its_values(text, at, e, f):
@@ -185,6 +186,7 @@ def _check_jets(text, at):
     return True
 
 
+@pytest.mark.slow
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(texts(), AT)
 def test_the_tree_jets_are_sympys_taylor_coefficients(text, at):
@@ -289,6 +291,7 @@ def _sympy_chain(machine, values):
     return p, d, x
 
 
+@pytest.mark.slow
 def test_exact_model_is_the_sympy_chain_on_every_machine(tmp_path):
     rng = np.random.default_rng(7)
     for path in _machines(tmp_path):
@@ -325,6 +328,7 @@ def test_every_element_jet_is_sympys_taylor_series_on_every_machine(tmp_path):
                 assert abs(g - w) <= 1e-12 * max(1.0, abs(w)), (path, tree, mono, g, w)
 
 
+@pytest.mark.slow
 def test_jet_model_is_the_truncated_model_of_the_derivation(tmp_path):
     """Small machines: the jets through the chain against derive's formulas, lambdified."""
     from chaincomp.symbolic.derive import derive

@@ -30,7 +30,7 @@ from chaincomp.cli.main import main as chaincomp_main
 from chaincomp.symbolic.jets import JetModel
 from chaincomp.symbolic.numeric import ExactModel
 
-from conftest import ROOT
+from helpers import ROOT, line_of
 
 ROBOTS = os.path.join(ROOT, ".venv", "lib", "python3.11", "site-packages", "cmeel.prefix", "share",
                       "example-robot-data", "robots")
@@ -189,6 +189,7 @@ def numpy_pose(chain, q, errors, mode, tool):
     return (t @ [*tool, 1.0])[:3], t[:3, 2]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["none", "joint-offsets", "origins", "all"])
 @pytest.mark.parametrize("arm", sorted(ARMS))
 def test_error_gains_equal_finite_differences_of_a_numpy_chain(arm, mode, tmp_path):
@@ -247,10 +248,6 @@ def robot(tmp_path, jtype="revolute", xyz="0 0.2 0", lower="-1", mimic="", extra
     path = tmp_path / name
     path.write_text(text)
     return path, text
-
-
-def line_of(text, needle):
-    return text[:text.index(needle)].count("\n") + 1
 
 
 def named(text, name, tag=""):

@@ -6,15 +6,12 @@ what is wrong, without a traceback. The expected line is computed here from wher
 landed in the text, never copied from the program's output.
 """
 
-import os
 import subprocess
-import sys
 
 import pytest
 
-from conftest import cli
+from helpers import cli, line_of, run_cli
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 
 # A copy of configs/machines/me220_xz.yaml (kept here so edits and line numbers stay stable).
 MACHINE = """\
@@ -70,20 +67,9 @@ def edit(text: str, *edits: tuple[str, str]) -> str:
     return text
 
 
-def line_of(text: str, at: str) -> int:
-    """1-based line where the unique snippet ``at`` starts."""
-    assert text.count(at) == 1, f"line marker not unique: {at!r}"
-    return text[:text.index(at)].count("\n") + 1
-
-
 def run(*args: str) -> subprocess.CompletedProcess:
     """In this process (cli.main.main): the cases below as a process each cost ~1 s of start-up."""
     return cli(*args, check=False)
-
-
-def run_process(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "chaincomp.cli.main", *args], capture_output=True,
-                          text=True, cwd=ROOT, timeout=300)
 
 
 def check(proc: subprocess.CompletedProcess, where: str, field: str | None, word: str) -> None:
@@ -240,13 +226,14 @@ def test_bad_machine(tmp_path, edits, at, field, word, verb):
     check(proc, f"{path}:{line_of(text, at)}:", field, word)
 
 
+@pytest.mark.slow
 def test_a_bad_machine_exits_2_from_a_process(tmp_path):
     """The exit path of a real process, for one case (the others run in this process)."""
     edits, at, field, word, verb = MACHINE_CASES[0].values
     text = edit(MACHINE, *edits)
     path = tmp_path / "bad.yaml"
     path.write_text(text, encoding="utf-8")
-    check(run_process(verb, str(path), "--json"), f"{path}:{line_of(text, at)}:", field, word)
+    check(run_cli(verb, str(path), "--json", check=False), f"{path}:{line_of(text, at)}:", field, word)
 
 
 def test_duplicate_symbol_names_first_line(tmp_path):

@@ -5,7 +5,6 @@ The injection payloads try to make Python run `touch MARKER`; each test checks t
 marker file was never created, whatever the exit code.
 """
 
-import os
 import subprocess
 import sys
 import time
@@ -19,9 +18,9 @@ from chaincomp.errors import ChaincompError
 from chaincomp.model.expressions import MAX_DEPTH, MAX_LENGTH, ExpressionError, parse
 from chaincomp.model.machine import load_machine
 
-from test_bad_input import MACHINE, PARAMS, edit, line_of
+from test_machine_file_errors import MACHINE, PARAMS, edit
+from helpers import ROOT, line_of
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 
 
 def run(*args, cwd=ROOT, timeout=120):
@@ -35,12 +34,12 @@ def payloads(marker: str) -> list[str]:
         f"-Y1 + 0*(lambda: 0).__globals__['__builtins__']['__import__']('os').system('{cmd}')",
         f"__import__('os').system('{cmd}')",
         f"Y1 + eval(\"__import__('os').system('{cmd}')\")",
-        f"Y1.__class__.__mro__[1].__subclasses__()",
-        f"[x for x in ().__class__.__base__.__subclasses__()]",
+        "Y1.__class__.__mro__[1].__subclasses__()",
+        "[x for x in ().__class__.__base__.__subclasses__()]",
         f"Y1 if __import__('os').system('{cmd}') else Y1",
         f"exec('import os; os.system(\"{cmd}\")')",
-        f"Y1 + Function('system')(1)",
-        f"Y1 + Symbol('__import__')",
+        "Y1 + Function('system')(1)",
+        "Y1 + Symbol('__import__')",
         f"Integer(__import__('os').system('{cmd}'))",
     ]
 
@@ -65,6 +64,7 @@ MACHINE_FIELDS = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("field,old,new", MACHINE_FIELDS, ids=[f[0] for f in MACHINE_FIELDS])
 def test_payload_in_machine_fields_never_runs(tmp_path, field, old, new):
     marker = tmp_path / "MARKER"
@@ -79,6 +79,7 @@ def test_payload_in_machine_fields_never_runs(tmp_path, field, old, new):
     assert not marker.exists()
 
 
+@pytest.mark.slow
 def test_payload_in_params_set_check_and_tolerances_never_runs(tmp_path):
     marker = tmp_path / "MARKER"
     p = payloads(str(marker))[0].replace('"', "'")
@@ -170,6 +171,7 @@ _ALPHABET = st.sampled_from(list("XYZL1EXX()+-*/^., ") + ["**", "sin(", "sqrt(",
                                                           "__", "'", "[", "lambda", ":"])
 
 
+@pytest.mark.slow
 @settings(max_examples=400, deadline=2000, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(_ALPHABET, max_size=40).map("".join))
 def test_parser_property_random_tokens(text):
@@ -195,6 +197,7 @@ def test_parser_property_random_text(text):
                     lambda kids: st.lists(kids, max_size=4) | st.dictionaries(st.text(max_size=6), kids,
                                                                               max_size=4), max_leaves=20),
        st.sampled_from(["name", "symbols", "chain", "tool", "loop", "error_block_order"]))
+@pytest.mark.slow
 def test_machine_loader_property_random_yaml(tmp_path, value, key):
     """A random YAML value in place of a top-level field: ChaincompError or a machine."""
     import yaml
@@ -221,6 +224,7 @@ def _cli_refuses(tmp_path, text, word, line=None, field=None):
     assert word in proc.stderr, proc.stderr
 
 
+@pytest.mark.slow
 def test_yaml_alias_bomb_refused(tmp_path):
     bomb = "a: &a [x, x, x, x, x, x, x, x, x, x]\n"
     for i in range(1, 9):
@@ -232,6 +236,7 @@ def test_yaml_alias_bomb_refused(tmp_path):
     assert time.monotonic() - start < 30
 
 
+@pytest.mark.slow
 def test_yaml_depth_refused(tmp_path):
     deep = "[" * 5000 + "]" * 5000
     text = edit(MACHINE, ("description: ME220 notes' X/Z two-slide example with positioning, yaw and pitch errors",
@@ -248,6 +253,7 @@ def test_yaml_aliases_used_sensibly_still_load(tmp_path):
     assert load_machine(str(path)).symbol("Y2").unit.name == "mm"
 
 
+@pytest.mark.slow
 def test_file_size_and_kind_refused(tmp_path):
     big = tmp_path / "big.yaml"
     with open(big, "w") as f:
@@ -263,6 +269,7 @@ def test_file_size_and_kind_refused(tmp_path):
     assert proc.returncode == 2 and f"{bad}:3: not UTF-8 text (byte 0xfc)" in proc.stderr, proc.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["me220_xz\n", "int", "NAN", "errno", "namespace", "M_PI", "std"])
 def test_names_that_break_the_cpp_refused(tmp_path, name):
     as_yaml = '"me220_xz\\n"' if name.endswith("\n") else name
@@ -274,6 +281,7 @@ def test_names_that_break_the_cpp_refused(tmp_path, name):
         _cli_refuses(tmp_path, text, "reserved", field="symbols[5].name")
 
 
+@pytest.mark.slow
 def test_symbol_name_with_trailing_newline_refused(tmp_path):
     text = edit(MACHINE, ("{name: ty,", '{name: "ty\\n",'))
     _cli_refuses(tmp_path, text, "invalid symbol name", field="symbols[5].name")
@@ -289,6 +297,7 @@ BAD_MODELS = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("edit_,word", [b[1:] for b in BAD_MODELS], ids=[b[0] for b in BAD_MODELS])
 def test_expressions_must_be_analytic_and_finite(tmp_path, edit_, word):
     text = edit(MACHINE, edit_)
@@ -305,12 +314,14 @@ def test_params_value_infinite_after_unit_conversion(tmp_path):
     assert f"{p}:4: values.dx1: " in proc.stderr and "larger than" in proc.stderr, proc.stderr
 
 
+@pytest.mark.slow
 def test_huge_integer_nominal(tmp_path):
     text = edit(MACHINE, ("nominal: 50,", "nominal: " + "9" * 401 + ","))
     _cli_refuses(tmp_path, text, "larger than 1e+15", line=line_of(text, "nominal: 999"),
                  field="symbols.Y1.nominal")
 
 
+@pytest.mark.slow
 def test_chain_and_symbol_counts_bounded(tmp_path):
     from chaincomp.model.machine import MAX_CHAIN_ELEMENTS, MAX_SYMBOLS
     T = "  - {translate: [X, Y1, 0], label: component 1 (X slide)}\n"
@@ -350,6 +361,7 @@ def _load_random(tmp_path, doc: dict, key: str, entries, load):
 @settings(max_examples=150, deadline=5000, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.dictionaries(st.sampled_from(["machine", "values", "description", "extra"]), _YAML_VALUES, max_size=4),
        st.dictionaries(st.sampled_from(["dx1", "ey1", "tx", "X", "nope"]), _YAML_VALUES, max_size=4))
+@pytest.mark.slow
 def test_params_loader_property_random_yaml(tmp_path, top, values):
     from chaincomp.model.params import load_params
     out = _load_random(tmp_path, top, "values", values, load_params) or {}
@@ -363,6 +375,7 @@ def test_params_loader_property_random_yaml(tmp_path, top, values):
        st.dictionaries(st.sampled_from(["dx1", "ey1", "tx", "zz"]),
                        st.dictionaries(st.sampled_from(["bound", "distribution", "normal_bound", "q"]), _YAML_VALUES,
                                        max_size=3), max_size=3))
+@pytest.mark.slow
 def test_tolerances_loader_property_random_yaml(tmp_path, top, tols):
     from chaincomp.analysis.tolerances import load_tolerances
     _load_random(tmp_path, top, "tolerances", tols, load_tolerances)
@@ -371,6 +384,7 @@ def test_tolerances_loader_property_random_yaml(tmp_path, top, tols):
 @settings(max_examples=100, deadline=5000, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.dictionaries(st.sampled_from(["machine", "where", "formulas", "chain", "source"]), _YAML_VALUES, max_size=4),
        st.lists(st.dictionaries(st.sampled_from(["name", "of", "formula", "x"]), _YAML_VALUES, max_size=4), max_size=3))
+@pytest.mark.slow
 def test_check_loader_property_random_yaml(tmp_path, top, formulas):
     from chaincomp.analysis.check import load_formulas
     _load_random(tmp_path, top, "formulas", formulas, load_formulas)

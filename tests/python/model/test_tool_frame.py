@@ -4,7 +4,7 @@ R_actual = exp([ω]×)·R_nominal (base frame) in the models, derive, eval, budg
 generated code.
 
 Truth from outside the code: a numpy model of the UR5 (UR's DH table with Hayati's beta after
-joints 2 and 3, as tests/python/test_demo_arm.py writes it) and of a small two-axis head,
+joints 2 and 3, as tests/python/machines/test_demo_arm.py writes it) and of a small two-axis head,
 written here; scipy's Rotation for the log of R_actual·R_nominalᵀ; central differences of them
 for the gains; the order of Taylor truncation for the order-2 models.
 """
@@ -28,55 +28,13 @@ from chaincomp.emit.cpp import generate
 from chaincomp.symbolic.jets import JetModel
 from chaincomp.symbolic.numeric import ExactModel, TruncatedModel
 
-from conftest import ROOT, machine_path
-from test_demo_arm import UR5_A, UR5_ALPHA, UR5_D, rot, trans
+from helpers import ROOT, machine_path
+from arm_models import UR5_FRAME, rot, ur5_frame
+from helpers import head_file, no_frame_file, run_verb, ur5_frame_file
+from model_library import Library, arr
 
-ARCSEC = math.pi / (180 * 3600)
 # the frame the UR5 variant gets: x along (1, 1, 0.3) made orthogonal to z = (0, 0, 1)
-UR5_FRAME = np.array([[1, -1, 0], [1, 1, 0], [0, 0, math.sqrt(2)]]) / math.sqrt(2)   # columns x, y, z
-UR5_POINT = np.array([40.0, 0.0, 100.0])
-
-
-def run(*args, cwd=None):
-    proc = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", *map(str, args)], capture_output=True,
-                          text=True, cwd=cwd or ROOT, timeout=900)
-    return proc.returncode, proc.stdout, proc.stderr
-
-
-def ur5_frame_file(tmp_path, tool="  point: [40, 0, 100]\n  direction: [0, 0, 1]\n  reference: [1, 1, 0.3]\n"):
-    """configs/machines/ur5.yaml with the tool given a frame (name kept: its params load)."""
-    with open(machine_path("ur5")) as f:
-        text = f.read()
-    head, _ = text.split("\ntool:\n")
-    path = tmp_path / "ur5_frame.yaml"
-    path.write_text(head + "\ntool:\n" + tool)
-    return path
-
-
-def no_frame_file(tmp_path, name):
-    """A bundled arm's file with its tool frame taken out (point and direction kept): the
-    machine without a frame that the tests compare against."""
-    with open(machine_path(name)) as f:
-        head, tool = f.read().split("\ntool:\n")
-    kept = [line for line in tool.splitlines(keepends=True) if not line.startswith("  reference:")]
-    assert len(kept) == len(tool.splitlines()) - 1, tool    # the bundled file has one reference line
-    path = tmp_path / f"{name}_no_frame.yaml"
-    path.write_text(head + "\ntool:\n" + "".join(kept))
-    return path
-
-
-def ur5_frame(q, e=None):
-    """(R, p): the tool frame (N x 3 x 3, columns x, y, z) and point (N x 3) of the UR5 variant."""
-    e = e or {}
-    g = lambda name: e.get(name, 0.0)  # noqa: E731
-    t = np.broadcast_to(np.eye(4), (len(q), 4, 4))
-    for j in range(6):
-        n = j + 1
-        t = t @ rot("z", q[:, j] + g(f"dtheta{n}")) @ trans("z", UR5_D[j] + g(f"dd{n}")) \
-            @ trans("x", UR5_A[j] + g(f"da{n}")) @ rot("x", UR5_ALPHA[j] + g(f"dalpha{n}"))
-        if n in (2, 3):
-            t = t @ rot("y", g(f"dbeta{n}"))
-    return t[:, :3, :3] @ UR5_FRAME, t[:, :3, :3] @ UR5_POINT + t[:, :3, 3]
+ARCSEC = math.pi / (180 * 3600)
 
 
 def rotvec(R_actual, R_nominal):
@@ -125,7 +83,7 @@ def test_reference_is_made_orthogonal_and_rotation_gives_the_same_frame(tmp_path
 def test_a_bad_frame_is_refused_with_its_line_and_field(tmp_path, tool, line, field, words):
     path = ur5_frame_file(tmp_path, tool)
     first = path.read_text().splitlines().index("tool:") + 1
-    code, out, err = run("eval", path, "--set", "q1=0")
+    code, out, err = run_verb("eval", path, "--set", "q1=0")
     assert code == 2 and "Traceback" not in err, err
     assert f"{path}:{first + line}: {field}:" in err and words in err, err
 
@@ -162,31 +120,6 @@ def test_rotation_vector_gains_against_central_differences_of_the_numpy_ur5(ur5f
             assert np.allclose(np.broadcast_to(g[row][i], (len(q),)), fd[:, c], atol=1e-8), (s.name, row)
 
 
-def head_file(tmp_path):
-    """A two-axis head with three tilt errors, one about the tool axis (seen only by the frame)."""
-    path = tmp_path / "head.yaml"
-    path.write_text("""name: head
-length_unit: mm
-rotation_sense: right_hand
-symbols:
-  - {name: A, role: axis, unit: deg, limits: [-180, 180]}
-  - {name: B, role: axis, unit: deg, limits: [-120, 120]}
-  - {name: L, role: constant, unit: mm, nominal: 100}
-  - {name: e1, role: error, unit: arcsec}
-  - {name: e2, role: error, unit: arcsec}
-  - {name: e3, role: error, unit: arcsec}
-  - {name: d1, role: error, unit: um}
-chain:
-  - {rotate: z, angle: A}
-  - {rotate: x, angle: e1}
-  - {rotate: y, angle: B + e2}
-  - {rotate: z, angle: e3}
-  - {translate: [d1, 0, L]}
-tool: {point: [0, 0, 10], direction: [0, 0, 1], reference: [0, 1, 0]}
-""")
-    return path
-
-
 def head_frame(A, B, e1=0.0, e2=0.0, e3=0.0):
     def R(axis, a):
         return rot(axis, np.asarray(a, float))[..., :3, :3]
@@ -221,23 +154,25 @@ def test_short_chain_derivation_gain_and_order_two_against_numpy(tmp_path):
         assert 6 < miss[0] / miss[1] < 10 and 6 < miss[1] / miss[2] < 10, miss
 
 
+@pytest.mark.slow
 def test_eval_shows_the_rotation_vector_in_arcsec(tmp_path):
     path = head_file(tmp_path)
     sets = ["--set", "A=20", "--set", "B=30", "--set", "e1=100", "--set", "e2=-50", "--set", "e3=30"]
-    code, out, err = run("eval", path, *sets, "--format", "json")
+    code, out, err = run_verb("eval", path, *sets, "--format", "json")
     assert code == 0, err
     doc = json.loads(out)
     want = rotvec(head_frame(np.radians([20]), np.radians([30]), *(np.array([100, -50, 30]) * ARCSEC)),
                   head_frame(np.radians([20]), np.radians([30])))[0]
     assert np.allclose(doc["orientation_error"]["exact"], want, rtol=0, atol=1e-15)
     assert np.allclose(doc["frame_x"], head_frame(np.radians([20]), np.radians([30]))[0][:, 0], atol=1e-15)
-    code, out, err = run("eval", path, *sets)
+    code, out, err = run_verb("eval", path, *sets)
     assert code == 0, err
     line = out.split("orientation error")[1].splitlines()[3]
     assert line.split()[0] == "exact", out
     assert f"{want[0] / ARCSEC:.3f}" in line and f"{np.linalg.norm(want) / ARCSEC:.3f}" in line
 
 
+@pytest.mark.slow
 def test_budget_has_the_orientation_rows_on_a_long_chain(ur5f, tmp_path):
     """The UR5 (jets, no expansion): wx, wy, wz with the systematic error at a point the numpy
     model's rotation vector."""
@@ -246,7 +181,7 @@ def test_budget_has_the_orientation_rows_on_a_long_chain(ur5f, tmp_path):
     args = ["budget", ur5f.file, "--params", params, "--over", "q2", "--grid", "3", "--format", "json"]
     for a in ("q1", "q3", "q4", "q5", "q6"):
         args += ["--set", f"{a}=30"]
-    code, out, err = run(*args)
+    code, out, err = run_verb(*args)
     assert code == 0, err
     doc = json.loads(out)
     comps = doc["components"]
@@ -256,6 +191,7 @@ def test_budget_has_the_orientation_rows_on_a_long_chain(ur5f, tmp_path):
 
 # ---------------------------------------------------------------- the generated code
 
+@pytest.mark.slow
 def test_machines_without_a_frame_generate_what_they_did(tmp_path):
     """The pose layout of a frame is the point, the direction and the x axis; without a frame
     nothing changes (the bundled machines' files carry no trace of it)."""
@@ -267,7 +203,6 @@ def test_machines_without_a_frame_generate_what_they_did(tmp_path):
 
 @pytest.fixture(scope="module")
 def ur5f_lib(ur5f, tmp_path_factory):
-    from test_generated_jets import Library
     tmp = tmp_path_factory.mktemp("ur5f_lib")
     env = dict(os.environ, XDG_CACHE_HOME=str(tmp / "cache"))
     proc = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "build", ur5f.file], capture_output=True,
@@ -286,10 +221,7 @@ def gain_row(g, row):
     return np.array([float(np.ravel(v)[0]) for v in g[row]])
 
 
-def arr(values):
-    return (ctypes.c_double * len(values))(*values)
-
-
+@pytest.mark.slow
 def test_generated_frame_code_against_python_and_numpy(ur5f, ur5f_lib):
     entry, model, *_ = ur5f_lib
     rng = np.random.default_rng(11)
@@ -338,6 +270,7 @@ def test_generated_frame_code_against_python_and_numpy(ur5f, ur5f_lib):
             assert np.allclose(J[:, j], fd, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_a_five_axis_machine_with_a_frame_compensates_as_without(tmp_path):
     """Two rotary axes cannot turn the tool about its axis: with a frame the point and the
     direction are corrected as before (same statuses, same corrections to rounding)."""
@@ -351,13 +284,13 @@ def test_a_five_axis_machine_with_a_frame_compensates_as_without(tmp_path):
     framed = tmp_path / "five_axis_ac.yaml"
     framed.write_text(text.replace("  direction: [0, 0, 1]\n", "  direction: [0, 0, 1]\n  reference: [1, 0, 0]\n"))
     log = tmp_path / "path.lcmlog"
-    assert run("simulate-log", plain, "-o", log, "--seconds", "0.2")[0] == 0
+    assert run_verb("simulate-log", plain, "-o", log, "--seconds", "0.2")[0] == 0
     params = os.path.join(ROOT, "configs", "params", "five_axis_ac-demo.yaml")
     config = os.path.join(ROOT, "tests", "e2e", "config_test.yaml")
     rows = []
     for m in (plain, framed):
         out = tmp_path / f"{len(rows)}.csv"
-        code, _, err = run("replay", log, "--machine", m, "--params", params, "--config", config, "--csv", out)
+        code, _, err = run_verb("replay", log, "--machine", m, "--params", params, "--config", config, "--csv", out)
         assert code == 0, err
         with open(out) as f:
             rows.append(list(csv.DictReader(f)))
@@ -367,12 +300,13 @@ def test_a_five_axis_machine_with_a_frame_compensates_as_without(tmp_path):
     assert max(abs(float(x[k]) - float(y[k])) for x, y in zip(a, b) for k in keys) < 1e-9   # deg
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("arm", ["ur5", "panda"])
 def test_bundled_arms_order_two_orientation_falls_as_the_errors_cubed(arm):
     """The bundled arms' frames at order 2 (symbolic and jets) against the exact rotation
     vector of the chain multiplied numerically: the miss falls 8x when the errors halve. (To
     order 2, ω is the skew part of (R - R0)·R0ᵀ alone; this holds that shortcut to the truth.)"""
-    from conftest import truncated
+    from helpers import truncated
     m = load_machine(machine_path(arm))
     rng = np.random.default_rng(17)
     q = {a.name: rng.uniform(-2.5, 2.5, 8) for a in m.axes}

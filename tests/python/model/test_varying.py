@@ -14,12 +14,11 @@ import numpy as np
 import pytest
 import yaml
 
-from conftest import PARAMS, ROOT, cli, machine_path, needs_netns, run_cli
+from helpers import DAEMON, PARAMS, ROOT, cli, machine_path, needs_netns, run_cli
 
 FIVE = machine_path("five_axis_ac")
 LASER = os.path.join(PARAMS, "five_axis_ac-laser.yaml")
 DEMO = os.path.join(PARAMS, "five_axis_ac-demo.yaml")
-DAEMON = os.path.join(ROOT, "build", "bin", "chaincompd")
 REPLAY = os.path.join(ROOT, "build", "bin", "chaincomp_replay")
 E2E_CONFIG = os.path.join(ROOT, "tests", "e2e", "config_test.yaml")
 ARCSEC = math.pi / 648000.0
@@ -219,6 +218,7 @@ def test_the_bundled_laser_calibration(tmp_path):
     assert all(tables[f"E{c}{ax}"].axis == ax for c in "XYZABC" for ax in "XYZ")
 
 
+@pytest.mark.slow
 def test_simulate_calibration_regenerates_the_bundled_file(tmp_path):
     out = tmp_path / "laser.yaml"
     run_cli("simulate-calibration", "configs/machines/five_axis_ac.yaml", "--base",
@@ -234,6 +234,7 @@ def test_simulate_calibration_regenerates_the_bundled_file(tmp_path):
             assert g == w
 
 
+@pytest.mark.slow
 def test_simulate_calibration_options(tmp_path):
     out = tmp_path / "c.yaml"
     run_cli("simulate-calibration", FIVE, "--knots", "11", "--seed", "4", "--interpolation", "linear",
@@ -251,6 +252,7 @@ def test_simulate_calibration_options(tmp_path):
     assert proc.returncode == 2 and "no slide" in proc.stderr
 
 
+@pytest.mark.slow
 def test_eval_with_tables_equals_eval_with_their_values_set(tmp_path):
     path = _write(tmp_path, TABLES)
     axes = ["--set", "X=123.4", "--set", "Y=-50", "--set", "Z=-200", "--set", "Ap=30", "--set", "Cp=-45"]
@@ -364,6 +366,7 @@ def test_replay_refuses_a_bad_table(tmp_path):
 
 # ----------------------------------------------------------------------------- plot
 
+@pytest.mark.slow
 def test_plot_a_table_and_a_polynomial(tmp_path):
     out = tmp_path / "exx.png"
     proc = run_cli("plot", "--table", LASER, "--error", "EXX", "-o", str(out))
@@ -422,6 +425,7 @@ def _htm_tool_point(machine, values):
     return np.einsum("nij,nj->ni", T, p)[:, :3]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("interpolation", ["monotone_cubic", "linear"])
 def test_compensation_with_tables_puts_the_tool_point_on_the_nominal_one(tmp_path, interpolation):
     """chaincomp_replay (the daemon's compensator) on a toolpath with the laser tables; the
@@ -458,6 +462,7 @@ def test_compensation_with_tables_puts_the_tool_point_on_the_nominal_one(tmp_pat
     assert np.linalg.norm(off - nominal, axis=1).max() > 1e-3
 
 
+@pytest.mark.slow
 @needs_netns
 def test_daemon_with_tables_streams_exact_targets_without_allocating(monkeypatch):
     """tests/e2e/e2e_stream.py with the laser tables: chaincompd (in a network namespace)
@@ -470,6 +475,7 @@ def test_daemon_with_tables_streams_exact_targets_without_allocating(monkeypatch
     assert "heap allocations after warm-up 0" in proc.stdout
 
 
+@pytest.mark.slow
 @needs_netns
 def test_daemon_with_tables_equals_replay_bit_for_bit(tmp_path, monkeypatch):
     monkeypatch.setenv("CHAINCOMP_E2E_PARAMS", LASER)
@@ -482,6 +488,7 @@ def test_daemon_with_tables_equals_replay_bit_for_bit(tmp_path, monkeypatch):
     assert "targets differing: 0" in proc.stdout
 
 
+@pytest.mark.slow
 def test_budget_takes_tables_as_bounds():
     # their largest |value| on the grid as the bound (test_budget_tables.py checks the numbers)
     proc = run_cli("budget", FIVE, "--params", LASER, "--grid", "2", "--samples", "0", check=False)

@@ -9,11 +9,8 @@ import time
 
 import pytest
 
-from conftest import ROOT, machine_path, needs_netns
+from helpers import DAEMON, NETNS, PY, ROOT, machine_path, needs_netns
 
-DAEMON = os.path.join(ROOT, "build", "bin", "chaincompd")
-NETNS = os.path.join(ROOT, "tests", "e2e", "netns.sh")
-PY = os.path.join(ROOT, ".venv", "bin", "python")
 PARAMS = os.path.join(ROOT, "configs", "params", "five_axis_ac-demo.yaml")
 
 
@@ -62,6 +59,7 @@ def _write(tmp, name, text):
     return str(path)
 
 
+@pytest.mark.slow
 def test_status_timer_does_not_spin(tmp_path):
     """status_period at its minimum (1 ms) on memq:// (no network): the daemon sleeps between
     statuses. poll() with a millisecond timeout spun a core for the last millisecond of each
@@ -108,6 +106,7 @@ def _scenario(*args, timeout=120):
     return proc.stdout
 
 
+@pytest.mark.slow
 @needs_netns
 @pytest.mark.parametrize("rate", [1000, 10000])
 def test_stream_end_to_end(rate):
@@ -115,21 +114,25 @@ def test_stream_end_to_end(rate):
     assert "heap allocations after warm-up 0" in out
 
 
+@pytest.mark.slow
 @needs_netns
 def test_bad_input_and_random_payloads():
     _scenario("tests/e2e/e2e_robust.py", "100000")
 
 
+@pytest.mark.slow
 @needs_netns
 def test_hostile_streams_twins_and_a_tiny_buffer():
     _scenario("tests/e2e/e2e_hostile.py")
 
 
+@pytest.mark.slow
 @needs_netns
 def test_switching_is_bumpless():
     _scenario("tests/e2e/e2e_switch.py")
 
 
+@pytest.mark.slow
 @needs_netns
 def test_replay_equals_daemon_bit_for_bit(tmp_path):
     log = tmp_path / "axes.lcmlog"

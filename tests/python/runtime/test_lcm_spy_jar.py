@@ -10,7 +10,7 @@ import struct
 
 import pytest
 
-from conftest import ROOT
+from helpers import ROOT
 
 JAR = os.path.join(ROOT, "build", "java", "chaincomp_lcmtypes.jar")
 SHARE = os.path.join(ROOT, ".venv", "lib", "python3.11", "site-packages", "share", "java")
@@ -89,6 +89,7 @@ def _doubles(text):
     return [float(v) for v in text.strip("[]").split(",")]
 
 
+@pytest.mark.slow
 def test_jar_decodes_a_corrected_target_and_a_status(decoder, tmp_path):
     from chaincomp.emit.buildtree import import_lcmtypes
     T = import_lcmtypes()
@@ -121,6 +122,7 @@ def test_jar_decodes_a_corrected_target_and_a_status(decoder, tmp_path):
     assert got_s["same_bytes"] == "true"
 
 
+@pytest.mark.slow
 def test_a_message_of_another_type_is_not_taken_for_ours(decoder, tmp_path):
     from chaincomp.emit.buildtree import import_lcmtypes
     data = bytearray(import_lcmtypes().lcmt_corrected_target().encode())
@@ -139,6 +141,7 @@ def test_lcm_spy_script_refuses_without_a_usable_url(args, match):
     assert proc.returncode == 2 and match in proc.stderr, proc.stderr
 
 
+@pytest.mark.slow
 def test_lcm_spy_finds_every_type_of_ours():
     """The wheel's own lcm-spy with the jar on its CLASSPATH (as tools/lcm-spy starts it) reports
     the types it found before it opens its window; without a display it stops there, before it

@@ -12,7 +12,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT
+from helpers import ROOT
 
 REPLAY = os.path.join(ROOT, "build", "bin", "chaincomp_replay")
 pytestmark = pytest.mark.skipif(not os.path.exists(REPLAY), reason="build/bin/chaincomp_replay not built")
@@ -73,6 +73,7 @@ def _replay(tmp_path, log, *extra):
                           timeout=300, cwd=tmp_path)
 
 
+@pytest.mark.slow
 def test_replay_json_counts_what_the_log_holds(tmp_path):
     # a circle, 1.6 mm at most between commands (max_step is 10 mm): every good command corrected
     good = [("xy_own", (80 * math.cos(k / 50), 40 * math.sin(k / 50))) for k in range(200)]

@@ -9,7 +9,7 @@ import subprocess
 
 import pytest
 
-from conftest import PARAMS, ROOT, machine_path, run_cli
+from helpers import PARAMS, ROOT, machine_path, run_cli
 
 REPLAY = os.path.join(ROOT, "build", "bin", "chaincomp_replay")
 

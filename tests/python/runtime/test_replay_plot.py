@@ -8,9 +8,10 @@ import subprocess
 import sys
 
 import numpy as np
+
 import pytest
 
-from conftest import PARAMS, ROOT, machine_path, run_cli
+from helpers import PARAMS, ROOT, machine_path, run_cli
 
 sys.path.insert(0, os.path.join(ROOT, "tests", "e2e"))
 E2E_CONFIG = os.path.join(ROOT, "tests", "e2e", "config_test.yaml")
@@ -32,6 +33,7 @@ def _exact_errors(rows):
     return exact_check(cmd, cor)
 
 
+@pytest.mark.slow
 def test_replay_matches_the_exact_model_on_every_record(tmp_path):
     log, out, table = tmp_path / "axes.lcmlog", tmp_path / "corrected.lcmlog", tmp_path / "replay.csv"
     run_cli("simulate-log", FIVE, "-o", str(log), "--seconds", "2")
@@ -50,6 +52,7 @@ def test_replay_matches_the_exact_model_on_every_record(tmp_path):
     assert {e.timestamp for e in events if e.channel == "CHAINCOMP_CORRECTED"} == originals
 
 
+@pytest.mark.slow
 def test_replay_reports_exactly_the_corrupted_records(tmp_path):
     import lcm
     from chaincomp.emit.buildtree import import_lcmtypes
@@ -82,6 +85,7 @@ def test_replay_reports_exactly_the_corrupted_records(tmp_path):
     assert "496 corrected, 4 rejected" in proc.stderr
 
 
+@pytest.mark.slow
 def test_replay_skips_and_reports_damaged_stretches_of_a_log(tmp_path):
     """Framing damage (garbage between events, a broken length, a truncated last event): each
     stretch is reported with its byte range and the events around it are still replayed."""
@@ -109,6 +113,7 @@ def test_replay_skips_and_reports_damaged_stretches_of_a_log(tmp_path):
     assert "damaged: 3 stretches of the log" in proc.stderr
 
 
+@pytest.mark.slow
 def test_replay_reports_one_damaged_stretch_once(tmp_path):
     """Garbage straight before an event with a broken length is one stretch, and a tail that
     holds sync words but no whole event is one stretch to the end."""
@@ -131,6 +136,7 @@ def test_replay_reports_one_damaged_stretch_once(tmp_path):
     assert "19 events, 19 commands" in proc.stderr and "damaged: 2 stretches" in proc.stderr
 
 
+@pytest.mark.slow
 def test_replay_refuses_to_write_over_its_input(tmp_path):
     log = tmp_path / "axes.lcmlog"
     run_cli("simulate-log", FIVE, "-o", str(log), "--seconds", "0.01")
@@ -147,6 +153,7 @@ def test_replay_refuses_to_write_over_its_input(tmp_path):
     assert log.read_bytes() == before
 
 
+@pytest.mark.slow
 def test_replay_bad_input(tmp_path):
     proc = run_cli("replay", str(tmp_path / "none.lcmlog"), "--machine", FIVE, "--params", FIVE_PARAMS,
                    check=False)
@@ -157,6 +164,7 @@ def test_replay_bad_input(tmp_path):
     assert proc.returncode == 2 and "p.yaml: cannot read file" in proc.stderr
 
 
+@pytest.mark.slow
 def test_fig3_map_equals_an_independent_first_order_model(tmp_path):
     """The paper's Fig. 3: first-order dy over Ap, Cp in -60..60 deg with its stated values."""
     from chaincomp import load_machine
@@ -211,6 +219,7 @@ def test_fig3_map_equals_an_independent_first_order_model(tmp_path):
     assert struct.unpack(">II", head[16:24]) == (800, 600)
 
 
+@pytest.mark.slow
 def test_plot_bad_input(tmp_path):
     proc = run_cli("plot", machine_path("angle_head"), "--over", "Ap,Zz", "-o", str(tmp_path / "x.png"), check=False)
     assert proc.returncode == 2 and "--over expects two different axes of angle_head (Ap, Cp), got 'Ap,Zz'" in proc.stderr

@@ -12,7 +12,7 @@ import sys
 import pytest
 import yaml
 
-from conftest import ROOT, machine_path, needs_netns, run_cli
+from helpers import ROOT, machine_path, needs_netns, run_cli
 from chaincomp.emit.buildtree import import_lcmtypes
 from chaincomp.cli import status
 
@@ -184,6 +184,7 @@ def test_refusals_are_one_line(args, line):
     assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr and proc.stdout == ""
 
 
+@pytest.mark.slow
 @needs_netns
 def test_status_against_daemons_in_a_namespace():
     proc = subprocess.run([os.path.join(ROOT, "tests", "e2e", "netns.sh"), os.path.join(ROOT, ".venv", "bin", "python"),

@@ -29,7 +29,7 @@ from chaincomp import load_machine
 from chaincomp.cli import derive as cli_derive
 from chaincomp.symbolic.derive import derive
 from chaincomp.symbolic.jets import JetModel
-from conftest import cli, machine_path
+from helpers import cli, machine_path
 
 MACHINE_TOOLS = ["vmc_xyz", "me220_xz", "trunnion_ac", "five_axis_ac", "angle_head", "mori_seiki_nv1500"]
 
@@ -59,11 +59,13 @@ def assert_prints_as_sympy(d, where=()) -> None:
         assert fast[key].is_zero == slow[key].is_zero, (*where, key)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name,order", [(n, 2) for n in MACHINE_TOOLS] + [("mori_seiki_nv1500", 3), ("me220_xz", 3)])
 def test_machine_tools_print_as_sympy_prints_them(name, order):
     assert_prints_as_sympy(derive(load_machine(machine_path(name)), order))
 
 
+@pytest.mark.slow
 def test_ur5_sample_prints_as_sympy_prints_it():
     """A sample of the UR5's order-1 formulas against sympy's collect(expand(...)) and diff."""
     d = derive(load_machine(machine_path("ur5")), 1)
@@ -187,6 +189,7 @@ def panda2():
     return doc, text
 
 
+@pytest.mark.slow
 def test_panda_order2_text_and_json_agree(panda2):
     doc, text = panda2
     heading = {"Tool point error": "error", "Tool direction error": "direction_error",
@@ -212,6 +215,7 @@ def test_panda_order2_text_and_json_agree(panda2):
             assert doc["gain"][m.group(1)][m.group(2)] == m.group(3)
 
 
+@pytest.mark.slow
 def test_panda_order2_against_an_independent_chain(panda2):
     """The printed series at ε and ε/10: exact − nominal minus the series falls as ε³ (as ε²
     with the order-1 terms alone), for the point, the direction and ω."""
@@ -232,6 +236,7 @@ def test_panda_order2_against_an_independent_chain(panda2):
             assert r2[1][part] < 1e-2 * r1[1][part], (part, r1, r2)
 
 
+@pytest.mark.slow
 def test_ur5_order3_printed_against_an_independent_chain():
     d = derive(load_machine(machine_path("ur5")), 3)
     rep = cli_derive.report(d)
@@ -248,6 +253,7 @@ def test_ur5_order3_printed_against_an_independent_chain():
         assert r3[1][part] < 1e-2 * r2[1][part], (part, r2, r3)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name,order", [("ur5", 3), ("panda", 3), ("ur5", 4)])
 def test_jets_orientation_to_order_k(name, order):
     """The numeric jets' ω (the same series by floats) against the exact rotation vector."""

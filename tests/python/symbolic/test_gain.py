@@ -7,10 +7,13 @@ import sympy as sp
 
 from chaincomp.symbolic.numeric import ExactModel
 
-from conftest import derived
+import pytest
+
+from helpers import derived
 from test_truncation import random_values
 
 
+@pytest.mark.slow
 def test_gain_matrix_equals_finite_differences(bundled):
     rng = random.Random(7)
     exact = ExactModel(bundled)

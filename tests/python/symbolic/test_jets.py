@@ -14,9 +14,8 @@ from chaincomp import ExactModel, load_machine
 from chaincomp.symbolic.jets import JetModel
 
 from arm_models import UR5_A, UR5_D, ur5 as ur5_frame
-from conftest import truncated
+from helpers import ROOT, truncated
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 BUNDLED = sorted(glob.glob(os.path.join(ROOT, "configs", "machines", "*.yaml")))
 
 # the UR5's twists as the YAML writes them (arm_models.UR5_ALPHA in rad)
@@ -57,6 +56,7 @@ def random_values(m, rng, scale):
     return v
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", BUNDLED, ids=os.path.basename)
 def test_jets_equal_the_symbolic_truncated_models(path):
     m = load_machine(path)

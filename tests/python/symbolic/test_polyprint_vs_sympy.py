@@ -121,6 +121,7 @@ def _same(shown, expr, what):
     assert shown.is_zero == (expr == 0), (what, expr)
 
 
+@pytest.mark.slow
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(problems())
 def test_polyprint_prints_as_sympy(problem):
@@ -243,6 +244,7 @@ def _random_machine(rng) -> str:
     return "\n".join(["name: rnd", "length_unit: mm", "rotation_sense: right_hand", "symbols:", *symbols, body]) + "\n"
 
 
+@pytest.mark.slow
 def test_random_machine_files_print_as_sympy(tmp_path):
     import contextlib
     import io

@@ -8,7 +8,7 @@ import pytest
 
 from chaincomp.symbolic.numeric import ExactModel
 
-from conftest import truncated
+from helpers import truncated
 
 EPSILONS = [1e-2, 1e-3, 1e-4, 1e-5]
 
@@ -21,6 +21,7 @@ def random_values(machine, rng):
     return values
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("order", [1, 2])
 def test_residual_slope(bundled, order):
     mpmath.mp.dps = 50
