@@ -4,7 +4,8 @@ tracker points, and what each identifies.
 The truth is this file's own: the chain multiplied here as 4x4 matrices, the gains of every
 reading taken by central differences of that product (tool point and tool rotation), the
 readings stacked with their unknown zeros as the module docstring of protocol_linear and the
-README define them, and the rank and the identified parameters found by numpy's SVD. Physical
+docs/guide/calibration.md ("Machines without rotary axes") define them, and the rank and the
+identified parameters found by numpy's SVD. Physical
 facts are checked from the machine's constants and ISO 230-1 / 230-6: the positioning run of
 X on vmc_xyz sees pitch with the lever H + Z - L, squareness needs the diagonals, a tool length
 error only the tracker.

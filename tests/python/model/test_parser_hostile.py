@@ -147,7 +147,7 @@ def test_parser_bounds(text, word):
 
 def test_parser_grammar():
     X, Z = SYMS["X"], SYMS["Z"]
-    # the README's grammar, with truth written out by hand
+    # the grammar of docs/reference/machine-file.md ("Math text is parsed"), truth written by hand
     assert parse("X^2^3", SYMS) == X ** 8            # right-associative
     assert parse("-X**2", SYMS) == -(X ** 2)         # the power binds tighter than the sign
     assert parse("2**-1", SYMS) == sp.Rational(1, 2)

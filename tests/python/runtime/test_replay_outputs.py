@@ -39,7 +39,7 @@ def test_replay_counts_the_corrections_held_back(tmp_path):
     nearly along C, where the tilt errors ask for a C correction beyond max_correction), then
     A opened by 5 deg a command to 46 deg, where that C correction swings the tool far and the
     rate limit (0.001 deg a command) unwinds it slowly. Where the daemon holds a correction
-    back it publishes the previous one shrunk by exactly one rate step towards none (README,
+    back it publishes the previous one shrunk by exactly one rate step towards none (docs/guide/daemon.md,
     "Truthful targets"): the CSV shows each such target, and the summary must count as many."""
     import lcm
     import numpy as np

@@ -195,7 +195,7 @@ def test_status_against_daemons_in_a_namespace():
 
 
 def test_the_limits_counters():
-    # clamped targets, those of them held back towards none (README, "Truthful targets"), and
+    # clamped targets, those of them held back towards none (docs/guide/daemon.md, "Truthful targets"), and
     # commands clamped into limits: each field of the status message in its place
     s = _status(clamped=12, held_back=5, clamped_input=3)
     d = _doc(s, None)["daemons"][0]
