@@ -82,8 +82,6 @@ def test_every_relative_link_reaches_a_file_and_heading(path):
         if generated:
             continue   # written by docs/hooks/cli_reference.py at build time; the strict build checks them
         if not os.path.exists(dest):
-            if rel_dest == os.path.join("docs", "install.md"):
-                continue   # written in parallel (issue #28); the strict build requires it
             bad.append(f"{target}: no file {rel_dest}")
             continue
         if anchor and dest.endswith(".md") and anchor not in headings(dest):
@@ -102,8 +100,6 @@ def test_slugify_matches_the_toc_extension():
 def test_mkdocs_build_strict_has_a_page_per_verb_with_every_option(tmp_path):
     if not os.path.exists(MKDOCS):
         pytest.skip(".venv/bin/mkdocs is missing: tools/setup installs docs/requirements.txt")
-    if not os.path.exists(os.path.join(ROOT, "docs", "install.md")):
-        pytest.skip("docs/install.md is not written yet (the nav lists it; issue #28)")
     site = tmp_path / "site"
     env = dict(os.environ, NO_MKDOCS_2_WARNING="1")
     proc = subprocess.run([MKDOCS, "build", "--strict", "--site-dir", str(site)], cwd=ROOT, env=env,
