@@ -2,7 +2,7 @@
 (used by tests/python/runtime/test_linuxcnc.py and tools/linuxcnc-demo).
 
 run() copies a configuration (configs/linuxcnc/NAME/) to a fresh work folder, writes the NML
-file without its TCP socket, picks the route (off | rt | bridge), and runs LinuxCNC once as an
+file without its TCP socket, picks the route (off | rt | bridge | comp), and runs LinuxCNC once as an
 unprivileged user (it refuses root), one instance at a time (a lock: LinuxCNC's shared memory
 keys are fixed). Its driver (drive.py) records every servo period with halsampler: the joint
 commands and the correction the drives actually got (drive - command).
@@ -31,7 +31,7 @@ ROOT = os.path.abspath(os.path.join(HERE, "..", ".."))
 USER = os.environ.get("CHAINCOMP_LINUXCNC_USER", "chaincomp-cnc")
 LOCK = os.path.join(tempfile.gettempdir(), "chaincomp-linuxcnc.lock")
 NML = "/usr/share/linuxcnc/linuxcnc.nml"
-ROUTES = ("off", "rt", "bridge")
+ROUTES = ("off", "rt", "bridge", "comp")
 # sampler.0 columns after halsampler's tag: 5 commands and 5 observed corrections (drive -
 # command), both in nm and udeg, then the bridge's age-ms or chaincomp_rt's cost-ns, stale, fault
 N_JOINTS = 5
@@ -39,6 +39,7 @@ COL_CMD, COL_OBS, COL_AGE, COL_STALE, COL_FAULT = 1, 6, 11, 12, 13
 COL_COST = COL_AGE
 COL_MC_CLOCKS, COL_RT_CLOCKS = 14, 15  # five_axis_ac's rt route: motion-controller.time, chaincomp-rt.update.time
 COL_CART = 14  # trunnion_ac: axis.L.pos-cmd * 1e6, L = x y z a c
+COL_POS_CMD = 16  # five_axis_ac: joint.N.pos-cmd * 1e6, before LinuxCNC's own compensation (comp route)
 
 
 def unavailable() -> str | None:
@@ -70,6 +71,12 @@ class Run:
         return self.samples[:, COL_CMD:COL_CMD + N_JOINTS] * 1e-6
 
     @property
+    def pos_commands(self) -> np.ndarray:
+        """joint.N.pos-cmd (five_axis_ac): the commands before LinuxCNC's own compensation
+        ([JOINT_n]COMP_FILE), which motor-pos-cmd (commands) includes."""
+        return self.samples[:, COL_POS_CMD:COL_POS_CMD + N_JOINTS] * 1e-6
+
+    @property
     def corrections(self) -> np.ndarray:
         """drive - command per joint, LinuxCNC units (mm, deg)."""
         return self.samples[:, COL_OBS:COL_OBS + N_JOINTS] * 1e-6
@@ -91,10 +98,11 @@ class Run:
 
 def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeout: float = 120.0,
         work: str | None = None, params: str | None = None, stale_ms: float = 50.0,
-        program: str | None = None) -> Run:
+        program: str | None = None, comp: dict[int, str] | None = None) -> Run:
     """One run of the configuration's program. `env`: the driver's settings (drive.py);
     `params`: the bridge's chaincompd params (default the machine's demo params); `stale_ms`:
-    the bridge's stale age; `program`: G-code text in place of the configuration's program.ngc."""
+    the bridge's stale age; `program`: G-code text in place of the configuration's program.ngc;
+    `comp` (route comp): joint number -> its COMP_FILE (type 1, chaincomp export's)."""
     if route not in ROUTES:
         raise ValueError(f"route {route!r}: expected one of {', '.join(ROUTES)}")
     src = os.path.join(HERE, config)
@@ -106,6 +114,10 @@ def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeo
         with open(os.path.join(work, "program.ngc"), "w") as f:
             f.write(program)
     params = os.path.abspath(params or os.path.join(ROOT, "configs", "params", f"{config}-demo.yaml"))
+    if (route == "comp") != bool(comp):
+        raise ValueError("the comp route takes comp files (comp={joint: file}), and only it")
+    if comp:
+        _add_comp_files(os.path.join(work, f"{config}.ini"), comp, work)
     with open(os.path.join(work, f"{config}.ini"), "a") as f:  # what the HAL files read as [CHAINCOMP]KEY
         f.write(f"\n[CHAINCOMP]\nROOT = {ROOT}\nPARAMS = {params}\nSTALE_MS = {stale_ms!r}\n")
     with open(NML) as f:
@@ -147,6 +159,23 @@ def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeo
         with open(os.path.join(work, "events.txt")) as f:
             events = [json.loads(line) for line in f if line.strip()]
     return Run(work, rows, events, log, proc.returncode, route)
+
+
+def _add_comp_files(ini: str, comp: dict[int, str], work: str) -> None:
+    """[JOINT_n]COMP_FILE and COMP_FILE_TYPE = 1 into the INI's joint sections (a second
+    section of the same name would not be read), each file copied into the work folder."""
+    with open(ini) as f:
+        lines = f.read().splitlines()
+    out = []
+    for line in lines:
+        out.append(line)
+        for n, path in comp.items():
+            if line.strip() == f"[JOINT_{n}]":
+                name = f"joint{n}.comp"
+                shutil.copy(path, os.path.join(work, name))
+                out += [f"COMP_FILE = {name}", "COMP_FILE_TYPE = 1"]
+    with open(ini, "w") as f:
+        f.write("\n".join(out) + "\n")
 
 
 def to_internal(machine, joints: np.ndarray) -> dict:

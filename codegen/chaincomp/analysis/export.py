@@ -1,0 +1,417 @@
+"""Compensation in the controllers' own formats (``chaincomp export``), each fitted to the
+exact model and replayed with the controller's own rule, so the residual it reports is the
+tool error the controller will leave (on the model), not the fit's.
+
+Two shapes of correction cover the formats:
+
+- per-joint tables (LinuxCNC ``[JOINT_n]COMP_FILE``): a trim t_j(q_j) added to each joint's
+  command, a function of that joint alone, linear between entries and held outside them
+  (src/emc/motion/control.c compute_screw_comp, command.c EMCMOT_SET_JOINT_COMP, LinuxCNC);
+- a 3x3 matrix on the linear axes (LinuxCNC ``matrixkins``: joint = C . axis; the printer
+  firmwares' skew factors are its strictly upper-triangular part).
+
+Every fit runs on the exact model: the tool point with the errors at the corrected joint
+positions against the nominal tool point at the commanded ones."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ChaincompError
+from ..model.machine import Machine, Symbol
+from ..symbolic.numeric import ExactModel
+
+# LinuxCNC: motion.h EMCMOT_COMP_SIZE; a larger file is refused entry by entry
+LINUXCNC_MAX_ENTRIES = 256
+MAX_POINTS = 2_000_000      # exact-model evaluations held at once by one fit or check
+FD_STEP = 1e-4              # mm or rad: central differences of the nominal model (exact for linear axes)
+
+
+@dataclass
+class Residual:
+    """Largest and RMS norm of the tool-point error over the check grid, mm."""
+    max: float
+    rms: float
+
+    @classmethod
+    def of(cls, dp: np.ndarray) -> Residual:
+        n = np.sqrt(np.sum(dp * dp, axis=0)).ravel()
+        return cls(float(n.max()), float(np.sqrt(np.mean(n * n))))
+
+
+@dataclass
+class ErrorShare:
+    """One error alone: its tool error without compensation and what the format leaves."""
+    name: str
+    before: Residual
+    after: Residual
+
+    @property
+    def represented(self) -> str:
+        """"yes" (at most 1 % of it, or under 0.1 um, is left), "no" (more than 90 %), else "partly"."""
+        if self.after.max <= max(0.01 * self.before.max, 1e-4):
+            return "yes"
+        return "no" if self.after.max > 0.9 * self.before.max else "partly"
+
+
+@dataclass
+class JointTable:
+    """One joint's compensation table: nominal positions and the trims added to its command
+    moving forward and in reverse, in the axis' declared unit."""
+    axis: Symbol
+    nominal: np.ndarray
+    forward: np.ndarray
+    reverse: np.ndarray
+
+    def trim(self, position: np.ndarray) -> np.ndarray:
+        """LinuxCNC's trim at ``position`` (declared unit) moving forward: linear between
+        entries, the end entries' trims held outside, trims stored as float (motion.h)."""
+        return np.interp(position, self.nominal, self.forward.astype(np.float32).astype(float))
+
+
+@dataclass
+class Export:
+    """What an exporter fitted, and what it leaves."""
+    format: str
+    machine: Machine
+    grid_points: int
+    before: Residual
+    after: Residual
+    tables: list[JointTable] = field(default_factory=list)
+    matrix: np.ndarray | None = None     # C (joint = C . axis) on `linear`
+    linear: list[str] = field(default_factory=list)
+    offset: np.ndarray | None = None     # constant tool-point offset left to the work offset, mm
+    after_offset: Residual | None = None  # the residual once that offset is touched off
+    shares: list[ErrorShare] = field(default_factory=list)
+
+
+def _errors_only(machine: Machine, values: dict, keep: set[str] | None) -> dict:
+    """``values`` with the errors outside ``keep`` dropped (zero); all of them with None."""
+    if keep is None:
+        return values
+    return {k: v for k, v in values.items() if machine.symbol(k).role != "error" or k in keep}
+
+
+def _nominal(machine: Machine, values: dict) -> dict:
+    return {k: v for k, v in values.items() if machine.symbol(k).role != "error"}
+
+
+def tool_error(exact: ExactModel, values: dict, commanded: dict, actual: dict) -> np.ndarray:
+    """(3, ...) tool-point error: the model with its errors at the ``actual`` joint positions
+    minus the nominal model at the ``commanded`` ones (internal units)."""
+    p1, _ = exact.pose({**values, **actual})
+    p0, _ = exact.pose({**_nominal(exact.machine, values), **commanded})
+    shape = np.broadcast_shapes(*(np.shape(v) for v in commanded.values()))
+    return np.stack([np.broadcast_to(np.asarray(a, float) - np.asarray(b, float), shape) for a, b in zip(p1, p0)])
+
+
+def _jacobian_column(exact: ExactModel, values: dict, q: dict, axis: str) -> np.ndarray:
+    """d(nominal tool point)/d(axis) at ``q`` by central differences (internal units)."""
+    nominal = _nominal(exact.machine, values)
+    plus, _ = exact.pose({**nominal, **q, axis: q[axis] + FD_STEP})
+    minus, _ = exact.pose({**nominal, **q, axis: q[axis] - FD_STEP})
+    shape = np.broadcast_shapes(*(np.shape(v) for v in q.values()))
+    return np.stack([np.broadcast_to((np.asarray(a, float) - np.asarray(b, float)) / (2 * FD_STEP), shape)
+                     for a, b in zip(plus, minus)])
+
+
+def axes_of(machine: Machine, joints: list[str] | None) -> list[Symbol]:
+    """The machine's axes in joint order (``joints``: every axis once; default the file's order)."""
+    names = [a.name for a in machine.axes]
+    if joints is None:
+        return list(machine.axes)
+    if sorted(joints) != sorted(names):
+        raise ChaincompError(f"--joints expects every axis of {machine.name} once ({', '.join(names)}), "
+                             f"got {','.join(joints)!r}")
+    return [machine.symbol(n) for n in joints]
+
+
+def check_grid(machine: Machine, axes: list[Symbol], points: int) -> list[np.ndarray]:
+    """The check grid: ``points`` values across each axis' limits (declared units)."""
+    total = points ** len(axes)
+    if total > MAX_POINTS:
+        raise ChaincompError(f"--grid {points}: the check grid would hold {points}^{len(axes)} = {total} points "
+                             f"(at most {MAX_POINTS}): lower --grid")
+    return [np.linspace(a.limits[0], a.limits[1], points) for a in axes]
+
+
+def _mesh(axes: list[Symbol], values_per_axis: list[np.ndarray]) -> dict:
+    """Internal values of a full grid, each axis broadcasting along its own dimension."""
+    n = len(axes)
+    out = {}
+    for k, (a, v) in enumerate(zip(axes, values_per_axis)):
+        shape = [1] * n
+        shape[k] = len(v)
+        out[a.name] = a.to_internal(np.asarray(v, float)).reshape(shape)
+    return out
+
+
+# ----------------------------------------------------------------------------- per-joint tables
+
+def _apply_tables(tables: list[JointTable], q: dict) -> dict:
+    """Joint positions a controller drives to for commands ``q`` (internal): q + trim(q)."""
+    out = dict(q)
+    for t in tables:
+        a = t.axis
+        out[a.name] = q[a.name] + a.to_internal(t.trim(a.from_internal(q[a.name])))
+    return out
+
+
+def fit_tables(machine: Machine, values: dict, axes: list[Symbol], entries: int, grid: list[np.ndarray],
+               sweeps: int = 4) -> list[JointTable]:
+    """Per-joint trims on ``entries`` equally spaced positions per joint, fitted to the exact
+    model by sweeps over the joints: each entry's trim takes the least-squares step that
+    cancels the tool error, along its joint's direction of motion, over the check grid of
+    the other joints (the trims of all joints applied as the controller applies them)."""
+    exact = ExactModel(machine)
+    tables = [JointTable(a, np.linspace(a.limits[0], a.limits[1], entries), np.zeros(entries), np.zeros(entries))
+              for a in axes]
+    slices = []
+    for j, a in enumerate(axes):
+        per_axis = [tables[j].nominal if k == j else grid[k] for k in range(len(axes))]
+        size = int(np.prod([len(v) for v in per_axis]))
+        if size > MAX_POINTS:
+            raise ChaincompError(f"fitting joint {a.name} would take {size} points ({entries} entries x the grid "
+                                 f"of the other joints; at most {MAX_POINTS}): lower --entries or --grid")
+        q = _mesh(axes, per_axis)
+        jac = _jacobian_column(exact, values, q, a.name)
+        slices.append((q, np.moveaxis(jac, j + 1, 1).reshape(3, entries, -1)))
+    for _ in range(sweeps):
+        largest = 0.0
+        for j, (a, (q, jac)) in enumerate(zip(axes, slices)):
+            r = tool_error(exact, values, q, _apply_tables(tables, q))
+            r = np.moveaxis(r, j + 1, 1).reshape(3, entries, -1)
+            num = np.sum(jac * r, axis=(0, 2))
+            den = np.sum(jac * jac, axis=(0, 2))
+            step = np.where(den > 1e-12 * max(float(den.max()), 1e-300), -num / np.where(den > 0, den, 1), 0.0)
+            tables[j].forward = tables[j].forward + a.from_internal(step)
+            largest = max(largest, float(np.max(np.abs(a.to_internal(1.0) * a.from_internal(step)))))
+        if largest < 1e-9:
+            break
+    for t in tables:
+        t.reverse = t.forward.copy()
+    return tables
+
+
+def with_reversal(tables: list[JointTable], reversal: dict[str, float]) -> None:
+    """ISO 230-2 reversal value B per axis (declared unit: position approached forward minus
+    reverse): the forward trim takes -B/2 more, the reverse trim +B/2."""
+    for t in tables:
+        b = reversal.get(t.axis.name, 0.0)
+        t.forward, t.reverse = t.forward - b / 2, t.forward + b / 2
+
+
+# ----------------------------------------------------------------------------- matrix on the linear axes
+
+def linear_axes(machine: Machine, axes: list[Symbol], fmt: str) -> list[Symbol]:
+    lin = [a for a in axes if a.unit.kind == "length"]
+    if len(lin) < 3:
+        raise ChaincompError(f"--format {fmt} needs three linear axes (X, Y, Z); {machine.name} has "
+                             f"{len(lin)} ({', '.join(a.name for a in lin) or 'none'})")
+    return lin[:3]
+
+
+def _apply_matrix(lin: list[Symbol], c: np.ndarray, q: dict) -> dict:
+    out = dict(q)
+    for i, a in enumerate(lin):
+        out[a.name] = sum(c[i, k] * q[b.name] for k, b in enumerate(lin))
+    return out
+
+
+def fit_matrix(machine: Machine, values: dict, axes: list[Symbol], lin: list[Symbol], grid: list[np.ndarray],
+               free: np.ndarray, iterations: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """C (joint = C . axis on ``lin``; the entries ``free`` fitted, the others those of the
+    identity) and the constant offset c that best cancel the exact tool error over the grid
+    (Gauss-Newton on the exact model; the offset is the work offset's, not the matrix's)."""
+    exact = ExactModel(machine)
+    q = _mesh(axes, grid)
+    jac = np.stack([_jacobian_column(exact, values, q, a.name).reshape(3, -1) for a in lin], axis=1)  # (3, 3, S)
+    pos = np.stack([np.broadcast_to(q[a.name], np.broadcast_shapes(*(np.shape(v) for v in q.values()))).ravel()
+                    for a in lin])                                                                    # (3, S)
+    idx = [(j, k) for j in range(3) for k in range(3) if free[j, k]]
+    # minimise |r + A.step - offset|^2: rows (component i, sample s); columns the free
+    # entries, then the offset left (absolute: r is recomputed on the exact model each time)
+    design = np.concatenate([(jac[:, j, :] * pos[k][None, :]).reshape(-1, 1) for j, k in idx] +
+                            [-np.kron(np.eye(3), np.ones((pos.shape[1], 1)))], axis=1)
+    c, offset = np.eye(3), np.zeros(3)
+    for _ in range(iterations):
+        r = tool_error(exact, values, q, _apply_matrix(lin, c, q)).reshape(-1)
+        step, *_ = np.linalg.lstsq(design, -r, rcond=None)
+        for n, (j, k) in enumerate(idx):
+            c[j, k] += step[n]
+        offset = step[len(idx):]
+    return c, offset
+
+
+# ----------------------------------------------------------------------------- the exporters
+
+FORMATS = ("linuxcnc-comp", "linuxcnc-matrixkins", "klipper", "marlin", "rrf")
+SKEW = np.array([[False, True, True], [False, False, True], [False, False, False]])
+
+
+def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, points: int, entries: int,
+           reversal: dict[str, float] | None = None, shares: bool = True, progress=None) -> Export:
+    """Fit the format to the model (``values``: internal units, every symbol) and replay it
+    over the check grid; with ``shares`` also each nonzero error alone."""
+    if fmt not in FORMATS:
+        raise ChaincompError(f"--format {fmt!r}: expected one of {', '.join(FORMATS)}")
+    axes = axes_of(machine, joints)
+    if fmt == "linuxcnc-comp" and not 2 <= entries <= LINUXCNC_MAX_ENTRIES:
+        raise ChaincompError(f"--entries {entries}: a LinuxCNC compensation file holds 2 to "
+                             f"{LINUXCNC_MAX_ENTRIES} entries (motion.h EMCMOT_COMP_SIZE)")
+    unknown = sorted(set(reversal or {}) - {a.name for a in axes})
+    if unknown:
+        raise ChaincompError(f"--reversal {unknown[0]}: not an axis of {machine.name}")
+    grid = check_grid(machine, axes, points)
+    lin = linear_axes(machine, axes, fmt) if fmt != "linuxcnc-comp" else []
+    free = np.ones((3, 3), bool) if fmt == "linuxcnc-matrixkins" else SKEW
+    exact = ExactModel(machine)
+    q = _mesh(axes, grid)
+
+    def fit(vals):
+        if fmt == "linuxcnc-comp":
+            tables = fit_tables(machine, vals, axes, entries, grid)
+            return tables, None, None, tool_error(exact, vals, q, _apply_tables(tables, q))
+        c, offset = fit_matrix(machine, vals, axes, lin, grid, free)
+        return [], c, offset, tool_error(exact, vals, q, _apply_matrix(lin, c, q))
+
+    if progress:
+        progress(f"fitting {fmt} on {machine.name} ({points}^{len(axes)} check points)")
+    before = tool_error(exact, values, q, q)
+    tables, c, offset, after = fit(values)
+    out = Export(fmt, machine, int(np.prod([len(g) for g in grid])), Residual.of(before), Residual.of(after),
+                 tables, c, [a.name for a in lin], offset)
+    if offset is not None:
+        out.after_offset = Residual.of(after - offset.reshape(3, *([1] * (after.ndim - 1))))
+    if shares:
+        names = [s.name for s in machine.errors if _nonzero(values.get(s.name, 0.0))]
+        for n, name in enumerate(names):
+            if progress:
+                progress(f"error {n + 1}/{len(names)}: {name} alone")
+            vals = _errors_only(machine, values, {name})
+            _, _, off, res = fit(vals)
+            if off is not None:   # a matrix leaves an error's constant part to the work offset
+                res = res - off.reshape(3, *([1] * (res.ndim - 1)))
+            out.shares.append(ErrorShare(name, Residual.of(tool_error(exact, vals, q, q)), Residual.of(res)))
+    if reversal:
+        with_reversal(tables, reversal)
+    return out
+
+
+def _nonzero(v) -> bool:
+    return not isinstance(v, (int, float)) or v != 0.0
+
+
+# ----------------------------------------------------------------------------- writers
+
+def linuxcnc_comp_text(table: JointTable, file_type: int) -> str:
+    """The COMP_FILE: one "nominal forward reverse" triplet per line, nothing else (LinuxCNC's
+    reader, usrmotintf.cc usrmotLoadComp, stops at the first line that is not three numbers).
+    Type 0 gives the positions the axis reaches (nominal - trim), type 1 the trims."""
+    lines = []
+    for nom, fwd, rev in zip(table.nominal, table.forward, table.reverse):
+        if file_type == 0:
+            fwd, rev = nom - fwd, nom - rev
+        lines.append(f"{nom:.12g} {fwd:.12g} {rev:.12g}")
+    return "\n".join(lines) + "\n"
+
+
+def linuxcnc_ini_text(e: Export, file_type: int, files: list[str]) -> str:
+    lines = [f"# chaincomp export {e.format}: compensation tables for {e.machine.name}, joints in this order:",
+             f"# {', '.join(t.axis.name for t in e.tables)}; values in the axes' units "
+             f"({', '.join(f'{t.axis.name} {t.axis.unit.name}' for t in e.tables)}). Paste each block into "
+             "the [JOINT_n] section of the INI file."]
+    for n, (t, f) in enumerate(zip(e.tables, files)):
+        lines += [f"[JOINT_{n}]", f"COMP_FILE = {f}", f"COMP_FILE_TYPE = {file_type}"]
+    return "\n".join(lines) + "\n"
+
+
+def matrixkins_text(e: Export) -> str:
+    names = "xyz"
+    lines = [f"# chaincomp export linuxcnc-matrixkins for {e.machine.name}: joint = C . axis on "
+             f"{', '.join(e.linear)} (KINEMATICS = matrixkins; LinuxCNC 2.9 or later)",
+             "# constant offset left to the work offset (G54/G10 L2): "
+             + " ".join(f"{v * 1e3:+.3f}" for v in e.offset) + " um"]
+    for i in range(3):
+        for k in range(3):
+            lines.append(f"setp matrixkins.C_{names[i]}{names[k]} {e.matrix[i, k]:.12g}")
+    return "\n".join(lines) + "\n"
+
+
+def skew_factors(e: Export) -> dict[str, float]:
+    """The Marlin/Klipper factors xy, xz, yz of the fitted matrix: motor x = x - y.xy -
+    z.(xz - xy.yz), motor y = y - z.yz (Marlin planner.h skew(), Klipper skew_correction.py)."""
+    c = e.matrix
+    xy, yz = -c[0, 1], -c[1, 2]
+    return {"xy": xy, "xz": -c[0, 2] + xy * yz, "yz": yz}
+
+
+def to_json(e: Export) -> dict:
+    def res(r: Residual | None):
+        return None if r is None else {"max_um": r.max * 1e3, "rms_um": r.rms * 1e3}
+    doc = {"format": e.format, "machine": e.machine.name, "check_points": e.grid_points,
+           "before": res(e.before), "after": res(e.after)}
+    if e.tables:
+        doc["joints"] = [{"axis": t.axis.name, "unit": t.axis.unit.name, "entries": len(t.nominal),
+                          "largest_trim": float(np.max(np.abs(t.forward)))} for t in e.tables]
+    if e.matrix is not None:
+        doc["linear_axes"] = e.linear
+        doc["matrix"] = e.matrix.tolist()
+        doc["offset_um"] = (e.offset * 1e3).tolist()
+        doc["after_offset"] = res(e.after_offset)
+    doc["errors"] = [{"name": s.name, "before": res(s.before), "after": res(s.after),
+                      "represented": s.represented} for s in e.shares]
+    return doc
+
+
+def to_text(e: Export) -> str:
+    def um(r: Residual) -> str:
+        return f"max {r.max * 1e3:.3f} um, RMS {r.rms * 1e3:.3f} um"
+    n_axes = len(e.tables) or len(e.machine.axes)
+    lines = [f"export {e.format} for {e.machine.name}: checked on {e.grid_points} points "
+             f"({round(e.grid_points ** (1 / n_axes))} per axis over the limits)",
+             f"  tool-point error without compensation: {um(e.before)}",
+             f"  with it (the controller's own rule):    {um(e.after)}"]
+    if e.tables:
+        lines.append("  " + "; ".join(f"{t.axis.name}: {len(t.nominal)} entries, largest trim "
+                                       f"{np.max(np.abs(t.forward)):.6g} {t.axis.unit.name}" for t in e.tables))
+    if e.matrix is not None:
+        lines.append(f"  once the constant offset {', '.join(f'{v * 1e3:+.3f}' for v in e.offset)} um "
+                     f"(x, y, z) is touched off: {um(e.after_offset)}")
+        lines.append("  C (joint = C . axis, " + ", ".join(e.linear) + "): "
+                     + "; ".join(" ".join(f"{v:.9f}" for v in row) for row in e.matrix))
+    if e.shares:
+        left = [s for s in e.shares if s.represented != "yes"]
+        lines.append("  represented: " + (" ".join(s.name for s in e.shares if s.represented == "yes") or "none"))
+        if left:
+            lines.append("  left out, each alone (max um without -> with the format):")
+            lines += [f"    {s.name:<10} {s.before.max * 1e3:9.3f} -> {s.after.max * 1e3:9.3f}  "
+                      f"{'not representable' if s.represented == 'no' else 'partly represented'}" for s in left]
+    return "\n".join(lines)
+
+
+KLIPPER_SIDE = 100.0   # mm: side AD of the calibration square SET_SKEW's lengths describe
+
+
+def klipper_lengths(factor: float, side: float = KLIPPER_SIDE) -> tuple[float, float, float]:
+    """AC, BD, AD of the square (sides ``side``) whose angle at A gives ``factor``: Klipper's
+    calc_skew_factor takes factor = cot(angle DAB) (klippy/extras/skew_correction.py)."""
+    theta = np.arctan2(1.0, factor)
+    return (side * float(np.sqrt(2 * (1 + np.cos(theta)))), side * float(np.sqrt(2 * (1 - np.cos(theta)))), side)
+
+
+def skew_text(e: Export) -> str:
+    """The firmware's command. Marlin M852 (gcode/calibrate/M852.cpp) and Klipper SET_SKEW
+    (docs/G-Codes.md) take the factors of skew_factors(); RepRapFirmware M556 (Move.cpp
+    AxisTransform: x += tanXY.y + tanXZ.z, y += tanYZ.z) adds, with X = S.tanXY, Y = S.tanYZ,
+    Z = S.tanXZ (GCodes2.cpp case 556)."""
+    f = skew_factors(e)
+    if e.format == "marlin":
+        return f"M852 I{f['xy']:.9f} J{f['xz']:.9f} K{f['yz']:.9f}"
+    if e.format == "klipper":
+        planes = {p: ",".join(f"{v:.9f}" for v in klipper_lengths(f[p.lower()])) for p in ("XY", "XZ", "YZ")}
+        return "SET_SKEW " + " ".join(f"{p}={v}" for p, v in planes.items())
+    c, s = e.matrix, KLIPPER_SIDE
+    return f"M556 S{s:g} X{s * c[0, 1]:.9f} Y{s * c[1, 2]:.9f} Z{s * c[0, 2]:.9f}"

@@ -1,0 +1,122 @@
+"""``chaincomp export``: compensation in a controller's own format, checked on the exact model."""
+
+from __future__ import annotations
+
+import os
+import sys
+
+from ..analysis import export as X
+from ..errors import ChaincompError
+from ..model.params import parse_value
+from .common import (add_machine_argument, add_values_arguments, check_finite, check_output, integer, load,
+                     names, to_json, values_for)
+
+MAX_GRID = 101
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("export", help="compensation in a controller's own format (LinuxCNC, printer firmware), "
+                                      "with the residual it leaves",
+                       description="Fits a controller's own compensation to the machine's exact model with the "
+                                   "errors of --params, replays it with the controller's own rule over a grid of "
+                                   "the working volume (--grid points per axis, limits included) and reports the "
+                                   "tool-point error before and after, and for each error alone what the format "
+                                   "leaves of it (an error the format cannot represent is left out). Formats: "
+                                   "linuxcnc-comp (one [JOINT_n]COMP_FILE per joint: -o is a folder), "
+                                   "linuxcnc-matrixkins (C_xx..C_zz of LinuxCNC's matrixkins: -o is a HAL file), "
+                                   "marlin (M852 I J K), klipper (SET_SKEW), rrf (M556): -o is the G-code line. "
+                                   "Nothing is written when anything is refused.")
+    add_machine_argument(p)
+    add_values_arguments(p)
+    p.add_argument("--format", dest="target", required=True, choices=X.FORMATS, help="the controller's format")
+    p.add_argument("-o", "--output", required=True, metavar="OUT", help="what to write (a folder for "
+                   "linuxcnc-comp, a file otherwise)")
+    p.add_argument("--grid", type=integer(2, MAX_GRID), default=9, metavar="N",
+                   help=f"check points per axis, limits included (default 9; at most {X.MAX_POINTS} in all)")
+    p.add_argument("--entries", type=integer(2, X.LINUXCNC_MAX_ENTRIES), default=33, metavar="N",
+                   help=f"linuxcnc-comp: entries per joint, equally spaced over its limits (default 33, at most "
+                        f"{X.LINUXCNC_MAX_ENTRIES}: LinuxCNC's EMCMOT_COMP_SIZE)")
+    p.add_argument("--comp-file-type", type=int, choices=(0, 1), default=1,
+                   help="linuxcnc-comp: COMP_FILE_TYPE 1 (nominal, forward trim, reverse trim; default) or 0 "
+                        "(nominal, position reached forward, reverse)")
+    p.add_argument("--joints", metavar="A1,A2,...", help="the machine's axes in the controller's joint order "
+                   "(default the machine file's order); matrixkins and the printers take the first three linear "
+                   "ones as X, Y, Z")
+    p.add_argument("--reversal", action="append", default=[], metavar="AXIS=VALUE",
+                   help="linuxcnc-comp: ISO 230-2 reversal value B of an axis (e.g. X=4um; repeatable): the "
+                        "forward trim takes -B/2, the reverse +B/2 (the model itself has no reversal)")
+    p.add_argument("--report", choices=("text", "json"), default="text", help="the report's format (default text)")
+    p.add_argument("--no-breakdown", action="store_true", help="skip the fit of each error alone")
+    p.set_defaults(run=run)
+
+
+def _reversal(machine, items: list[str]) -> dict[str, float]:
+    out = {}
+    for item in items:
+        name, eq, raw = item.partition("=")
+        name = name.strip()
+        if not eq or not name:
+            raise ChaincompError(f"--reversal {item!r}: expected AXIS=VALUE, e.g. X=4um")
+        if name not in [a.name for a in machine.axes]:
+            raise ChaincompError(f"--reversal {name}: not an axis of {machine.name} "
+                                 f"({', '.join(a.name for a in machine.axes)})")
+        axis = machine.symbol(name)
+        try:
+            out[name] = axis.from_internal(parse_value(axis, raw))
+        except ValueError as exc:
+            raise ChaincompError(f"--reversal {item}: {exc}") from None
+    return out
+
+
+def _outputs(e: X.Export, out: str, file_type: int) -> dict[str, str]:
+    """Every file to write, path -> text."""
+    if e.format == "linuxcnc-comp":
+        files = [f"joint{n}_{t.axis.name}.comp" for n, t in enumerate(e.tables)]
+        texts = {os.path.join(out, f): X.linuxcnc_comp_text(t, file_type) for f, t in zip(files, e.tables)}
+        texts[os.path.join(out, "compensation.ini")] = X.linuxcnc_ini_text(e, file_type, files)
+        return texts
+    if e.format == "linuxcnc-matrixkins":
+        return {out: X.matrixkins_text(e)}
+    return {out: X.skew_text(e) + "\n"}
+
+
+def _check_folder(out: str, inputs) -> None:
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise ChaincompError(f"-o {out}: linuxcnc-comp writes a folder of files; {out} is a file")
+    parent = os.path.dirname(os.path.abspath(out))
+    if not os.path.isdir(parent):
+        raise ChaincompError(f"-o {out}: folder {parent} does not exist")
+    if not os.access(out if os.path.isdir(out) else parent, os.W_OK):
+        raise ChaincompError(f"-o {out}: not writable")
+
+
+def run(args) -> int:
+    machine = load(args.machine)
+    if args.target == "linuxcnc-comp":
+        _check_folder(args.output, [args.machine, args.params])
+    else:
+        check_output(args.output, args.machine, args.params)
+    reversal = _reversal(machine, args.reversal)
+    if reversal and args.target != "linuxcnc-comp":
+        raise ChaincompError(f"--reversal: only linuxcnc-comp has a reverse trim, not {args.target}")
+    values, has_errors = values_for(machine, args.params, args.sets)
+    if not has_errors:
+        raise ChaincompError("nothing to compensate: give error values (--params P.yaml or --set E=V)")
+    joints = names(args.joints, "--joints") or None
+
+    def progress(text: str) -> None:
+        print(f"export: {text}", file=sys.stderr, flush=True)
+
+    e = X.export(machine, values, args.target, joints, args.grid, args.entries, reversal,
+                 shares=not args.no_breakdown, progress=progress)
+    texts = _outputs(e, args.output, args.comp_file_type)
+    doc = X.to_json(e)
+    check_finite(doc)
+    if args.target == "linuxcnc-comp":
+        os.makedirs(args.output, exist_ok=True)
+    for path, text in texts.items():
+        with open(path, "w") as f:
+            f.write(text)
+        print(f"export: wrote {path}", file=sys.stderr)
+    print(to_json(doc) if args.report == "json" else X.to_text(e))
+    return 0
