@@ -150,7 +150,7 @@ def _mesh(axes: list[Symbol], values_per_axis: list[np.ndarray]) -> dict:
 
 # ----------------------------------------------------------------------------- per-joint tables
 
-def _apply_tables(tables: list[JointTable], q: dict) -> dict:
+def apply_tables(tables: list[JointTable], q: dict) -> dict:
     """Joint positions a controller drives to for commands ``q`` (internal): q + trim(q)."""
     out = dict(q)
     for t in tables:
@@ -181,7 +181,7 @@ def fit_tables(machine: Machine, values: dict, axes: list[Symbol], entries: int,
     for _ in range(sweeps):
         largest = 0.0
         for j, (a, (q, jac)) in enumerate(zip(axes, slices)):
-            r = tool_error(exact, values, q, _apply_tables(tables, q))
+            r = tool_error(exact, values, q, apply_tables(tables, q))
             r = np.moveaxis(r, j + 1, 1).reshape(3, entries, -1)
             num = np.sum(jac * r, axis=(0, 2))
             den = np.sum(jac * jac, axis=(0, 2))
@@ -213,7 +213,7 @@ def linear_axes(machine: Machine, axes: list[Symbol], fmt: str) -> list[Symbol]:
     return lin[:3]
 
 
-def _apply_matrix(lin: list[Symbol], c: np.ndarray, q: dict) -> dict:
+def apply_matrix(lin: list[Symbol], c: np.ndarray, q: dict) -> dict:
     out = dict(q)
     for i, a in enumerate(lin):
         out[a.name] = sum(c[i, k] * q[b.name] for k, b in enumerate(lin))
@@ -237,7 +237,7 @@ def fit_matrix(machine: Machine, values: dict, axes: list[Symbol], lin: list[Sym
                             [-np.kron(np.eye(3), np.ones((pos.shape[1], 1)))], axis=1)
     c, offset = np.eye(3), np.zeros(3)
     for _ in range(iterations):
-        r = tool_error(exact, values, q, _apply_matrix(lin, c, q)).reshape(-1)
+        r = tool_error(exact, values, q, apply_matrix(lin, c, q)).reshape(-1)
         step, *_ = np.linalg.lstsq(design, -r, rcond=None)
         for n, (j, k) in enumerate(idx):
             c[j, k] += step[n]
@@ -273,9 +273,9 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     def fit(vals):
         if fmt == "linuxcnc-comp":
             tables = fit_tables(machine, vals, axes, entries, grid)
-            return tables, None, None, tool_error(exact, vals, q, _apply_tables(tables, q))
+            return tables, None, None, tool_error(exact, vals, q, apply_tables(tables, q))
         c, offset = fit_matrix(machine, vals, axes, lin, grid, free)
-        return [], c, offset, tool_error(exact, vals, q, _apply_matrix(lin, c, q))
+        return [], c, offset, tool_error(exact, vals, q, apply_matrix(lin, c, q))
 
     if progress:
         progress(f"fitting {fmt} on {machine.name} ({points}^{len(axes)} check points)")

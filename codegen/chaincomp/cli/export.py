@@ -15,8 +15,7 @@ MAX_GRID = 101
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("export", help="compensation in a controller's own format (LinuxCNC, printer firmware), "
-                                      "with the residual it leaves",
+    p = sub.add_parser("export", help="compensation in a controller's own format, with the residual it leaves",
                        description="Fits a controller's own compensation to the machine's exact model with the "
                                    "errors of --params, replays it with the controller's own rule over a grid of "
                                    "the working volume (--grid points per axis, limits included) and reports the "

@@ -82,6 +82,7 @@ def rt_run(rt_module):
 def test_without_compensation_the_error_is_the_exact_models(off_run, machine, params):
     completed(off_run)
     assert np.all(off_run.corrections == 0.0)
+    assert np.array_equal(off_run.pos_commands, off_run.commands)   # no LinuxCNC comp files on this route
     _, dwells = program_dwells(off_run)
     exact = ExactModel(machine)
     sizes = []
@@ -380,3 +381,50 @@ def test_trunnion_under_tool_centre_point_control_is_compensated(trunnion_rt_mod
         assert np.linalg.norm(direction[s], axis=1).max() < 1e-8
         assert np.linalg.norm(uncompensated[s], axis=1).min() * 1e3 > 1.0
     assert run.samples[:, cnc.COL_FAULT].max() == 0
+
+
+@pytest.fixture(scope="module")
+def comp_export(machine):
+    """chaincomp export --format linuxcnc-comp of five_axis_ac with the demo params: the fit
+    (its tables predict the residual) and the files LinuxCNC loads."""
+    from chaincomp.analysis import export as X
+    from chaincomp.cli.common import values_for
+
+    values, _ = values_for(machine, PARAMS, [])
+    e = X.export(machine, values, "linuxcnc-comp", None, 5, 33, shares=False)
+    return X, values, e
+
+
+@pytest.fixture(scope="module")
+def comp_run(comp_export, tmp_path_factory):
+    X, _, e = comp_export
+    folder = tmp_path_factory.mktemp("comp")
+    files = {}
+    for n, t in enumerate(e.tables):
+        files[n] = str(folder / f"joint{n}.comp")
+        with open(files[n], "w") as f:
+            f.write(X.linuxcnc_comp_text(t, 1))
+    yield from cleaned(cnc.run("comp", comp=files))
+
+
+def test_comp_files_leave_the_residual_the_exporter_predicts(comp_run, comp_export, machine, params):
+    """LinuxCNC's own per-joint compensation (issue #29), no daemon: at every dwell of the
+    program the tool error of the true machine at the drive positions (motor-pos-cmd, which
+    holds LinuxCNC's trims) against the program (joint.N.pos-cmd) is the residual the
+    exporter predicted from its tables, within 0.1 um. In motion LinuxCNC ramps a trim's
+    changes (backlash_filt, control.c) and the dwells are where it has caught up."""
+    X, values, e = comp_export
+    completed(comp_run)
+    assert np.all(comp_run.corrections == 0.0)   # no HAL offset: only LinuxCNC's own trims
+    trims = comp_run.commands - comp_run.pos_commands
+    found = cnc.dwells(comp_run.pos_commands)
+    assert len(found) >= PROGRAM_DWELLS + 1
+    worst, sizes = 0.0, []
+    for s in found[-PROGRAM_DWELLS:]:
+        measured, _ = cnc.tool_errors(machine, params, comp_run.pos_commands[s], comp_run.drives[s])
+        q = cnc.to_internal(machine, comp_run.pos_commands[s])
+        predicted = X.tool_error(X.ExactModel(machine), values, q, X.apply_tables(e.tables, q)).T
+        worst = max(worst, float(np.abs(measured - predicted).max()))
+        sizes.append(float(np.abs(trims[s]).max()))
+    assert worst < 1e-4, worst * 1e3
+    assert min(sizes) > 1e-3   # the trims were applied: tens of um on the slides
