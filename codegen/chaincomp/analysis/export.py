@@ -7,7 +7,8 @@ Two shapes of correction cover the formats:
 - per-joint tables (LinuxCNC ``[JOINT_n]COMP_FILE``): a trim t_j(q_j) added to each joint's
   command, a function of that joint alone, linear between entries and held outside them
   (src/emc/motion/control.c compute_screw_comp, command.c EMCMOT_SET_JOINT_COMP, LinuxCNC);
-- a 3x3 matrix on the linear axes (LinuxCNC ``matrixkins``: joint = C . axis; the printer
+- a 3x3 matrix on the linear axes (LinuxCNC ``matrixkins``, src/hal/components/matrixkins.comp,
+  on LinuxCNC's master since 2022-11-27, not in 2.9: joint = C . axis; the printer
   firmwares' skew factors are its strictly upper-triangular part).
 
 Every fit runs on the exact model: the tool point with the errors at the corrected joint
@@ -277,19 +278,26 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
         c, offset = fit_matrix(machine, vals, axes, lin, grid, free)
         return [], c, offset, tool_error(exact, vals, q, apply_matrix(lin, c, q))
 
-    if progress:
-        progress(f"fitting {fmt} on {machine.name} ({points}^{len(axes)} check points)")
     before = tool_error(exact, values, q, q)
     tables, c, offset, after = fit(values)
     out = Export(fmt, machine, int(np.prod([len(g) for g in grid])), Residual.of(before), Residual.of(after),
                  tables, c, [a.name for a in lin], offset)
     if offset is not None:
         out.after_offset = Residual.of(after - offset.reshape(3, *([1] * (after.ndim - 1))))
+    # what the format does beyond a touch-off (a matrix leaves the constant to the work offset)
+    left, base = out.after, out.before
+    if offset is not None:
+        left = out.after_offset
+        base = Residual.of(before - before.reshape(3, -1).mean(axis=1).reshape(3, *([1] * (before.ndim - 1))))
+    if not left.max < base.max * (1 - 1e-3) - 1e-7:   # 0.1 nm: rounding, not compensation
+        raise ChaincompError(f"--format {fmt} represents none of the errors given for {machine.name} (largest tool "
+                             f"error {base.max * 1e3:.3f} um without it, {left.max * 1e3:.3f} um with it): "
+                             f"nothing written")
     if shares:
         names = [s.name for s in machine.errors if _nonzero(values.get(s.name, 0.0))]
-        for n, name in enumerate(names):
-            if progress:
-                progress(f"error {n + 1}/{len(names)}: {name} alone")
+        if progress:
+            progress(f"{fmt} fitted on {points}^{len(axes)} check points; now each of the {len(names)} errors alone")
+        for name in names:
             vals = _errors_only(machine, values, {name})
             _, _, off, res = fit(vals)
             if off is not None:   # a matrix leaves an error's constant part to the work offset
@@ -331,7 +339,7 @@ def linuxcnc_ini_text(e: Export, file_type: int, files: list[str]) -> str:
 def matrixkins_text(e: Export) -> str:
     names = "xyz"
     lines = [f"# chaincomp export linuxcnc-matrixkins for {e.machine.name}: joint = C . axis on "
-             f"{', '.join(e.linear)} (KINEMATICS = matrixkins; LinuxCNC 2.9 or later)",
+             f"{', '.join(e.linear)} (KINEMATICS = matrixkins: LinuxCNC 2.10, not in 2.9)",
              "# constant offset left to the work offset (G54/G10 L2): "
              + " ".join(f"{v * 1e3:+.3f}" for v in e.offset) + " um"]
     for i in range(3):

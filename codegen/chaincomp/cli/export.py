@@ -44,7 +44,9 @@ def add_parser(sub) -> None:
     p.add_argument("--reversal", action="append", default=[], metavar="AXIS=VALUE",
                    help="linuxcnc-comp: ISO 230-2 reversal value B of an axis (e.g. X=4um; repeatable): the "
                         "forward trim takes -B/2, the reverse +B/2 (the model itself has no reversal)")
-    p.add_argument("--report", choices=("text", "json"), default="text", help="the report's format (default text)")
+    p.add_argument("--report", choices=("text", "json"), default="text",
+                   help="the report's format (default text; --format names the controller's)")
+    p.add_argument("--json", dest="report", action="store_const", const="json", help="the same as --report json")
     p.add_argument("--no-breakdown", action="store_true", help="skip the fit of each error alone")
     p.set_defaults(run=run)
 

@@ -177,10 +177,11 @@ def test_printer_skew_cancels_squareness(capsys, tmp_path, fmt):
     assert doc["after_offset"]["max_um"] < 0.01
 
 
-def test_printer_skew_cannot_scale(capsys, tmp_path):
-    doc, _ = export(capsys, tmp_path, POSITIONING, "marlin", "--grid", "5")
-    assert {e["name"]: e["represented"] for e in doc["errors"]}["EXX"] != "yes"
-    assert doc["after_offset"]["max_um"] > 1.0
+def test_printer_skew_cannot_scale_and_says_so(tmp_path):
+    machine = write_file(tmp_path, "own_xyz.yaml", OWN)
+    params = write_file(tmp_path, "own.yaml", POSITIONING)
+    nothing_written(tmp_path, "export", machine, "--params", params, "--format", "marlin", "-o", tmp_path / "m.g",
+                    match="--format marlin represents none of the errors given for own_xyz")
 
 
 # ----------------------------------------------------------------------------- bundled machines
@@ -225,6 +226,8 @@ def test_refusals_write_nothing(tmp_path):
     nothing_written(tmp_path, "export", fa, "--params", os.path.join(PARAMS, "five_axis_ac-demo.yaml"),
                     "--format", "linuxcnc-comp", "-o", out, "--grid", "60", match="the check grid would hold")
     nothing_written(tmp_path, "export", vmc, "--format", "marlin", "-o", out, match="nothing to compensate")
+    nothing_written(tmp_path, "export", vmc, "--set", "EXX=3um", "--format", "marlin", "-o", out,
+                    match="--format marlin represents none of the errors given for vmc_xyz")
     nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "linuxcnc-comp", "-o", out,
                     "--reversal", "Q=1um", match="--reversal Q: not an axis")
     nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "marlin", "-o", out,
