@@ -16,12 +16,14 @@ positions against the nominal tool point at the commanded ones."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import ChaincompError
 from ..model.machine import Machine, Symbol
+from ..model.varying import varying_errors
 from ..symbolic.numeric import ExactModel
 
 # LinuxCNC: motion.h EMCMOT_COMP_SIZE; a larger file is refused entry by entry
@@ -266,6 +268,7 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     if unknown:
         raise ChaincompError(f"--reversal {unknown[0]}: not an axis of {machine.name}")
     grid = check_grid(machine, axes, points)
+    values = _held_at_the_ends(machine, values)
     lin = linear_axes(machine, axes, fmt) if fmt != "linuxcnc-comp" else []
     free = np.ones((3, 3), bool) if fmt == "linuxcnc-matrixkins" else SKEW
     exact = ExactModel(machine)
@@ -305,6 +308,20 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
             out.shares.append(ErrorShare(name, Residual.of(tool_error(exact, vals, q, q)), Residual.of(res)))
     if reversal:
         with_reversal(tables, reversal)
+    return out
+
+
+def _held_at_the_ends(machine: Machine, values: dict) -> dict:
+    """A table or polynomial that rejects outside its range must cover its axis' limits (the
+    grid reaches them); the corrected positions then pass its ends by the trims (um), where it
+    is held: the error there is the end's."""
+    out = dict(values)
+    for name, v in varying_errors(values).items():
+        if v.outside == "reject":
+            lo, hi = machine.symbol(v.axis).limits
+            for t in (lo, hi):
+                v.check_inside(machine.symbol(v.axis).to_internal(t))
+            out[name] = dataclasses.replace(v, outside="hold")
     return out
 
 

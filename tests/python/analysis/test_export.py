@@ -237,3 +237,33 @@ def test_refusals_write_nothing(tmp_path):
     (tmp_path / "file").write_text("x")
     nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "linuxcnc-comp", "-o",
                     tmp_path / "file", match="is a file")
+
+
+def test_a_rejecting_table_must_cover_the_axis_and_is_held_past_its_ends(capsys, tmp_path):
+    """The trims drive X a few um past a table's ends at the limits: there it is held (the
+    machine's error there is the end's), not NaN; a table short of the limits is refused."""
+    table = """\
+machine: own_xyz
+values:
+  EXX:
+    axis: X
+    units: [mm, um]
+    interpolation: linear
+    outside: reject
+    table:
+      - [{first}, 5]
+      - [150, -3]
+      - [300, 8]
+"""
+    doc, out = export(capsys, tmp_path, table.format(first=0), "linuxcnc-comp", "--entries", "33", "--grid", "5")
+    t = linuxcnc_comp.read((out / "joint0_X.comp").read_text(), 1)
+
+    def truth(x):   # the table, read by hand: linear between its rows, held past its ends
+        return np.interp(x, [0, 150, 300], [5e-3, -3e-3, 8e-3])
+    x = np.linspace(0, 300, 1001)
+    assert np.abs(x + linuxcnc_comp.trim(t, x) + truth(x + linuxcnc_comp.trim(t, x)) - x).max() < 1e-5
+    assert doc["after"]["max_um"] < 0.01
+    machine = write_file(tmp_path, "own_xyz.yaml", OWN)
+    params = write_file(tmp_path, "short.yaml", table.format(first=1))
+    nothing_written(tmp_path, "export", machine, "--params", params, "--format", "linuxcnc-comp",
+                    "-o", tmp_path / "c", match="short.yaml:3: values.EXX: X = 0 mm lies outside the table")
