@@ -29,6 +29,17 @@ from ..symbolic.numeric import ExactModel
 # LinuxCNC: motion.h EMCMOT_COMP_SIZE; a larger file is refused entry by entry
 LINUXCNC_MAX_ENTRIES = 256
 MAX_POINTS = 2_000_000      # exact-model evaluations held at once by one fit or check
+DEFAULT_GRID_POINTS = 100_000  # the default check grid's size: 9 per axis up to five axes
+
+
+def default_grid(n_axes: int) -> int:
+    """Points per axis of the default check grid: 9, or fewer where 9^n would be too many."""
+    n = 9
+    while n > 3 and n ** n_axes > DEFAULT_GRID_POINTS:
+        n -= 1
+    return n
+
+
 FD_STEP = 1e-4              # mm or rad: central differences of the nominal model (exact for linear axes)
 
 
@@ -162,18 +173,15 @@ def apply_tables(tables: list[JointTable], q: dict) -> dict:
     return out
 
 
-def fit_tables(machine: Machine, values: dict, axes: list[Symbol], entries: int, grid: list[np.ndarray],
-               sweeps: int = 4) -> list[JointTable]:
-    """Per-joint trims on ``entries`` equally spaced positions per joint, fitted to the exact
-    model by sweeps over the joints: each entry's trim takes the least-squares step that
-    cancels the tool error, along its joint's direction of motion, over the check grid of
-    the other joints (the trims of all joints applied as the controller applies them)."""
+def table_slices(machine: Machine, values: dict, axes: list[Symbol], entries: int, grid: list[np.ndarray]):
+    """Per joint: the fit's sample points (its entries x the check grid of the other joints)
+    and the nominal tool point's derivative along it there (the errors do not enter: one
+    computation serves every fit on these points)."""
     exact = ExactModel(machine)
-    tables = [JointTable(a, np.linspace(a.limits[0], a.limits[1], entries), np.zeros(entries), np.zeros(entries))
-              for a in axes]
     slices = []
     for j, a in enumerate(axes):
-        per_axis = [tables[j].nominal if k == j else grid[k] for k in range(len(axes))]
+        nominal = np.linspace(a.limits[0], a.limits[1], entries)
+        per_axis = [nominal if k == j else grid[k] for k in range(len(axes))]
         size = int(np.prod([len(v) for v in per_axis]))
         if size > MAX_POINTS:
             raise ChaincompError(f"fitting joint {a.name} would take {size} points ({entries} entries x the grid "
@@ -181,6 +189,18 @@ def fit_tables(machine: Machine, values: dict, axes: list[Symbol], entries: int,
         q = _mesh(axes, per_axis)
         jac = _jacobian_column(exact, values, q, a.name)
         slices.append((q, np.moveaxis(jac, j + 1, 1).reshape(3, entries, -1)))
+    return slices
+
+
+def fit_tables(machine: Machine, values: dict, axes: list[Symbol], entries: int, slices, sweeps: int = 4) -> list[JointTable]:
+    """Per-joint trims on ``entries`` equally spaced positions per joint, fitted to the exact
+    model by sweeps over the joints: each entry's trim takes the least-squares step that
+    cancels the tool error, along its joint's direction of motion, over the check grid of
+    the other joints (``slices``: table_slices; the trims of all joints applied as the
+    controller applies them)."""
+    exact = ExactModel(machine)
+    tables = [JointTable(a, np.linspace(a.limits[0], a.limits[1], entries), np.zeros(entries), np.zeros(entries))
+              for a in axes]
     for _ in range(sweeps):
         largest = 0.0
         for j, (a, (q, jac)) in enumerate(zip(axes, slices)):
@@ -274,9 +294,11 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     exact = ExactModel(machine)
     q = _mesh(axes, grid)
 
-    def fit(vals):
+    slices = table_slices(machine, values, axes, entries, grid) if fmt == "linuxcnc-comp" else None
+
+    def fit(vals, sweeps=4):
         if fmt == "linuxcnc-comp":
-            tables = fit_tables(machine, vals, axes, entries, grid)
+            tables = fit_tables(machine, vals, axes, entries, slices, sweeps)
             return tables, None, None, tool_error(exact, vals, q, apply_tables(tables, q))
         c, offset = fit_matrix(machine, vals, axes, lin, grid, free)
         return [], c, offset, tool_error(exact, vals, q, apply_matrix(lin, c, q))
@@ -302,7 +324,7 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
             progress(f"{fmt} fitted on {points}^{len(axes)} check points; now each of the {len(names)} errors alone")
         for name in names:
             vals = _errors_only(machine, values, {name})
-            _, _, off, res = fit(vals)
+            _, _, off, res = fit(vals, sweeps=2)   # one error alone: its share, to a few per cent
             if off is not None:   # a matrix leaves an error's constant part to the work offset
                 res = res - off.reshape(3, *([1] * (res.ndim - 1)))
             out.shares.append(ErrorShare(name, Residual.of(tool_error(exact, vals, q, q)), Residual.of(res)))

@@ -30,8 +30,9 @@ def add_parser(sub) -> None:
     p.add_argument("--format", dest="target", required=True, choices=X.FORMATS, help="the controller's format")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="what to write (a folder for "
                    "linuxcnc-comp, a file otherwise)")
-    p.add_argument("--grid", type=integer(2, MAX_GRID), default=9, metavar="N",
-                   help=f"check points per axis, limits included (default 9; at most {X.MAX_POINTS} in all)")
+    p.add_argument("--grid", type=integer(2, MAX_GRID), metavar="N",
+                   help=f"check points per axis, limits included (default 9, fewer on a chain of more than five "
+                        f"axes: at most {X.DEFAULT_GRID_POINTS} in all; at most {X.MAX_POINTS} when given)")
     p.add_argument("--entries", type=integer(2, X.LINUXCNC_MAX_ENTRIES), default=33, metavar="N",
                    help=f"linuxcnc-comp: entries per joint, equally spaced over its limits (default 33, at most "
                         f"{X.LINUXCNC_MAX_ENTRIES}: LinuxCNC's EMCMOT_COMP_SIZE)")
@@ -108,7 +109,8 @@ def run(args) -> int:
     def progress(text: str) -> None:
         print(f"export: {text}", file=sys.stderr, flush=True)
 
-    e = X.export(machine, values, args.target, joints, args.grid, args.entries, reversal,
+    grid = args.grid or X.default_grid(len(machine.axes))
+    e = X.export(machine, values, args.target, joints, grid, args.entries, reversal,
                  shares=not args.no_breakdown, progress=progress)
     texts = _outputs(e, args.output, args.comp_file_type)
     doc = X.to_json(e)
