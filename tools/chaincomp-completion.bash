@@ -9,7 +9,7 @@ _chaincomp() {
         case "${COMP_WORDS[i]}" in -*) ;; *) verb="${COMP_WORDS[i]}"; break;; esac
     done
     if [[ -z $verb ]]; then
-        words='derive eval generate testvectors protocol identify simulate-measurements simulate-log replay plot check report budget simulate-calibration build lint iso230-2 laser-to-params status import-urdf ballbar -h --help --version'
+        words='derive eval generate testvectors protocol identify simulate-measurements simulate-log replay plot check report budget simulate-calibration build lint iso230-2 laser-to-params status import-urdf ballbar export -h --help --version'
     else
         case "$verb" in
         derive)
@@ -125,6 +125,13 @@ _chaincomp() {
             --plane) words='XY YZ ZX';;
             --format) words='text json';;
             *) words='-h --help --params --set --plane --radius --centre --center --axes --points --feed --fit --degree --assume-zero --prefer --format --json --plot -o --output'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        export)
+          case "$prev" in
+            --format) words='linuxcnc-comp linuxcnc-matrixkins klipper marlin rrf';;
+            --comp-file-type) words='0 1';;
+            --report) words='text json';;
+            *) words='-h --help --params --set --format -o --output --grid --entries --comp-file-type --joints --reversal --report --json --no-breakdown'; [[ $cur == -* ]] || return 0;;
           esac;;
         *) return 0;;
         esac

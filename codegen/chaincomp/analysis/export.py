@@ -29,6 +29,7 @@ from ..symbolic.numeric import ExactModel
 # LinuxCNC: motion.h EMCMOT_COMP_SIZE; a larger file is refused entry by entry
 LINUXCNC_MAX_ENTRIES = 256
 MAX_POINTS = 2_000_000      # exact-model evaluations held at once by one fit or check
+MAX_BREAKDOWN = 120_000_000  # errors x check points of the breakdown (each error alone): about a minute
 DEFAULT_GRID_POINTS = 100_000  # the default check grid's size: 9 per axis up to five axes
 
 
@@ -40,7 +41,7 @@ def default_grid(n_axes: int) -> int:
     return n
 
 
-FD_STEP = 1e-4              # mm or rad: central differences of the nominal model (exact for linear axes)
+FD_STEP = 1e-4              # mm or rad: differences of the nominal model (exact for linear axes), kept inside the limits
 
 
 @dataclass
@@ -50,8 +51,9 @@ class Residual:
     rms: float
 
     @classmethod
-    def of(cls, dp: np.ndarray) -> Residual:
-        n = np.sqrt(np.sum(dp * dp, axis=0)).ravel()
+    def of(cls, dp) -> Residual:
+        """Of a (3, ...) error, or of a list of them (the check sets)."""
+        n = np.concatenate([np.sqrt(np.sum(d * d, axis=0)).ravel() for d in (dp if isinstance(dp, list) else [dp])])
         return cls(float(n.max()), float(np.sqrt(np.mean(n * n))))
 
 
@@ -90,7 +92,8 @@ class Export:
     """What an exporter fitted, and what it leaves."""
     format: str
     machine: Machine
-    grid_points: int
+    grid: int              # check points per axis over the limits
+    grid_points: int       # every point checked (with the points between table entries)
     before: Residual
     after: Residual
     tables: list[JointTable] = field(default_factory=list)
@@ -122,13 +125,29 @@ def tool_error(exact: ExactModel, values: dict, commanded: dict, actual: dict) -
 
 
 def _jacobian_column(exact: ExactModel, values: dict, q: dict, axis: str) -> np.ndarray:
-    """d(nominal tool point)/d(axis) at ``q`` by central differences (internal units)."""
+    """d(nominal tool point)/d(axis) at ``q`` by differences (internal units): central, and
+    one-sided at the limits (the model need not exist beyond them: sqrt(X) from X = 0)."""
     nominal = _nominal(exact.machine, values)
-    plus, _ = exact.pose({**nominal, **q, axis: q[axis] + FD_STEP})
-    minus, _ = exact.pose({**nominal, **q, axis: q[axis] - FD_STEP})
+    lo, hi = (exact.machine.symbol(axis).to_internal(v) for v in exact.machine.symbol(axis).limits)
+    up, down = np.minimum(q[axis] + FD_STEP, max(lo, hi)), np.maximum(q[axis] - FD_STEP, min(lo, hi))
+    plus, _ = exact.pose({**nominal, **q, axis: up})
+    minus, _ = exact.pose({**nominal, **q, axis: down})
     shape = np.broadcast_shapes(*(np.shape(v) for v in q.values()))
-    return np.stack([np.broadcast_to((np.asarray(a, float) - np.asarray(b, float)) / (2 * FD_STEP), shape)
-                     for a, b in zip(plus, minus)])
+    jac = np.stack([np.broadcast_to((np.asarray(a, float) - np.asarray(b, float)) / (up - down), shape)
+                    for a, b in zip(plus, minus)])
+    _check_finite(exact.machine, jac, q, f"the derivative along {axis} of the nominal tool point")
+    return jac
+
+
+def _check_finite(machine: Machine, dp: np.ndarray, q: dict, what: str) -> None:
+    """Refuse a model that is not finite somewhere on the points checked, naming the first."""
+    bad = ~np.isfinite(dp).all(axis=0)
+    if bad.any():
+        k = np.unravel_index(int(np.argmax(bad.ravel())), bad.shape)
+        at = ", ".join(f"{n} = {machine.symbol(n).from_internal(float(np.broadcast_to(v, bad.shape)[k])):.6g} "
+                       f"{machine.symbol(n).unit.name}" for n, v in q.items())
+        raise ChaincompError(f"{machine.name}: {what} is not finite at {at} ({machine.file}: an expression "
+                             f"undefined inside the axes' limits, e.g. sqrt or a division): nothing written")
 
 
 def axes_of(machine: Machine, joints: list[str] | None) -> list[Symbol]:
@@ -243,28 +262,56 @@ def apply_matrix(lin: list[Symbol], c: np.ndarray, q: dict) -> dict:
     return out
 
 
-def fit_matrix(machine: Machine, values: dict, axes: list[Symbol], lin: list[Symbol], grid: list[np.ndarray],
-               free: np.ndarray, iterations: int = 3) -> tuple[np.ndarray, np.ndarray]:
-    """C (joint = C . axis on ``lin``; the entries ``free`` fitted, the others those of the
-    identity) and the constant offset c that best cancel the exact tool error over the grid
-    (Gauss-Newton on the exact model; the offset is the work offset's, not the matrix's)."""
+@dataclass
+class MatrixDesign:
+    """The normal equations of the matrix fit on the check grid: the nominal model's
+    derivatives enter, not the errors, so one design serves every fit on the grid."""
+    q: dict
+    jac: np.ndarray          # (3, 3, S): d(tool point)/d(linear axis)
+    pos: np.ndarray          # (3, S): the linear axes' commands
+    free: list[tuple[int, int]]
+    ata: np.ndarray
+
+
+def matrix_design(machine: Machine, values: dict, axes: list[Symbol], lin: list[Symbol], grid: list[np.ndarray],
+                  free: np.ndarray) -> MatrixDesign:
+    """Minimise |r + A.step - offset|^2 over rows (component i, sample s), columns the free
+    entries of C (jac[i, j, s] pos[k, s]) then the offset left (-1 on its component), by the
+    normal equations: A (3 S rows) is never formed, only A'A here and A'r in fit_matrix."""
     exact = ExactModel(machine)
     q = _mesh(axes, grid)
-    jac = np.stack([_jacobian_column(exact, values, q, a.name).reshape(3, -1) for a in lin], axis=1)  # (3, 3, S)
+    jac = np.stack([_jacobian_column(exact, values, q, a.name).reshape(3, -1) for a in lin], axis=1)
     pos = np.stack([np.broadcast_to(q[a.name], np.broadcast_shapes(*(np.shape(v) for v in q.values()))).ravel()
-                    for a in lin])                                                                    # (3, S)
+                    for a in lin])
     idx = [(j, k) for j in range(3) for k in range(3) if free[j, k]]
-    # minimise |r + A.step - offset|^2: rows (component i, sample s); columns the free
-    # entries, then the offset left (absolute: r is recomputed on the exact model each time)
-    design = np.concatenate([(jac[:, j, :] * pos[k][None, :]).reshape(-1, 1) for j, k in idx] +
-                            [-np.kron(np.eye(3), np.ones((pos.shape[1], 1)))], axis=1)
-    c, offset = np.eye(3), np.zeros(3)
+    gram = np.einsum("ijs,ils,ks,ms->jklm", jac, jac, pos, pos, optimize=True)    # (j,k) x (l,m)
+    cross = np.einsum("ijs,ks->ijk", jac, pos)                                     # offset i x (j,k)
+    n = len(idx)
+    ata = np.zeros((n + 3, n + 3))
+    for a, (j, k) in enumerate(idx):
+        for b, (l, m) in enumerate(idx):
+            ata[a, b] = gram[j, k, l, m]
+        ata[a, n:] = ata[n:, a] = -cross[:, j, k]
+    ata[n:, n:] = np.eye(3) * pos.shape[1]
+    return MatrixDesign(q, jac, pos, idx, ata)
+
+
+def fit_matrix(machine: Machine, values: dict, lin: list[Symbol], d: MatrixDesign,
+               iterations: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """C (joint = C . axis on ``lin``; the free entries fitted, the others those of the
+    identity) and the constant offset that best cancel the exact tool error over the grid
+    (Gauss-Newton on the exact model, r recomputed each time; the offset is the work
+    offset's, not the matrix's)."""
+    exact = ExactModel(machine)
+    c, offset, n = np.eye(3), np.zeros(3), len(d.free)
     for _ in range(iterations):
-        r = tool_error(exact, values, q, apply_matrix(lin, c, q)).reshape(-1)
-        step, *_ = np.linalg.lstsq(design, -r, rcond=None)
-        for n, (j, k) in enumerate(idx):
-            c[j, k] += step[n]
-        offset = step[len(idx):]
+        r = tool_error(exact, values, d.q, apply_matrix(lin, c, d.q)).reshape(3, -1)
+        rc = np.einsum("ijs,ks,is->jk", d.jac, d.pos, r)
+        atr = np.concatenate([[rc[j, k] for j, k in d.free], -r.sum(axis=1)])
+        step, *_ = np.linalg.lstsq(d.ata, -atr, rcond=None)
+        for a, (j, k) in enumerate(d.free):
+            c[j, k] += step[a]
+        offset = step[n:]
     return c, offset
 
 
@@ -274,10 +321,27 @@ FORMATS = ("linuxcnc-comp", "linuxcnc-matrixkins", "klipper", "marlin", "rrf")
 SKEW = np.array([[False, True, True], [False, False, True], [False, False, False]])
 
 
+def between_entries(axes: list[Symbol], entries: int, grid: list[np.ndarray]) -> list[dict]:
+    """Per joint, the midpoints of its table's entries x the check grid of the other joints:
+    where a table's linear rule is furthest from the model (a grid of 9 on 33 entries would
+    fall on entries only)."""
+    sets = []
+    for j, a in enumerate(axes):
+        nominal = np.linspace(a.limits[0], a.limits[1], entries)
+        size = (entries - 1) * int(np.prod([len(g) for k, g in enumerate(grid) if k != j]))
+        if size > MAX_POINTS:
+            raise ChaincompError(f"checking joint {a.name} between its entries would take {size} points ({entries - 1} "
+                                 f"midpoints x the grid of the other joints; at most {MAX_POINTS}): lower --entries "
+                                 f"or --grid")
+        sets.append(_mesh(axes, [(nominal[1:] + nominal[:-1]) / 2 if k == j else grid[k] for k in range(len(axes))]))
+    return sets
+
+
 def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, points: int, entries: int,
            reversal: dict[str, float] | None = None, shares: bool = True, progress=None) -> Export:
     """Fit the format to the model (``values``: internal units, every symbol) and replay it
-    over the check grid; with ``shares`` also each nonzero error alone."""
+    over the check grid (for tables also between every two entries of each joint); with
+    ``shares`` also each nonzero error alone."""
     if fmt not in FORMATS:
         raise ChaincompError(f"--format {fmt!r}: expected one of {', '.join(FORMATS)}")
     axes = axes_of(machine, joints)
@@ -292,42 +356,57 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     lin = linear_axes(machine, axes, fmt) if fmt != "linuxcnc-comp" else []
     free = np.ones((3, 3), bool) if fmt == "linuxcnc-matrixkins" else SKEW
     exact = ExactModel(machine)
-    q = _mesh(axes, grid)
-
+    sets = [_mesh(axes, grid)]
+    if fmt == "linuxcnc-comp":
+        sets += between_entries(axes, entries, grid)
+    n_points = sum(int(np.prod(np.broadcast_shapes(*(np.shape(v) for v in q.values())))) for q in sets)
+    names = [s.name for s in machine.errors if _nonzero(values.get(s.name, 0.0))]
+    if shares and len(names) * n_points > MAX_BREAKDOWN:
+        raise ChaincompError(f"the breakdown would fit each of {len(names)} errors alone on {n_points} points "
+                             f"(at most {MAX_BREAKDOWN} in all): lower --grid or add --no-breakdown")
+    before = [tool_error(exact, values, q, q) for q in sets]
+    for b, q in zip(before, sets):
+        _check_finite(machine, b, q, "the tool point with the errors given")
     slices = table_slices(machine, values, axes, entries, grid) if fmt == "linuxcnc-comp" else None
+    design = matrix_design(machine, values, axes, lin, grid, free) if lin else None
 
     def fit(vals, sweeps=4):
         if fmt == "linuxcnc-comp":
             tables = fit_tables(machine, vals, axes, entries, slices, sweeps)
-            return tables, None, None, tool_error(exact, vals, q, apply_tables(tables, q))
-        c, offset = fit_matrix(machine, vals, axes, lin, grid, free)
-        return [], c, offset, tool_error(exact, vals, q, apply_matrix(lin, c, q))
+            return tables, None, None, [tool_error(exact, vals, q, apply_tables(tables, q)) for q in sets]
+        c, offset = fit_matrix(machine, vals, lin, design, iterations=max(sweeps - 1, 1))
+        return [], c, offset, [tool_error(exact, vals, q, apply_matrix(lin, c, q)) for q in sets]
 
-    before = tool_error(exact, values, q, q)
+    def shifted(dp: list[np.ndarray], by: np.ndarray) -> list[np.ndarray]:
+        return [d - by.reshape(3, *([1] * (d.ndim - 1))) for d in dp]
+
     tables, c, offset, after = fit(values)
-    out = Export(fmt, machine, int(np.prod([len(g) for g in grid])), Residual.of(before), Residual.of(after),
+    for a, q in zip(after, sets):
+        _check_finite(machine, a, q, f"the tool point with {fmt}'s correction")
+    out = Export(fmt, machine, points, n_points, Residual.of(before), Residual.of(after),
                  tables, c, [a.name for a in lin], offset)
-    if offset is not None:
-        out.after_offset = Residual.of(after - offset.reshape(3, *([1] * (after.ndim - 1))))
     # what the format does beyond a touch-off (a matrix leaves the constant to the work offset)
     left, base = out.after, out.before
     if offset is not None:
-        left = out.after_offset
-        base = Residual.of(before - before.reshape(3, -1).mean(axis=1).reshape(3, *([1] * (before.ndim - 1))))
+        out.after_offset = left = Residual.of(shifted(after, offset))
+        base = Residual.of(shifted(before, before[0].reshape(3, -1).mean(axis=1)))
     if not left.max < base.max * (1 - 1e-3) - 1e-7:   # 0.1 nm: rounding, not compensation
-        raise ChaincompError(f"--format {fmt} represents none of the errors given for {machine.name} (largest tool "
-                             f"error {base.max * 1e3:.3f} um without it, {left.max * 1e3:.3f} um with it): "
-                             f"nothing written")
+        worse = left.max > base.max + 1e-7   # a fit on a coarse grid, worse between its points
+        raise ChaincompError(f"--format {fmt} " + ("leaves more tool error than no compensation" if worse else
+                             "represents none of the errors given") + f" for {machine.name} (largest tool error "
+                             f"{base.max * 1e3:.3f} um without it, {left.max * 1e3:.3f} um with it, on "
+                             f"{n_points} points" + ("; a finer --grid fits on more" if worse else "") +
+                             "): nothing written")
     if shares:
-        names = [s.name for s in machine.errors if _nonzero(values.get(s.name, 0.0))]
         if progress:
-            progress(f"{fmt} fitted on {points}^{len(axes)} check points; now each of the {len(names)} errors alone")
+            progress(f"{fmt} fitted and checked on {n_points} points; now each of the {len(names)} errors alone")
         for name in names:
             vals = _errors_only(machine, values, {name})
             _, _, off, res = fit(vals, sweeps=2)   # one error alone: its share, to a few per cent
             if off is not None:   # a matrix leaves an error's constant part to the work offset
-                res = res - off.reshape(3, *([1] * (res.ndim - 1)))
-            out.shares.append(ErrorShare(name, Residual.of(tool_error(exact, vals, q, q)), Residual.of(res)))
+                res = shifted(res, off)
+            out.shares.append(ErrorShare(name, Residual.of([tool_error(exact, vals, q, q) for q in sets]),
+                                         Residual.of(res)))
     if reversal:
         with_reversal(tables, reversal)
     return out
@@ -356,12 +435,24 @@ def _nonzero(v) -> bool:
 def linuxcnc_comp_text(table: JointTable, file_type: int) -> str:
     """The COMP_FILE: one "nominal forward reverse" triplet per line, nothing else (LinuxCNC's
     reader, usrmotintf.cc usrmotLoadComp, stops at the first line that is not three numbers).
-    Type 0 gives the positions the axis reaches (nominal - trim), type 1 the trims."""
+    Type 0 gives the positions the axis reaches (nominal - trim), type 1 the trims. Numbers
+    are written to round trip (repr); a table whose entries or trims the file cannot carry
+    (entries too close for their magnitude, a trim lost in nominal - trim) is refused."""
     lines = []
     for nom, fwd, rev in zip(table.nominal, table.forward, table.reverse):
         if file_type == 0:
             fwd, rev = nom - fwd, nom - rev
-        lines.append(f"{nom:.12g} {fwd:.12g} {rev:.12g}")
+        lines.append(f"{float(nom)!r} {float(fwd)!r} {float(rev)!r}")
+    a = table.axis
+    read = np.array([[float(v) for v in line.split()] for line in lines])
+    if not np.all(np.diff(read[:, 0]) > 0):
+        raise ChaincompError(f"joint {a.name}: {len(lines)} entries over [{a.limits[0]:g}, {a.limits[1]:g}] "
+                             f"{a.unit.name} cannot be told apart in a compensation file: lower --entries")
+    trims = read[:, :1] - read[:, 1:] if file_type == 0 else read[:, 1:]
+    lost = np.abs(a.to_internal(trims - np.stack([table.forward, table.reverse], axis=1)))
+    if lost.max() > 1e-7:   # internal units: 0.1 nm or 0.1 urad
+        raise ChaincompError(f"joint {a.name}: COMP_FILE_TYPE {file_type} loses up to {lost.max():.3g} (internal "
+                             f"units) of the trims at positions of this magnitude: use --comp-file-type 1")
     return "\n".join(lines) + "\n"
 
 
@@ -398,7 +489,7 @@ def skew_factors(e: Export) -> dict[str, float]:
 def to_json(e: Export) -> dict:
     def res(r: Residual | None):
         return None if r is None else {"max_um": r.max * 1e3, "rms_um": r.rms * 1e3}
-    doc = {"format": e.format, "machine": e.machine.name, "check_points": e.grid_points,
+    doc = {"format": e.format, "machine": e.machine.name, "grid": e.grid, "check_points": e.grid_points,
            "before": res(e.before), "after": res(e.after)}
     if e.tables:
         doc["joints"] = [{"axis": t.axis.name, "unit": t.axis.unit.name, "entries": len(t.nominal),
@@ -416,9 +507,9 @@ def to_json(e: Export) -> dict:
 def to_text(e: Export) -> str:
     def um(r: Residual) -> str:
         return f"max {r.max * 1e3:.3f} um, RMS {r.rms * 1e3:.3f} um"
-    n_axes = len(e.tables) or len(e.machine.axes)
+    between = ", and between every two entries of each joint" if e.tables else ""
     lines = [f"export {e.format} for {e.machine.name}: checked on {e.grid_points} points "
-             f"({round(e.grid_points ** (1 / n_axes))} per axis over the limits)",
+             f"({e.grid} per axis over the limits{between})",
              f"  tool-point error without compensation: {um(e.before)}",
              f"  with it (the controller's own rule):    {um(e.after)}"]
     if e.tables:

@@ -9,7 +9,7 @@ from ..analysis import export as X
 from ..errors import ChaincompError
 from ..model.params import parse_value
 from .common import (add_machine_argument, add_values_arguments, check_finite, check_output, integer, load,
-                     names, to_json, values_for)
+                     names, refuse_empty, to_json, values_for)
 
 MAX_GRID = 101
 
@@ -59,6 +59,8 @@ def _reversal(machine, items: list[str]) -> dict[str, float]:
         name = name.strip()
         if not eq or not name:
             raise ChaincompError(f"--reversal {item!r}: expected AXIS=VALUE, e.g. X=4um")
+        if name in out:
+            raise ChaincompError(f"--reversal {name}: given twice")
         if name not in [a.name for a in machine.axes]:
             raise ChaincompError(f"--reversal {name}: not an axis of {machine.name} "
                                  f"({', '.join(a.name for a in machine.axes)})")
@@ -73,7 +75,7 @@ def _reversal(machine, items: list[str]) -> dict[str, float]:
 def _outputs(e: X.Export, out: str, file_type: int) -> dict[str, str]:
     """Every file to write, path -> text."""
     if e.format == "linuxcnc-comp":
-        files = [f"joint{n}_{t.axis.name}.comp" for n, t in enumerate(e.tables)]
+        files = _comp_files([t.axis for t in e.tables])
         texts = {os.path.join(out, f): X.linuxcnc_comp_text(t, file_type) for f, t in zip(files, e.tables)}
         texts[os.path.join(out, "compensation.ini")] = X.linuxcnc_ini_text(e, file_type, files)
         return texts
@@ -82,7 +84,14 @@ def _outputs(e: X.Export, out: str, file_type: int) -> dict[str, str]:
     return {out: X.skew_text(e) + "\n"}
 
 
-def _check_folder(out: str, inputs) -> None:
+def _comp_files(axes) -> list[str]:
+    return [f"joint{n}_{a.name}.comp" for n, a in enumerate(axes)]
+
+
+def _check_folder(out: str, files: list[str], inputs) -> None:
+    """The folder linuxcnc-comp writes, and each file in it (before the work: none is an
+    input, a folder, or read-only)."""
+    refuse_empty(("-o", out), hint="expected a folder name")
     if os.path.exists(out) and not os.path.isdir(out):
         raise ChaincompError(f"-o {out}: linuxcnc-comp writes a folder of files; {out} is a file")
     parent = os.path.dirname(os.path.abspath(out))
@@ -90,21 +99,28 @@ def _check_folder(out: str, inputs) -> None:
         raise ChaincompError(f"-o {out}: folder {parent} does not exist")
     if not os.access(out if os.path.isdir(out) else parent, os.W_OK):
         raise ChaincompError(f"-o {out}: not writable")
+    if os.path.isdir(out):
+        for f in files + ["compensation.ini"]:
+            check_output(os.path.join(out, f), *inputs)
 
 
 def run(args) -> int:
     machine = load(args.machine)
+    joints = names(args.joints, "--joints") or None
     if args.target == "linuxcnc-comp":
-        _check_folder(args.output, [args.machine, args.params])
+        _check_folder(args.output, _comp_files(X.axes_of(machine, joints)), [args.machine, args.params])
     else:
         check_output(args.output, args.machine, args.params)
+    for item in args.sets:
+        name = item.partition("=")[0].strip()
+        if name in [a.name for a in machine.axes]:
+            raise ChaincompError(f"--set {item}: {name} is an axis; export checks every axis over its limits")
     reversal = _reversal(machine, args.reversal)
     if reversal and args.target != "linuxcnc-comp":
         raise ChaincompError(f"--reversal: only linuxcnc-comp has a reverse trim, not {args.target}")
     values, has_errors = values_for(machine, args.params, args.sets)
     if not has_errors:
         raise ChaincompError("nothing to compensate: give error values (--params P.yaml or --set E=V)")
-    joints = names(args.joints, "--joints") or None
 
     def progress(text: str) -> None:
         print(f"export: {text}", file=sys.stderr, flush=True)
@@ -117,9 +133,21 @@ def run(args) -> int:
     check_finite(doc)
     if args.target == "linuxcnc-comp":
         os.makedirs(args.output, exist_ok=True)
-    for path, text in texts.items():
-        with open(path, "w") as f:
-            f.write(text)
-        print(f"export: wrote {path}", file=sys.stderr)
+    # all or nothing: each file written beside its target, then renamed over it
+    written = []
+    try:
+        for path, text in texts.items():
+            tmp = os.path.join(os.path.dirname(os.path.abspath(path)), f".{os.path.basename(path)}.{os.getpid()}~")
+            written.append((tmp, path))
+            with open(tmp, "w") as f:
+                f.write(text)
+        for tmp, path in written:
+            os.replace(tmp, path)
+            print(f"export: wrote {path}", file=sys.stderr)
+    except OSError as exc:
+        for tmp, _ in written:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+        raise ChaincompError(f"-o {args.output}: {exc.strerror or exc}: nothing written") from None
     print(to_json(doc) if args.report == "json" else X.to_text(e))
     return 0

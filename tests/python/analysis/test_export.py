@@ -15,6 +15,9 @@ import pytest
 
 import firmware_skew
 import linuxcnc_comp
+from chaincomp.analysis import export as X
+from chaincomp.errors import ChaincompError
+from chaincomp.model.machine import load_machine
 from helpers import machine_path, refused_one_line, run_main, write_file, PARAMS
 
 ARCSEC = np.pi / 180 / 3600
@@ -81,6 +84,18 @@ def random_points(n=4000, seed=3):
     return rng.uniform(0, 300, n), rng.uniform(0, 200, n), rng.uniform(-100, 0, n)
 
 
+def check_points(limits, grid, entries):
+    """The points the exporter's report promises for tables (docs/guide/export.md): a grid
+    of ``grid`` per axis, and along each joint the midpoints between its ``entries``."""
+    axes = [np.linspace(lo, hi, grid) for lo, hi in limits]
+    sets = [np.meshgrid(*axes, indexing="ij")]
+    for j, (lo, hi) in enumerate(limits):
+        nominal = np.linspace(lo, hi, entries)
+        sets.append(np.meshgrid(*[(nominal[1:] + nominal[:-1]) / 2 if k == j else v for k, v in enumerate(axes)],
+                                indexing="ij"))
+    return [np.concatenate([s[k].ravel() for s in sets]) for k in range(len(limits))]
+
+
 def export(capsys, tmp_path, params_text, fmt, *extra):
     machine = write_file(tmp_path, "own_xyz.yaml", OWN)
     params = write_file(tmp_path, "own.yaml", params_text)
@@ -110,8 +125,10 @@ def test_linuxcnc_tables_cancel_the_positioning_errors(capsys, tmp_path, file_ty
     before = np.linalg.norm(own_model(x, y, z, exx, eyy, 3e-3) - np.array([x, y, z]), axis=0) * 1e3
     assert before.max() > 5.0
     assert residual(x, y, z).max() < 0.05   # the curvature between 17 entries, float trims
-    # the report's residual is the replay's on its own check grid (7 points per axis)
-    g = np.meshgrid(np.linspace(0, 300, 7), np.linspace(0, 200, 7), np.linspace(-100, 0, 7), indexing="ij")
+    # the report's residual is the replay's on its check points: 7 per axis, and along each
+    # joint the midpoints of its 17 entries (7 of the others' each)
+    g = check_points([(0, 300), (0, 200), (-100, 0)], 7, 17)
+    assert doc["check_points"] == len(g[0])
     assert doc["after"]["max_um"] == pytest.approx(residual(*g).max(), abs=1e-4)
     assert doc["before"]["max_um"] == pytest.approx(
         (np.linalg.norm(own_model(*g, exx, eyy, 3e-3) - np.array(g), axis=0) * 1e3).max(), rel=1e-9)
@@ -232,38 +249,84 @@ def test_refusals_write_nothing(tmp_path):
                     "--reversal", "Q=1um", match="--reversal Q: not an axis")
     nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "marlin", "-o", out,
                     "--reversal", "X=1um", match="only linuxcnc-comp")
+    nothing_written(tmp_path, "export", machine_path("trunnion_ac"), "--params",
+                    os.path.join(PARAMS, "trunnion_ac-demo.yaml"), "--format", "linuxcnc-comp", "-o", out,
+                    "--grid", "3", "--entries", "9", match="leaves more tool error than no compensation for trunnion_ac")
     nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "linuxcnc-comp", "-o", out,
-                    "--joints", "X,Y", match="--joints expects every axis")
-    (tmp_path / "file").write_text("x")
-    nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "linuxcnc-comp", "-o",
-                    tmp_path / "file", match="is a file")
+                    "--reversal", "X=1um", "--reversal", "X=2um", match="--reversal X: given twice")
+    nothing_written(tmp_path, "export", vmc, "--params", params, "--set", "X=100", "--format", "linuxcnc-comp",
+                    "-o", out, match="--set X=100: X is an axis")
+    nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "linuxcnc-comp", "-o", "",
+                    match="-o: an empty value")
+    # bounded work: the breakdown fits every error alone on every point
+    nothing_written(tmp_path, "export", machine_path("panda"), "--params", os.path.join(PARAMS, "panda-demo.yaml"),
+                    "--format", "linuxcnc-comp", "-o", out, "--grid", "6", match="the breakdown would fit each of")
 
 
-def test_a_rejecting_table_must_cover_the_axis_and_is_held_past_its_ends(capsys, tmp_path):
-    """The trims drive X a few um past a table's ends at the limits: there it is held (the
-    machine's error there is the end's), not NaN; a table short of the limits is refused."""
-    table = """\
+def test_a_folder_in_the_way_or_an_input_inside_it_writes_nothing(tmp_path):
+    """Every file linuxcnc-comp writes is checked before the work: a folder where a file
+    goes, or the machine file itself among the files, loses nothing."""
+    folder = tmp_path / "comp"
+    folder.mkdir()
+    (folder / "compensation.ini").mkdir()
+    vmc, params = machine_path("vmc_xyz"), os.path.join(PARAMS, "vmc_xyz-demo.yaml")
+    nothing_written(folder, "export", vmc, "--params", params, "--format", "linuxcnc-comp", "-o", folder,
+                    match="compensation.ini: is a folder")
+    (folder / "compensation.ini").rmdir()
+    machine = write_file(folder, "joint0_X.comp", OWN)   # a user's machine file, by an unlucky name
+    pos = write_file(tmp_path, "pos.yaml", POSITIONING)
+    nothing_written(folder, "export", machine, "--params", pos, "--format", "linuxcnc-comp", "-o", folder,
+                    match="is also an input")
+    assert (folder / "joint0_X.comp").read_text() == OWN
+
+
+def test_a_model_undefined_inside_the_limits_is_named(tmp_path):
+    """sqrt(X) on X in [-10, 300]: NaN at negative X, which would read as a residual of nan."""
+    machine = write_file(tmp_path, "root.yaml", OWN.replace("name: own_xyz", "name: root_xyz").replace(
+        "limits: [0, 300]", "limits: [-10, 300]").replace("translate: [X + EXX, 0, 0]", "translate: [X + EXX*sqrt(X), 0, 0]"))
+    nothing_written(tmp_path, "export", machine, "--set", "EXX=1um", "--format", "linuxcnc-comp",
+                    "-o", tmp_path / "c", match=r"root_xyz: the tool point with the errors given is not finite at X = -10 mm")
+
+
+def test_a_table_the_file_cannot_carry_is_refused(tmp_path):
+    """The writer's guard, on tables built here: at 1e10 mm a double's spacing is 1.9e-6 mm,
+    so type 0's nominal - trim cannot carry a trim of 3.3 um to 0.1 nm (type 1 writes the
+    trims themselves), and 33 entries over 300 mm at 1e17 mm fall on equal doubles."""
+    axis = load_machine(str(write_file(tmp_path, "own_xyz.yaml", OWN))).symbol("X")
+    far = np.linspace(1e10, 1e10 + 300, 33)
+    table = X.JointTable(axis, far, np.full(33, 3.3e-3), np.full(33, 3.3e-3))
+    with pytest.raises(ChaincompError, match="COMP_FILE_TYPE 0 loses up to"):
+        X.linuxcnc_comp_text(table, 0)
+    assert linuxcnc_comp.read(X.linuxcnc_comp_text(table, 1), 1)[:, 1] == pytest.approx(3.3e-3, rel=1e-7)
+    further = np.linspace(1e17, 1e17 + 300, 33)
+    with pytest.raises(ChaincompError, match="33 entries over .* cannot be told apart"):
+        X.linuxcnc_comp_text(X.JointTable(axis, further, np.zeros(33), np.zeros(33)), 1)
+
+
+def test_a_pitch_cycle_between_the_entries_is_reported_not_hidden(capsys, tmp_path):
+    """A lead screw's cyclic error with its zeros on the entries (period 2 entry spacings of
+    33 entries over 300 mm): the default grid (9 per axis) falls on entries only, where the
+    trims are zero and exact; the tool error between them is the cycle's full amplitude,
+    and the report must say so."""
+    spacing = 300 / 32
+    rows = "\n".join(f"      - [{float(x)!r}, {float(2.0 * np.sin(np.pi * x / spacing))!r}]" for x in np.linspace(0, 300, 257))
+    params = f"""\
 machine: own_xyz
 values:
   EXX:
     axis: X
     units: [mm, um]
     interpolation: linear
-    outside: reject
+    outside: hold
     table:
-      - [{first}, 5]
-      - [150, -3]
-      - [300, 8]
+{rows}
+  EYY: 2 um
 """
-    doc, out = export(capsys, tmp_path, table.format(first=0), "linuxcnc-comp", "--entries", "33", "--grid", "5")
+    doc, out = export(capsys, tmp_path, params, "linuxcnc-comp")
     t = linuxcnc_comp.read((out / "joint0_X.comp").read_text(), 1)
-
-    def truth(x):   # the table, read by hand: linear between its rows, held past its ends
-        return np.interp(x, [0, 150, 300], [5e-3, -3e-3, 8e-3])
-    x = np.linspace(0, 300, 1001)
-    assert np.abs(x + linuxcnc_comp.trim(t, x) + truth(x + linuxcnc_comp.trim(t, x)) - x).max() < 1e-5
-    assert doc["after"]["max_um"] < 0.01
-    machine = write_file(tmp_path, "own_xyz.yaml", OWN)
-    params = write_file(tmp_path, "short.yaml", table.format(first=1))
-    nothing_written(tmp_path, "export", machine, "--params", params, "--format", "linuxcnc-comp",
-                    "-o", tmp_path / "c", match="short.yaml:3: values.EXX: X = 0 mm lies outside the table")
+    x = np.linspace(0, 300, 30001)
+    truth = np.interp(x, np.linspace(0, 300, 257), 2e-3 * np.sin(np.pi * np.linspace(0, 300, 257) / spacing))
+    left = np.abs(linuxcnc_comp.trim(t, x) + truth)   # the trims are tiny: the error at x itself
+    assert left.max() > 1.9e-3
+    assert doc["after"]["max_um"] == pytest.approx(left.max() * 1e3, rel=0.02)
+    assert doc["after"]["max_um"] > 1.9

@@ -70,8 +70,10 @@ def test_shared_options_have_the_same_names_and_defaults(verb):
         assert opts["--seed"].type("4294967295") == 2**32 - 1
     if "--format" in opts and "json" in (opts["--format"].choices or ()):
         assert opts["--format"].default == FORMAT_DEFAULT, verb
-    if "--json" in opts:   # the older spelling: --format json
-        assert "--format" in opts and opts["--json"].dest == "format" and opts["--json"].const == "json", verb
+    if "--json" in opts:   # the older spelling: --format json (--report json where --format names a target's)
+        report = "--report" if "--report" in opts else "--format"
+        assert report in opts and opts["--json"].dest == opts[report].dest and opts["--json"].const == "json", verb
+        assert opts[report].default == FORMAT_DEFAULT and "json" in opts[report].choices, verb
     if "--assume-zero" in opts:
         a = opts["--assume-zero"]
         assert isinstance(a, argparse._AppendAction) and a.default == [] and a.metavar == "E1,E2", verb

@@ -425,11 +425,16 @@ def test_export_linuxcnc_tables(name, tmp_path):
 
     out = tmp_path / "comp"
     doc = json.loads(run_cli("export", machine_path(name), "--params", params_file(name), "--format",
-                             "linuxcnc-comp", "-o", str(out), "--grid", "3", "--entries", "9", "--no-breakdown",
+                             "linuxcnc-comp", "-o", str(out), "--grid", "5", "--entries", "9", "--no-breakdown",
                              "--report", "json").stdout)
     m, values = truth(name)
-    grids = [np.linspace(*s["limits"], 3) for s in raw(name)["symbols"] if s["role"] == "axis"]
-    q = np.stack([g.ravel() for g in np.meshgrid(*grids, indexing="ij")], axis=1)     # declared units
+    # the check points the report promises: 5 per axis, and each joint between its 9 entries
+    limits = [s["limits"] for s in raw(name)["symbols"] if s["role"] == "axis"]
+    grids = [np.linspace(*lim, 5) for lim in limits]
+    mids = [(lambda e: (e[1:] + e[:-1]) / 2)(np.linspace(*lim, 9)) for lim in limits]
+    sets = [grids] + [[mids[j] if k == j else g for k, g in enumerate(grids)] for j in range(len(grids))]
+    q = np.concatenate([np.stack([g.ravel() for g in np.meshgrid(*per_axis, indexing="ij")], axis=1)
+                        for per_axis in sets])                                          # declared units
     tables = [linuxcnc_comp.read((out / f"joint{n}_{a.name}.comp").read_text(), 1) for n, a in enumerate(m.axes)]
     assert all(len(t) == 9 for t in tables)
     driven = q + np.stack([linuxcnc_comp.trim(t, q[:, n]) for n, t in enumerate(tables)], axis=1)
