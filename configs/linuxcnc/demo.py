@@ -1,7 +1,9 @@
 """tools/linuxcnc-demo: the five_axis_ac program under LinuxCNC with compensation off, through
-chaincomp-lcm-bridge (chaincompd) and through chaincomp_rt, and the tool-point error the
+chaincomp-lcm-bridge (chaincompd), through chaincomp_rt, and with LinuxCNC's own per-joint
+compensation files written by `chaincomp export` (no daemon), and the tool-point error the
 simulated true machine makes along the path: max and RMS at the dwells and in motion, the
-bridge's lag and the realtime component's cost, and a plot."""
+bridge's lag, the realtime component's cost, the comp files' measured error against the
+exporter's prediction, and a plot."""
 
 from __future__ import annotations
 
@@ -11,6 +13,7 @@ import os
 import platform
 import subprocess
 import sys
+import tempfile
 
 import numpy as np
 
@@ -18,15 +21,46 @@ import cnc
 
 MACHINE = os.path.join(cnc.ROOT, "configs", "machines", "five_axis_ac.yaml")
 PARAMS = os.path.join(cnc.ROOT, "configs", "params", "five_axis_ac-demo.yaml")
-LABELS = {"off": "compensation off", "bridge": "chaincomp-lcm-bridge + chaincompd", "rt": "chaincomp_rt"}
+LABELS = {"off": "compensation off", "bridge": "chaincomp-lcm-bridge + chaincompd", "rt": "chaincomp_rt",
+          "comp": "COMP_FILE tables (chaincomp export)"}
+CHAINCOMP = os.path.join(cnc.ROOT, ".venv", "bin", "chaincomp")
 
 
 def say(text: str) -> None:
     print(f"linuxcnc-demo: {text}", file=sys.stderr, flush=True)
 
 
+def export_tables(folder: str) -> dict[int, str]:
+    """The demo params as LinuxCNC compensation files, through the CLI as a user writes them."""
+    say("writing LinuxCNC compensation files: chaincomp export --format linuxcnc-comp")
+    report = subprocess.run([CHAINCOMP, "export", MACHINE, "--params", PARAMS, "--format", "linuxcnc-comp",
+                             "-o", folder, "--no-breakdown", "--json"], stdout=subprocess.PIPE, text=True, check=True)
+    names = [j["axis"] for j in json.loads(report.stdout)["joints"]]
+    return {n: os.path.join(folder, f"joint{n}_{a}.comp") for n, a in enumerate(names)}
+
+
+def predicted_at_dwells(run, machine, params, folder: str) -> np.ndarray:
+    """What chaincomp's model of the exported tables says the tool error is at each dwell
+    (the tables read back from the files; LinuxCNC's rule: linear, held outside, float trims)."""
+    from chaincomp.analysis import export as X
+    from chaincomp.cli.common import values_for
+
+    values, _ = values_for(machine, PARAMS, [])
+    tables = []
+    for n, a in enumerate(machine.axes):
+        rows = np.loadtxt(os.path.join(folder, f"joint{n}_{a.name}.comp"), ndmin=2)
+        tables.append(X.JointTable(a, rows[:, 0], rows[:, 1], rows[:, 2]))
+    out = []
+    for s in cnc.dwells(run.pos_commands)[1:]:
+        q = cnc.to_internal(machine, run.pos_commands[s])
+        measured, _ = cnc.tool_errors(machine, params, run.pos_commands[s], run.drives[s])
+        predicted = X.tool_error(X.ExactModel(machine), values, q, X.apply_tables(tables, q)).T
+        out.append(np.abs(measured - predicted).max())
+    return np.array(out)
+
+
 def install_rt() -> None:
-    chaincomp = os.path.join(cnc.ROOT, ".venv", "bin", "chaincomp")
+    chaincomp = CHAINCOMP
     say("building chaincomp_rt for five_axis_ac with the demo params")
     out = subprocess.run([chaincomp, "build", "--linuxcnc", MACHINE, "--params", PARAMS],
                          stdout=subprocess.PIPE, text=True, check=True).stdout.split()[0]
@@ -43,10 +77,12 @@ def stats(values: np.ndarray) -> dict:
 
 
 def summarize(run, machine, params) -> dict:
-    found = cnc.dwells(run.commands)
+    # the program's joint commands (joint.N.pos-cmd): on the comp route LinuxCNC's trims
+    # come after them, in motor-pos-cmd; on the others the two are equal
+    found = cnc.dwells(run.pos_commands)
     if run.returncode != 0 or len(found) < 2:
         raise SystemExit(f"linuxcnc-demo: the run in {run.work} failed:\n{run.log[-2000:]}")
-    point, _ = cnc.tool_errors(machine, params, run.commands, run.drives)
+    point, _ = cnc.tool_errors(machine, params, run.pos_commands, run.drives)
     err_um = np.linalg.norm(point, axis=1) * 1e3
     program = np.zeros(len(err_um), bool)
     # from the first dwell on: the move there leaves A = 0 at home, a singular pose (the tool
@@ -58,7 +94,8 @@ def summarize(run, machine, params) -> dict:
     out = {"periods": int(program.sum()), "dwells_um": stats(err_um[at_dwell]),
            "motion_um": stats(err_um[program & ~at_dwell]), "t": (np.arange(len(err_um)) - found[0].stop) * 1e-3,
            "error_um": err_um}
-    extra = (run.lag_ms if run.route == "bridge" else run.samples[:, cnc.COL_COST])[program]
+    extra = (run.lag_ms if run.route == "bridge" else run.samples[:, cnc.COL_COST])[program] \
+        if run.route in ("bridge", "rt") else None
     return out, extra
 
 
@@ -66,13 +103,14 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="tools/linuxcnc-demo", description=__doc__)
     p.add_argument("--plot", default=os.path.join(cnc.ROOT, "out", "linuxcnc-demo.png"), metavar="OUT.png",
                    help="where the plot goes (default out/linuxcnc-demo.png)")
-    p.add_argument("--routes", default="off,bridge,rt", help="comma list of off, bridge, rt (default all three)")
+    p.add_argument("--routes", default="off,bridge,rt,comp",
+                   help="comma list of off, bridge, rt, comp (default all four)")
     p.add_argument("--format", choices=("text", "json"), default="text", help="output format (default text)")
     args = p.parse_args(argv)
     routes = args.routes.split(",")
     for r in routes:
         if r not in cnc.ROUTES:
-            p.error(f"--routes: unknown route {r!r} (expected off, bridge, rt)")
+            p.error(f"--routes: unknown route {r!r} (expected off, bridge, rt, comp)")
     reason = cnc.unavailable()
     if reason:
         raise SystemExit(f"linuxcnc-demo: {reason}")
@@ -85,8 +123,14 @@ def main(argv=None) -> int:
     results = {}
     for r in routes:
         say(f"running the program: {LABELS[r]}")
-        run = cnc.run(r)
+        if r == "comp":
+            folder = tempfile.mkdtemp(prefix="chaincomp-demo-comp-")
+            run = cnc.run(r, comp=export_tables(folder))
+        else:
+            run = cnc.run(r)
         summary, extra = summarize(run, machine, params)
+        if r == "comp":
+            summary["measured_minus_predicted_um"] = float(predicted_at_dwells(run, machine, params, folder).max() * 1e3)
         if r == "bridge":
             summary["lag_ms"] = dict(zip(("p50", "p99", "max"), map(float, np.percentile(extra, [50, 99, 100]))))
         if r == "rt":
@@ -120,6 +164,9 @@ def main(argv=None) -> int:
             lag = results["bridge"]["lag_ms"]
             print(f"bridge lag (age of the applied correction): p50 {lag['p50']:.2f} ms, p99 {lag['p99']:.2f} ms, "
                   f"max {lag['max']:.2f} ms")
+        if "comp" in results:
+            print(f"COMP_FILE tables: measured minus chaincomp export's prediction at the dwells, largest "
+                  f"{results['comp']['measured_minus_predicted_um']:.6f} um")
         if "rt" in results:
             c = results["rt"]["cost_ns"]
             print(f"chaincomp_rt cost per servo period: p50 {c['p50']:.0f} ns, p99 {c['p99']:.0f} ns, "
