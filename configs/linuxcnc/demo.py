@@ -39,7 +39,7 @@ def export_tables(folder: str) -> dict[int, str]:
     return {n: os.path.join(folder, f"joint{n}_{a}.comp") for n, a in enumerate(names)}
 
 
-def predicted_at_dwells(run, machine, params, folder: str) -> np.ndarray:
+def predicted_at_dwells(run, machine, params, files: dict[int, str]) -> np.ndarray:
     """What chaincomp's model of the exported tables says the tool error is at each dwell
     (the tables read back from the files; LinuxCNC's rule: linear, held outside, float trims)."""
     from chaincomp.analysis import export as X
@@ -48,7 +48,7 @@ def predicted_at_dwells(run, machine, params, folder: str) -> np.ndarray:
     values, _ = values_for(machine, PARAMS, [])
     tables = []
     for n, a in enumerate(machine.axes):
-        rows = np.loadtxt(os.path.join(folder, f"joint{n}_{a.name}.comp"), ndmin=2)
+        rows = np.loadtxt(files[n], ndmin=2)
         tables.append(X.JointTable(a, rows[:, 0], rows[:, 1], rows[:, 2]))
     out = []
     for s in cnc.dwells(run.pos_commands)[1:]:
@@ -60,12 +60,11 @@ def predicted_at_dwells(run, machine, params, folder: str) -> np.ndarray:
 
 
 def install_rt() -> None:
-    chaincomp = CHAINCOMP
     say("building chaincomp_rt for five_axis_ac with the demo params")
-    out = subprocess.run([chaincomp, "build", "--linuxcnc", MACHINE, "--params", PARAMS],
+    out = subprocess.run([CHAINCOMP, "build", "--linuxcnc", MACHINE, "--params", PARAMS],
                          stdout=subprocess.PIPE, text=True, check=True).stdout.split()[0]
     if os.geteuid() == 0:
-        subprocess.run([chaincomp, "build", "--linuxcnc", MACHINE, "--params", PARAMS, "--install"],
+        subprocess.run([CHAINCOMP, "build", "--linuxcnc", MACHINE, "--params", PARAMS, "--install"],
                        stdout=subprocess.DEVNULL, check=True)
     else:
         say("installing it into /usr/lib/linuxcnc/modules (sudo)")
@@ -123,14 +122,11 @@ def main(argv=None) -> int:
     results = {}
     for r in routes:
         say(f"running the program: {LABELS[r]}")
-        if r == "comp":
-            folder = tempfile.mkdtemp(prefix="chaincomp-demo-comp-")
-            run = cnc.run(r, comp=export_tables(folder))
-        else:
-            run = cnc.run(r)
+        comp = export_tables(tempfile.mkdtemp(prefix="chaincomp-demo-comp-")) if r == "comp" else None
+        run = cnc.run(r, comp=comp)
         summary, extra = summarize(run, machine, params)
-        if r == "comp":
-            summary["measured_minus_predicted_um"] = float(predicted_at_dwells(run, machine, params, folder).max() * 1e3)
+        if comp:
+            summary["measured_minus_predicted_um"] = float(predicted_at_dwells(run, machine, params, comp).max() * 1e3)
         if r == "bridge":
             summary["lag_ms"] = dict(zip(("p50", "p99", "max"), map(float, np.percentile(extra, [50, 99, 100]))))
         if r == "rt":

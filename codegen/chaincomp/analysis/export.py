@@ -115,12 +115,17 @@ def _nominal(machine: Machine, values: dict) -> dict:
     return {k: v for k, v in values.items() if machine.symbol(k).role != "error"}
 
 
+def _shape(q: dict) -> tuple[int, ...]:
+    """The shape the axis values of ``q`` broadcast to."""
+    return np.broadcast_shapes(*(np.shape(v) for v in q.values()))
+
+
 def tool_error(exact: ExactModel, values: dict, commanded: dict, actual: dict) -> np.ndarray:
     """(3, ...) tool-point error: the model with its errors at the ``actual`` joint positions
     minus the nominal model at the ``commanded`` ones (internal units)."""
     p1, _ = exact.pose({**values, **actual})
     p0, _ = exact.pose({**_nominal(exact.machine, values), **commanded})
-    shape = np.broadcast_shapes(*(np.shape(v) for v in commanded.values()))
+    shape = _shape(commanded)
     return np.stack([np.broadcast_to(np.asarray(a, float) - np.asarray(b, float), shape) for a, b in zip(p1, p0)])
 
 
@@ -132,7 +137,7 @@ def _jacobian_column(exact: ExactModel, values: dict, q: dict, axis: str) -> np.
     up, down = np.minimum(q[axis] + FD_STEP, max(lo, hi)), np.maximum(q[axis] - FD_STEP, min(lo, hi))
     plus, _ = exact.pose({**nominal, **q, axis: up})
     minus, _ = exact.pose({**nominal, **q, axis: down})
-    shape = np.broadcast_shapes(*(np.shape(v) for v in q.values()))
+    shape = _shape(q)
     jac = np.stack([np.broadcast_to((np.asarray(a, float) - np.asarray(b, float)) / (up - down), shape)
                     for a, b in zip(plus, minus)])
     _check_finite(exact.machine, jac, q, f"the derivative along {axis} of the nominal tool point")
@@ -192,6 +197,16 @@ def apply_tables(tables: list[JointTable], q: dict) -> dict:
     return out
 
 
+def check_table_sizes(axes: list[Symbol], entries: int, grid: list[np.ndarray]) -> None:
+    """Refuse tables whose fit would hold too many points at once: per joint its entries x
+    the grid of the other joints (table_slices; between_entries takes one fewer)."""
+    for j, a in enumerate(axes):
+        size = entries * int(np.prod([len(g) for k, g in enumerate(grid) if k != j]))
+        if size > MAX_POINTS:
+            raise ChaincompError(f"fitting joint {a.name} would take {size} points ({entries} entries x the grid "
+                                 f"of the other joints; at most {MAX_POINTS}): lower --entries or --grid")
+
+
 def table_slices(machine: Machine, values: dict, axes: list[Symbol], entries: int, grid: list[np.ndarray]):
     """Per joint: the fit's sample points (its entries x the check grid of the other joints)
     and the nominal tool point's derivative along it there (the errors do not enter: one
@@ -200,12 +215,7 @@ def table_slices(machine: Machine, values: dict, axes: list[Symbol], entries: in
     slices = []
     for j, a in enumerate(axes):
         nominal = np.linspace(a.limits[0], a.limits[1], entries)
-        per_axis = [nominal if k == j else grid[k] for k in range(len(axes))]
-        size = int(np.prod([len(v) for v in per_axis]))
-        if size > MAX_POINTS:
-            raise ChaincompError(f"fitting joint {a.name} would take {size} points ({entries} entries x the grid "
-                                 f"of the other joints; at most {MAX_POINTS}): lower --entries or --grid")
-        q = _mesh(axes, per_axis)
+        q = _mesh(axes, [nominal if k == j else grid[k] for k in range(len(axes))])
         jac = _jacobian_column(exact, values, q, a.name)
         slices.append((q, np.moveaxis(jac, j + 1, 1).reshape(3, entries, -1)))
     return slices
@@ -281,7 +291,7 @@ def matrix_design(machine: Machine, values: dict, axes: list[Symbol], lin: list[
     exact = ExactModel(machine)
     q = _mesh(axes, grid)
     jac = np.stack([_jacobian_column(exact, values, q, a.name).reshape(3, -1) for a in lin], axis=1)
-    pos = np.stack([np.broadcast_to(q[a.name], np.broadcast_shapes(*(np.shape(v) for v in q.values()))).ravel()
+    pos = np.stack([np.broadcast_to(q[a.name], _shape(q)).ravel()
                     for a in lin])
     idx = [(j, k) for j in range(3) for k in range(3) if free[j, k]]
     gram = np.einsum("ijs,ils,ks,ms->jklm", jac, jac, pos, pos, optimize=True)    # (j,k) x (l,m)
@@ -328,11 +338,6 @@ def between_entries(axes: list[Symbol], entries: int, grid: list[np.ndarray]) ->
     sets = []
     for j, a in enumerate(axes):
         nominal = np.linspace(a.limits[0], a.limits[1], entries)
-        size = (entries - 1) * int(np.prod([len(g) for k, g in enumerate(grid) if k != j]))
-        if size > MAX_POINTS:
-            raise ChaincompError(f"checking joint {a.name} between its entries would take {size} points ({entries - 1} "
-                                 f"midpoints x the grid of the other joints; at most {MAX_POINTS}): lower --entries "
-                                 f"or --grid")
         sets.append(_mesh(axes, [(nominal[1:] + nominal[:-1]) / 2 if k == j else grid[k] for k in range(len(axes))]))
     return sets
 
@@ -358,8 +363,9 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     exact = ExactModel(machine)
     sets = [_mesh(axes, grid)]
     if fmt == "linuxcnc-comp":
+        check_table_sizes(axes, entries, grid)
         sets += between_entries(axes, entries, grid)
-    n_points = sum(int(np.prod(np.broadcast_shapes(*(np.shape(v) for v in q.values())))) for q in sets)
+    n_points = sum(int(np.prod(_shape(q))) for q in sets)
     names = [s.name for s in machine.errors if _nonzero(values.get(s.name, 0.0))]
     if shares and len(names) * n_points > MAX_BREAKDOWN:
         raise ChaincompError(f"the breakdown would fit each of {len(names)} errors alone on {n_points} points "
@@ -370,11 +376,13 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     slices = table_slices(machine, values, axes, entries, grid) if fmt == "linuxcnc-comp" else None
     design = matrix_design(machine, values, axes, lin, grid, free) if lin else None
 
-    def fit(vals, sweeps=4):
+    def fit(vals, alone=False):
+        """The format fitted to ``vals``; ``alone``: one error's share, to a few per cent (2
+        sweeps of the tables, 1 Gauss-Newton step of the matrix: linear in C to first order)."""
         if fmt == "linuxcnc-comp":
-            tables = fit_tables(machine, vals, axes, entries, slices, sweeps)
+            tables = fit_tables(machine, vals, axes, entries, slices, 2 if alone else 4)
             return tables, None, None, [tool_error(exact, vals, q, apply_tables(tables, q)) for q in sets]
-        c, offset = fit_matrix(machine, vals, lin, design, iterations=max(sweeps - 1, 1))
+        c, offset = fit_matrix(machine, vals, lin, design, iterations=1 if alone else 3)
         return [], c, offset, [tool_error(exact, vals, q, apply_matrix(lin, c, q)) for q in sets]
 
     def shifted(dp: list[np.ndarray], by: np.ndarray) -> list[np.ndarray]:
@@ -402,7 +410,7 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
             progress(f"{fmt} fitted and checked on {n_points} points; now each of the {len(names)} errors alone")
         for name in names:
             vals = _errors_only(machine, values, {name})
-            _, _, off, res = fit(vals, sweeps=2)   # one error alone: its share, to a few per cent
+            _, _, off, res = fit(vals, alone=True)
             if off is not None:   # a matrix leaves an error's constant part to the work offset
                 res = shifted(res, off)
             out.shares.append(ErrorShare(name, Residual.of([tool_error(exact, vals, q, q) for q in sets]),
