@@ -46,6 +46,7 @@ def predicted_at_dwells(run, machine, params, files: dict[int, str]) -> np.ndarr
     from chaincomp.cli.common import values_for
 
     values, _ = values_for(machine, PARAMS, [])
+    exact = X.ExactModel(machine)
     tables = []
     for n, a in enumerate(machine.axes):
         rows = np.loadtxt(files[n], ndmin=2)
@@ -54,7 +55,7 @@ def predicted_at_dwells(run, machine, params, files: dict[int, str]) -> np.ndarr
     for s in cnc.dwells(run.pos_commands)[1:]:
         q = cnc.to_internal(machine, run.pos_commands[s])
         measured, _ = cnc.tool_errors(machine, params, run.pos_commands[s], run.drives[s])
-        predicted = X.tool_error(X.ExactModel(machine), values, q, X.apply_tables(tables, q)).T
+        predicted = X.tool_error(exact, values, q, X.apply_tables(tables, q)).T
         out.append(np.abs(measured - predicted).max())
     return np.array(out)
 
