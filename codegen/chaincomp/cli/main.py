@@ -21,6 +21,7 @@ VERB_MODULES = {
     "report": "report", "budget": "budget", "simulate-calibration": "simulate_calibration",
     "build": "build", "lint": "lint", "iso230-2": "iso230_2", "laser-to-params": "laser_to_params",
     "status": "status", "import-urdf": "import_urdf", "ballbar": "ballbar", "export": "export",
+    "thermal": "thermal", "simulate-thermal": "simulate_thermal",
 }
 
 

@@ -1,0 +1,187 @@
+"""``chaincomp thermal fit`` and ``chaincomp thermal check``: a thermal model of the machine's
+errors from a log of temperatures and measured drift, and how much of a log's drift a model
+takes out."""
+
+from __future__ import annotations
+
+import shlex
+import sys
+
+import numpy as np
+
+from ..errors import ChaincompError
+from ..measure import thermal as T
+from ..model.yamlsource import write_checked
+from .common import (add_format_argument, add_machine_argument, check_finite, check_output, integer, load, names,
+                     number, to_json)
+
+LOG_HELP = ("a CSV log: 'time [s]', temperature columns 'NAME [degC]' and drift columns named by the errors they "
+            "measure, e.g. 'EZZ [um]'")
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("thermal", help="thermal models: fit one to logged drift (fit), or check one on a log (check)",
+                       description="Thermal errors as functions of measured temperatures and their first-order lags "
+                                   "(docs/guide/thermal.md).")
+    verbs = p.add_subparsers(dest="thermal_verb", metavar="ACTION", required=True)
+    f = verbs.add_parser("fit", help="fit gains and time constants to a log, choosing a few of its sensors",
+                         description="For each drift column of the log, choose sensors greedily (each must lower the "
+                                     "drift's residual by Schwarz's criterion and by --min-improvement), fit the "
+                                     "offset, gains and time constants (value = offset + sum gain * (lagged "
+                                     "temperature - reference)), report their standard uncertainties (white noise on "
+                                     "the drift readings assumed) and write the model.")
+    add_machine_argument(f)
+    f.add_argument("log", metavar="LOG.csv", help=LOG_HELP)
+    f.add_argument("-o", "--output", required=True, metavar="MODEL.yaml", help="thermal model to write")
+    f.add_argument("--errors", metavar="E1,E2", help="drift columns to fit (default all)")
+    f.add_argument("--sensors", metavar="S1,S2", help="sensors to choose from (default every temperature column)")
+    f.add_argument("--max-sensors", type=integer(1, T.MAX_TERMS), default=3, metavar="N",
+                   help=f"at most this many sensors per error (default 3, at most {T.MAX_TERMS})")
+    f.add_argument("--min-improvement", type=number(0, 1), default=0.01, metavar="R",
+                   help="a sensor is taken only if it lowers the RMS residual by this fraction (default 0.01)")
+    f.add_argument("--no-lag", action="store_true", help="no time constants: each term follows its sensor at once")
+    f.add_argument("--reference", type=number(*T.TEMPERATURE_RANGE), default=T.REFERENCE_TEMPERATURE, metavar="DEGC",
+                   help=f"reference temperature (default {T.REFERENCE_TEMPERATURE:g} degC, ISO 1)")
+    f.add_argument("--drift", action="append", default=[], metavar="COLUMN=ERROR",
+                   help="a drift column measuring ERROR under another name (repeatable)")
+    f.add_argument("--check", metavar="HELD_OUT.csv", help="also report the model on this log (not used in the fit)")
+    add_format_argument(f)
+    f.set_defaults(run=run_fit)
+    c = verbs.add_parser("check", help="the drift of a log before and after a thermal model",
+                         description="Evaluate the model on the log's temperatures and report each drift column "
+                                     "before and after subtracting it (largest and RMS, the error's unit), both "
+                                     "from the log's first row, as a probe reads the drift since it was touched "
+                                     "off.")
+    add_machine_argument(c)
+    c.add_argument("model", metavar="MODEL.yaml", help="thermal model (as thermal fit writes)")
+    c.add_argument("log", metavar="LOG.csv", help=LOG_HELP)
+    c.add_argument("--drift", action="append", default=[], metavar="COLUMN=ERROR",
+                   help="a drift column measuring ERROR under another name (repeatable)")
+    add_format_argument(c)
+    c.set_defaults(run=run_check)
+
+
+def _renames(items: list[str]) -> dict[str, str]:
+    out = {}
+    for item in items:
+        column, eq, error = (s.strip() for s in item.partition("="))
+        if not eq or not column or not error:
+            raise ChaincompError(f"--drift: expected COLUMN=ERROR, got {item!r}")
+        if column in out:
+            raise ChaincompError(f"--drift: column {column} given twice")
+        out[column] = error
+    return out
+
+
+def _check(model: T.ThermalModel, log: T.Log) -> dict:
+    """Each of the model's errors that the log measures: its drift before and after the model."""
+    missing = [s for s in model.sensors if s not in log.temperatures]
+    if missing:
+        raise ChaincompError(f"the model reads sensor {', '.join(missing)}, not in the log (sensors: "
+                             f"{', '.join(log.temperatures)})", log.path)
+    out = {}
+    for name, em in model.errors.items():
+        if name not in log.drift:
+            continue
+        scale = log.drift_units[name].to_internal / em.unit.to_internal   # the log's unit -> the model's
+        d = log.drift[name] * scale
+        # both from the log's first row: a probe reads the drift since it was touched off
+        predicted = em.evaluate(log.t, log.temperatures, model.reference)
+        before = d - d[0]
+        after = before - (predicted - predicted[0])
+        out[name] = {"unit": em.unit.name, "before_max": float(np.max(np.abs(before))),
+                     "before_rms": float(np.sqrt(np.mean(before ** 2))),
+                     "after_max": float(np.max(np.abs(after))), "after_rms": float(np.sqrt(np.mean(after ** 2)))}
+    if not out:
+        raise ChaincompError(f"no drift column of the model's errors ({', '.join(model.errors)})", log.path)
+    return out
+
+
+def _check_lines(result: dict, what: str) -> list[str]:
+    lines = [f"{what}:"]
+    for name, r in result.items():
+        share = r["after_max"] / r["before_max"] if r["before_max"] > 0 else 0.0
+        lines.append(f"  {name}: drift {r['before_max']:.4g} {r['unit']} max, {r['before_rms']:.4g} RMS -> left "
+                     f"{r['after_max']:.4g} max, {r['after_rms']:.4g} RMS ({100 * share:.0f} % of the largest)")
+    return lines
+
+
+def run_fit(args) -> int:
+    check_output(args.output, args.machine, args.log, args.check)
+    machine = load(args.machine)
+    rename = _renames(args.drift)
+    log = T.read_log(args.log, machine, rename)
+    held = T.read_log(args.check, machine, rename) if args.check else None
+    errors = names(args.errors, "--errors") if args.errors else list(log.drift)
+    for e in errors:
+        if e not in log.drift:
+            raise ChaincompError(f"--errors: no drift column of {e} in the log (drift columns: {', '.join(log.drift)})",
+                                 args.log)
+    sensors = names(args.sensors, "--sensors") if args.sensors else list(log.temperatures)
+    for s in sensors:
+        if s not in log.temperatures:
+            raise ChaincompError(f"--sensors: no temperature column {s} in the log (sensors: "
+                                 f"{', '.join(log.temperatures)})", args.log)
+    model = T.ThermalModel(machine.name, args.reference)
+    fits = {}
+    for e in errors:
+        print(f"thermal fit: {e} from {len(log.t)} rows, {len(sensors)} sensors", file=sys.stderr)
+        f = T.fit(log, e, sensors, args.reference, args.max_sensors, args.min_improvement, not args.no_lag,
+                  progress=lambda text: print(f"thermal fit: {text}", file=sys.stderr))
+        if not f.model.terms:
+            raise ChaincompError(f"{e}: no sensor explains its drift (RMS {f.rms_before:.4g} "
+                                 f"{log.drift_units[e].name}): nothing to write", args.log)
+        model.errors[e] = f.model
+        fits[e] = f
+    command = ["chaincomp", "thermal", "fit", args.machine, args.log, "-o", args.output]
+    text = T.model_text(model, [f"Written by: {' '.join(shlex.quote(c) for c in command)}",
+                                f"Fitted to {len(log.t)} rows over {log.t[-1] - log.t[0]:g} s; each error's "
+                                "value is its params value plus offset + sum gain * (lag - reference)."])
+    held_result = _check(model, held) if held is not None else None
+    doc = {"machine": machine.name, "log": args.log, "rows": int(len(log.t)), "reference": args.reference,
+           "errors": {e: {"unit": f.model.unit.name, "offset": f.model.offset, "offset_u": f.model.offset_u,
+                          "rms_before": f.rms_before, "rms_after": f.rms_after, "max_before": f.max_before,
+                          "max_after": f.max_after,
+                          "terms": [{"sensor": t.sensor, "gain": t.gain, "gain_u": t.gain_u,
+                                     "time_constant": t.time_constant, "time_constant_u": t.time_constant_u}
+                                    for t in f.model.terms]} for e, f in fits.items()}}
+    if held_result is not None:
+        doc["check"] = {"log": args.check, "errors": held_result}
+    check_finite(doc)
+
+    def loads(tmp: str) -> None:   # the file written reads back as the model fitted
+        T.load_model(tmp, machine)
+
+    try:
+        write_checked(args.output, text, loads)
+    except OSError as exc:
+        raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
+    if args.format == "json":
+        print(to_json(doc))
+        return 0
+    lines = [f"thermal model of {machine.name} from {args.log} ({len(log.t)} rows) -> {args.output}"]
+    for e, f in fits.items():
+        u = f.model.unit.name
+        lines.append(f"  {e}: offset {f.model.offset:.4g} ± {f.model.offset_u:.2g} {u}; drift RMS "
+                     f"{f.rms_before:.4g} -> {f.rms_after:.4g} {u}, max {f.max_before:.4g} -> {f.max_after:.4g} {u}")
+        for t in f.model.terms:
+            lines.append(f"    {t.sensor}: gain {t.gain:.5g} ± {t.gain_u:.2g} {u}/K, time constant "
+                         f"{t.time_constant:.5g} ± {t.time_constant_u:.2g} s")
+    if held_result is not None:
+        lines += _check_lines(held_result, f"on {args.check} (held out)")
+    print("\n".join(lines))
+    return 0
+
+
+def run_check(args) -> int:
+    machine = load(args.machine)
+    model = T.load_model(args.model, machine)
+    log = T.read_log(args.log, machine, _renames(args.drift))
+    result = _check(model, log)
+    doc = {"machine": machine.name, "model": args.model, "log": args.log, "errors": result}
+    check_finite(doc)
+    if args.format == "json":
+        print(to_json(doc))
+    else:
+        print("\n".join(_check_lines(result, f"{args.model} on {args.log}")))
+    return 0

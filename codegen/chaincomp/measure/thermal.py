@@ -1,0 +1,560 @@
+"""Thermal errors: error values that follow measured temperatures through first-order lags.
+
+A thermal model adds to an error of the machine (its geometric value from the params file)
+
+    value(t) = offset + sum_i gain_i * (lag(T_i, tau_i)(t) - T_ref)
+
+in the error's unit; T_i is a named temperature input (a sensor, degC), tau_i its time
+constant (0: no lag) and T_ref the reference temperature (ISO 1: 20 degC). The lag is the
+exact response of dy/dt = (u - y)/tau to an input linear between readings, settled at the
+first reading (the machine soaked at its start temperature):
+
+    y_k = u_k - s_k tau (1 - e_k) + e_k (y_{k-1} - u_{k-1}),  e_k = exp(-dt_k/tau),
+    s_k = (u_k - u_{k-1})/dt_k
+
+``fit`` finds the offset, gains and time constants from a log of temperatures and measured
+drift (variable projection: the gains by least squares at given time constants, the time
+constants by Levenberg-Marquardt on their logarithms), choosing a small subset of the logged
+sensors greedily; ``simulate`` writes such a log from a known model."""
+
+from __future__ import annotations
+
+import csv
+import math
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ChaincompError
+from ..model import units as U
+from ..model.expressions import MAX_LITERAL
+from ..model.machine import Machine
+from ..model.yamlsource import LineDict, LineList, describe, line_of, load_yaml, read_text
+
+REFERENCE_TEMPERATURE = 20.0   # degC: ISO 1, the reference temperature of geometrical specifications
+MAX_ERRORS = 64                # errors of one thermal model
+MAX_TERMS = 8                  # terms of one error
+MAX_TIME_CONSTANT = 1e6        # s (11.6 days): a machine tool's slowest structure takes hours
+MAX_GAIN = 1e6                 # in the error's unit per K
+TEMPERATURE_RANGE = (-100.0, 300.0)   # degC: a reading outside is a broken sensor, not a temperature
+MAX_ROWS = 2_000_000           # rows of a log (a week at 3 Hz)
+MAX_COLUMNS = 64
+SENSOR = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,31}")
+_DECIMAL = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+_HEADER_UNIT = re.compile(r"^(.*?)\s*\[([^\]]*)\]\s*$")
+TEMPERATURE_UNITS = ("degC", "°C")
+BLOCK = 30.0                   # lag: time constants per vectorised block (exp(30) stays far from overflow)
+
+
+# ----------------------------------------------------------------------------- the lag
+
+def lag(t: np.ndarray, u: np.ndarray, tau: float) -> np.ndarray:
+    """First-order lag of readings ``u`` at times ``t`` (s, increasing) with time constant
+    ``tau`` (s; 0: none), exact for an input linear between readings, settled at u[0]."""
+    t = np.asarray(t, float)
+    u = np.asarray(u, float)
+    if tau == 0 or len(u) < 2:
+        return u.copy()
+    dt = np.diff(t)
+    one_minus_e = -np.expm1(-dt / tau)
+    e = 1.0 - one_minus_e
+    c = u[1:] - e * u[:-1] - (np.diff(u) / dt) * tau * one_minus_e   # y_k = e_k y_{k-1} + c_k
+    y = np.empty_like(u)
+    y[0] = u[0]
+    n, k = len(u), 1
+    while k < n:
+        y[k] = e[k - 1] * y[k - 1] + c[k - 1]
+        # the readings within BLOCK time constants after t_k: y_m = P_m (y_k + sum c_j / P_j),
+        # P_m = exp(-(t_m - t_k)/tau), at most exp(30) apart
+        end = int(np.searchsorted(t, t[k] + BLOCK * tau, side="left"))
+        if end > k + 1:
+            p = np.exp(-(t[k + 1:end] - t[k]) / tau)
+            y[k + 1:end] = p * (y[k] + np.cumsum(c[k:end - 1] / p))
+        k = max(end, k + 1)
+    return y
+
+
+# ----------------------------------------------------------------------------- the model
+
+@dataclass
+class Term:
+    sensor: str
+    gain: float                 # the error's unit per K
+    time_constant: float        # s; 0: no lag
+    gain_u: float | None = None            # standard uncertainties of a fit (k = 1)
+    time_constant_u: float | None = None
+
+
+@dataclass
+class ErrorModel:
+    error: str
+    unit: U.Unit
+    offset: float
+    terms: list[Term] = field(default_factory=list)
+    offset_u: float | None = None
+
+    def evaluate(self, t: np.ndarray, temperatures: dict[str, np.ndarray], reference: float) -> np.ndarray:
+        """The error's thermal part at the log's times, in its unit."""
+        value = np.full(len(t), self.offset)
+        for term in self.terms:
+            value = value + term.gain * (lag(t, temperatures[term.sensor], term.time_constant) - reference)
+        return value
+
+
+@dataclass
+class ThermalModel:
+    machine: str
+    reference: float = REFERENCE_TEMPERATURE
+    errors: dict[str, ErrorModel] = field(default_factory=dict)
+
+    @property
+    def sensors(self) -> list[str]:
+        return sorted({term.sensor for e in self.errors.values() for term in e.terms})
+
+
+def _number(node, key, path: str, what: str, lo: float, hi: float) -> float:
+    value = node[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ChaincompError(f"expected a number ({what}), got {describe(value)}", path, line_of(node, key), key)
+    value = float(value)
+    if not (lo <= value <= hi):
+        raise ChaincompError(f"{value!r} is outside [{lo:g}, {hi:g}] ({what})", path, line_of(node, key), key)
+    return value
+
+
+def _keys(node, allowed: tuple[str, ...], required: tuple[str, ...], path: str, where: str) -> None:
+    for key in node:
+        if key not in allowed:
+            raise ChaincompError(f"unknown key {key!r} in {where} (expected: {', '.join(allowed)})", path,
+                                 line_of(node, key), str(key))
+    for key in required:
+        if key not in node:
+            raise ChaincompError(f"{where} needs {key!r}", path, line_of(node))
+
+
+def load_model(path: str, machine: Machine | None = None) -> ThermalModel:
+    """A thermal model file; every fault a ChaincompError naming the file, line and field."""
+    doc = load_yaml(path)
+    if not isinstance(doc, LineDict):
+        raise ChaincompError(f"expected a mapping with 'machine' and 'errors', got {describe(doc)}", path, 1)
+    _keys(doc, ("machine", "reference_temperature", "errors"), ("machine", "errors"), path, "a thermal model")
+    name = doc["machine"]
+    if not isinstance(name, str):
+        raise ChaincompError(f"expected the machine's name, got {describe(name)}", path, line_of(doc, "machine"),
+                             "machine")
+    if machine is not None and name != machine.name:
+        raise ChaincompError(f"the model is of machine {name!r}, not {machine.name!r}", path,
+                             line_of(doc, "machine"), "machine")
+    model = ThermalModel(name)
+    if "reference_temperature" in doc:
+        model.reference = _number(doc, "reference_temperature", path, "degC", *TEMPERATURE_RANGE)
+    errors = doc["errors"]
+    if not isinstance(errors, LineDict) or not errors:
+        raise ChaincompError(f"expected a mapping of error names to their models, got {describe(errors)}", path,
+                             line_of(doc, "errors"), "errors")
+    if len(errors) > MAX_ERRORS:
+        raise ChaincompError(f"{len(errors)} errors: a thermal model holds at most {MAX_ERRORS}", path,
+                             line_of(doc, "errors"), "errors")
+    for err, node in errors.items():
+        line = line_of(errors, err)
+        if machine is not None:
+            known = {s.name: s for s in machine.errors}
+            if err not in known:
+                raise ChaincompError(f"{err!r} is not an error of {machine.name}", path, line, str(err))
+        if not isinstance(node, LineDict):
+            raise ChaincompError(f"expected a mapping with unit, offset and terms, got {describe(node)}", path,
+                                 line, str(err))
+        _keys(node, ("unit", "offset", "terms"), ("unit", "terms"), path, f"error {err}")
+        try:
+            unit = U.unit(node["unit"]) if isinstance(node["unit"], str) else None
+        except KeyError as exc:
+            raise ChaincompError(exc.args[0], path, line_of(node, "unit"), "unit") from None
+        if unit is None or unit.kind not in ("length", "angle"):
+            raise ChaincompError(f"expected a length or angle unit (um, arcsec, ...), got {describe(node['unit'])}",
+                                 path, line_of(node, "unit"), "unit")
+        if machine is not None and known[err].unit.kind != unit.kind:
+            raise ChaincompError(f"{err} is {'an' if known[err].unit.kind == 'angle' else 'a'} {known[err].unit.kind} "
+                                 f"in {machine.name}, not {'an' if unit.kind == 'angle' else 'a'} {unit.kind}",
+                                 path, line_of(node, "unit"), "unit")
+        limit = MAX_LITERAL / unit.to_internal
+        em = ErrorModel(str(err), unit, _number(node, "offset", path, unit.name, -limit, limit)
+                        if "offset" in node else 0.0)
+        terms = node["terms"]
+        if not isinstance(terms, LineList) or not 1 <= len(terms) <= MAX_TERMS:
+            raise ChaincompError(f"expected a list of 1 to {MAX_TERMS} terms, got {describe(terms)}", path,
+                                 line_of(node, "terms"), "terms")
+        seen: dict[str, int] = {}
+        for i, term in enumerate(terms):
+            tline = line_of(terms, i)
+            if not isinstance(term, LineDict):
+                raise ChaincompError(f"expected a term {{sensor, gain, time_constant}}, got {describe(term)}", path,
+                                     tline, "terms")
+            _keys(term, ("sensor", "gain", "time_constant"), ("sensor", "gain"), path, "a term")
+            sensor = term["sensor"]
+            if not isinstance(sensor, str) or not SENSOR.fullmatch(sensor):
+                raise ChaincompError(f"expected a sensor name (a letter or _, then letters, digits or _, at most 32), "
+                                     f"got {describe(sensor)}", path, line_of(term, "sensor"), "sensor")
+            gain = _number(term, "gain", path, f"{unit.name}/K", -MAX_GAIN, MAX_GAIN)
+            tau = _number(term, "time_constant", path, "s, 0 for no lag", 0.0, MAX_TIME_CONSTANT) \
+                if "time_constant" in term else 0.0
+            key = f"{sensor}@{tau!r}"
+            if key in seen:
+                raise ChaincompError(f"a second term of sensor {sensor} with time constant {tau:g} s (the first on "
+                                     f"line {seen[key]}): add their gains", path, tline, "terms")
+            seen[key] = tline
+            em.terms.append(Term(sensor, gain, tau))
+        model.errors[em.error] = em
+    return model
+
+
+def _g(v: float) -> str:
+    text = f"{v:.6g}"
+    return "0" if text in ("-0", "0") else text
+
+
+def model_text(model: ThermalModel, header: list[str]) -> str:
+    """The model as a file ``load_model`` reads (uncertainties as comments)."""
+    lines = [f"# {h}" for h in header]
+    lines += [f"machine: {model.machine}",
+              f"reference_temperature: {_g(model.reference)}   # degC: each term is gain * (lagged temperature - this)",
+              "errors:"]
+    for em in model.errors.values():
+        u = f"   # ± {_g(em.offset_u)} (standard uncertainty)" if em.offset_u is not None else ""
+        lines += [f"  {em.error}:",
+                  f"    unit: {em.unit.name}   # of the offset, and per K of each gain",
+                  f"    offset: {_g(em.offset)}{u}",
+                  "    terms:   # gain in " + em.unit.name + "/K, time_constant in s (0: no lag)"]
+        for term in em.terms:
+            u = ""
+            if term.gain_u is not None:
+                u = f"   # ± {_g(term.gain_u)} {em.unit.name}/K, ± {_g(term.time_constant_u or 0.0)} s"
+            lines.append(f"      - {{sensor: {term.sensor}, gain: {_g(term.gain)}, "
+                         f"time_constant: {_g(term.time_constant)}}}{u}")
+    return "\n".join(lines) + "\n"
+
+
+# ----------------------------------------------------------------------------- the log
+
+@dataclass
+class Log:
+    path: str
+    t: np.ndarray                         # s
+    temperatures: dict[str, np.ndarray]   # degC
+    drift: dict[str, np.ndarray]          # error name -> values in drift_units[name]
+    drift_units: dict[str, U.Unit]
+    columns: dict[str, str]               # sensor or error -> its header cell
+
+
+def read_log(path: str, machine: Machine, rename: dict[str, str] | None = None) -> Log:
+    """A CSV log: a 'time [s]' column, temperature columns ('NAME [degC]') and drift columns
+    named by errors of the machine ('EZZ [um]'; ``rename`` maps other names to errors)."""
+    rename = dict(rename or {})
+    text = read_text(path, limit=256 * 1024 * 1024)
+    if text.startswith("\ufeff"):
+        text = text[1:]
+    rows = [(i, line) for i, line in enumerate(text.splitlines(), 1)
+            if line.strip() and not line.lstrip().startswith("#")]
+    if not rows:
+        raise ChaincompError("no header row (expected e.g. 'time [s],T_spindle [degC],EZZ [um]')", path, 1)
+    if len(rows) - 1 > MAX_ROWS:
+        raise ChaincompError(f"{len(rows) - 1} rows: a log holds at most {MAX_ROWS}", path)
+    hline, htext = rows[0]
+    delimiter = ";" if htext.count(";") > htext.count(",") else "\t" if "\t" in htext and "," not in htext else ","
+
+    def cells(number: int, line: str) -> list[str]:
+        try:
+            return next(csv.reader([line], delimiter=delimiter))
+        except csv.Error as exc:
+            raise ChaincompError(f"unreadable CSV row: {exc}", path, number) from None
+
+    header = cells(hline, htext)
+    if len(header) > MAX_COLUMNS:
+        raise ChaincompError(f"{len(header)} columns: a log holds at most {MAX_COLUMNS}", path, hline)
+    errors = {s.name: s for s in machine.errors}
+    time_col, kinds, names, scale = None, [], [], []
+    for k, cell in enumerate(header):
+        m = _HEADER_UNIT.match(cell.strip())
+        name, unit = (m.group(1).strip(), m.group(2).strip()) if m else (cell.strip(), None)
+        if unit is None:
+            raise ChaincompError(f"column {k + 1} ({cell.strip()!r}) has no unit: write it in brackets, e.g. "
+                                 "'time [s]', 'T_spindle [degC]', 'EZZ [um]'", path, hline, cell.strip())
+        if name.lower() == "time":
+            if unit != "s":
+                raise ChaincompError(f"time in {unit!r}: write it in seconds ('time [s]')", path, hline, cell.strip())
+            if time_col is not None:
+                raise ChaincompError(f"two time columns ({time_col + 1} and {k + 1})", path, hline, cell.strip())
+            time_col = k
+            kinds.append("time"), names.append("time"), scale.append(1.0)
+            continue
+        if unit in TEMPERATURE_UNITS:
+            if not SENSOR.fullmatch(name):
+                raise ChaincompError(f"sensor name {name!r}: a letter or _, then letters, digits or _ (at most 32)",
+                                     path, hline, cell.strip())
+            kinds.append("temperature"), names.append(name), scale.append(1.0)
+            continue
+        try:
+            u = U.unit(unit)
+        except KeyError as exc:
+            raise ChaincompError(f"{exc.args[0]}; or a temperature in {' or '.join(TEMPERATURE_UNITS)}", path,
+                                 hline, cell.strip()) from None
+        error = rename.pop(name, name)
+        if error not in errors:
+            raise ChaincompError(f"drift column {name!r} is not an error of {machine.name} (name the column by the "
+                                 f"error it measures, e.g. EZZ, or map it with --drift {name}=ERROR)", path, hline,
+                                 cell.strip())
+        if u.kind != errors[error].unit.kind:
+            raise ChaincompError(f"{error} is {'an' if errors[error].unit.kind == 'angle' else 'a'} "
+                                 f"{errors[error].unit.kind} but the column is in {u.name}", path, hline, cell.strip())
+        kinds.append("drift"), names.append(error), scale.append(1.0)
+    if rename:
+        raise ChaincompError(f"--drift: no column {', '.join(sorted(rename))} in the header", path, hline)
+    if time_col is None:
+        raise ChaincompError(f"no 'time [s]' column (header: {', '.join(header)})", path, hline)
+    for kind in ("temperature", "drift"):
+        if kind not in kinds:
+            raise ChaincompError(f"no {kind} column ({'NAME [degC]' if kind == 'temperature' else 'ERROR [um]'}; "
+                                 f"header: {', '.join(header)})", path, hline)
+    seen: dict[str, int] = {}
+    for k, name in enumerate(names):
+        if name in seen:
+            raise ChaincompError(f"two columns of {name} ({seen[name] + 1} and {k + 1})", path, hline, header[k].strip())
+        seen[name] = k
+    data = np.empty((len(rows) - 1, len(header)))
+    for r, (line, raw) in enumerate(rows[1:]):
+        row = cells(line, raw)
+        if len(row) != len(header):
+            raise ChaincompError(f"{len(row)} cells, the header has {len(header)}", path, line)
+        for k, cell in enumerate(row):
+            t = cell.strip()
+            if not _DECIMAL.fullmatch(t):
+                raise ChaincompError(f"expected a number, got {cell!r}", path, line, header[k].strip())
+            v = float(t)
+            if not abs(v) <= MAX_LITERAL:
+                raise ChaincompError(f"{t!r} is larger than {MAX_LITERAL:g} in magnitude", path, line, header[k].strip())
+            if kinds[k] == "temperature" and not TEMPERATURE_RANGE[0] <= v <= TEMPERATURE_RANGE[1]:
+                raise ChaincompError(f"{v:g} degC is outside [{TEMPERATURE_RANGE[0]:g}, {TEMPERATURE_RANGE[1]:g}] "
+                                     "degC: a broken sensor?", path, line, header[k].strip())
+            data[r, k] = v
+        if r and not data[r, time_col] > data[r - 1, time_col]:
+            raise ChaincompError(f"time {data[r, time_col]:g} s does not follow {data[r - 1, time_col]:g} s "
+                                 "(times must increase)", path, line, header[time_col].strip())
+    if len(data) < 10:
+        raise ChaincompError(f"{len(data)} rows: a fit needs at least 10", path, hline)
+    units = {}
+    for k, cell in enumerate(header):
+        if kinds[k] == "drift":
+            units[names[k]] = U.unit(_HEADER_UNIT.match(cell.strip()).group(2).strip())
+    return Log(path, data[:, time_col],
+               {n: data[:, k] for k, n in enumerate(names) if kinds[k] == "temperature"},
+               {n: data[:, k] for k, n in enumerate(names) if kinds[k] == "drift"}, units,
+               {n: header[k].strip() for k, n in enumerate(names)})
+
+
+# ----------------------------------------------------------------------------- the fit
+
+@dataclass
+class Fit:
+    model: ErrorModel
+    rms_before: float      # of the drift about its mean, the error's unit
+    rms_after: float
+    max_before: float
+    max_after: float
+    steps: list[tuple[str, float]]   # the sensors in the order chosen, with the RMS left after each
+
+
+def _design(t, temps, chosen, taus, reference) -> np.ndarray:
+    cols = [np.ones(len(t))] + [lag(t, temps[s], tau) - reference for s, tau in zip(chosen, taus)]
+    return np.stack(cols, axis=1)
+
+
+def _solve(a: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, float]:
+    coef, *_ = np.linalg.lstsq(a, d, rcond=None)
+    r = d - a @ coef
+    return coef, float(r @ r)
+
+
+def _refine(t, temps, d, chosen, taus, reference, lo, hi, iterations: int = 40):
+    """Levenberg-Marquardt on the logarithms of the positive time constants (the gains solved at
+    each step): the time constants and the residual sum of squares."""
+    free = [i for i, tau in enumerate(taus) if tau > 0]
+    taus = list(taus)
+    _, rss = _solve(_design(t, temps, chosen, taus, reference), d)
+    if not free:
+        return taus, rss
+    mu = 1e-3
+    h = 1e-5
+    for _ in range(iterations):
+        a = _design(t, temps, chosen, taus, reference)
+        coef, rss = _solve(a, d)
+        r = d - a @ coef
+        jac = np.empty((len(d), len(free)))
+        for j, i in enumerate(free):
+            up = list(taus)
+            up[i] = taus[i] * math.exp(h)
+            a_up = _design(t, temps, chosen, up, reference)
+            c_up, _ = _solve(a_up, d)
+            jac[:, j] = ((d - a_up @ c_up) - r) / h
+        g = jac.T @ r
+        jtj = jac.T @ jac
+        improved = False
+        for _ in range(12):
+            step = np.linalg.solve(jtj + mu * np.diag(np.diag(jtj) + 1e-12), -g)
+            trial = list(taus)
+            for j, i in enumerate(free):
+                trial[i] = float(np.clip(taus[i] * math.exp(float(np.clip(step[j], -2, 2))), lo, hi))
+            _, rss_trial = _solve(_design(t, temps, chosen, trial, reference), d)
+            if rss_trial < rss:
+                taus, mu, improved = trial, max(mu / 3, 1e-9), True
+                if rss - rss_trial <= 1e-10 * rss:
+                    return taus, rss_trial
+                break
+            mu *= 4
+        if not improved:
+            break
+    _, rss = _solve(_design(t, temps, chosen, taus, reference), d)
+    return taus, rss
+
+
+def _uncertainties(t, temps, d, chosen, taus, coef, reference) -> np.ndarray:
+    """Standard uncertainties of (offset, gains, time constants) from the Jacobian of the full
+    model at the solution, for white noise on the drift readings."""
+    a = _design(t, temps, chosen, taus, reference)
+    r = d - a @ coef
+    cols = [a[:, 0]] + [a[:, 1 + i] for i in range(len(chosen))]
+    for i, (s, tau) in enumerate(zip(chosen, taus)):
+        if tau > 0:
+            dtau = tau * 1e-6
+            cols.append(coef[1 + i] * (lag(t, temps[s], tau + dtau) - lag(t, temps[s], tau - dtau)) / (2 * dtau))
+    jac = np.stack(cols, axis=1)
+    dof = max(len(d) - jac.shape[1], 1)
+    s2 = float(r @ r) / dof
+    try:
+        cov = s2 * np.linalg.inv(jac.T @ jac)
+    except np.linalg.LinAlgError:
+        return np.full(jac.shape[1], math.inf)
+    return np.sqrt(np.maximum(np.diag(cov), 0.0))
+
+
+def fit(log: Log, error: str, sensors: list[str], reference: float = REFERENCE_TEMPERATURE,
+        max_sensors: int = 3, min_improvement: float = 0.1, lags: bool = True, progress=None) -> Fit:
+    """The thermal model of ``error`` from the log: sensors chosen greedily among ``sensors`` while
+    each new one lowers the RMS residual by at least ``min_improvement`` (relative)."""
+    t, d = log.t, log.drift[error]
+    temps = log.temperatures
+    duration = float(t[-1] - t[0])
+    lo = max(float(np.median(np.diff(t))), 1e-3)
+    hi = min(10 * duration, MAX_TIME_CONSTANT)
+    grid = [0.0] + (list(np.geomspace(lo, hi, 24)) if lags and hi > lo else [])
+    rms0 = float(np.sqrt(np.mean((d - d.mean()) ** 2)))
+    chosen: list[str] = []
+    taus: list[float] = []
+    rss = float(np.sum((d - d.mean()) ** 2))
+    steps = []
+    while len(chosen) < min(max_sensors, len(sensors)):
+        best = None
+        for s in sensors:
+            if s in chosen:
+                continue
+            for tau in grid:
+                _, r = _solve(_design(t, temps, chosen + [s], taus + [tau], reference), d)
+                if best is None or r < best[0]:
+                    best = (r, s, tau)
+        _, s, tau = best
+        new_taus, new_rss = _refine(t, temps, d, chosen + [s], taus + [tau], reference, lo, hi)
+        n = len(d)
+        # Schwarz's criterion (BIC): a sensor adds a gain and a time constant, and must lower
+        # n ln(RSS) by more than 2 ln(n); and it must lower the RMS by min_improvement
+        if n * math.log(rss / max(new_rss, 1e-300)) <= 2 * math.log(n) or \
+                math.sqrt(new_rss) > (1 - min_improvement) * math.sqrt(rss):
+            break
+        chosen, taus, rss = chosen + [s], new_taus, new_rss
+        steps.append((s, math.sqrt(rss / len(d))))
+        if progress:
+            progress(f"{error}: + {s} (time constant {taus[-1]:.4g} s): RMS left {math.sqrt(rss / len(d)):.4g}")
+    a = _design(t, temps, chosen, taus, reference)
+    coef, rss = _solve(a, d)
+    u = _uncertainties(t, temps, d, chosen, taus, coef, reference)
+    tau_u = iter(u[1 + len(chosen):])
+    em = ErrorModel(error, log.drift_units[error], float(coef[0]), offset_u=float(u[0]))
+    for i, (s, tau) in enumerate(zip(chosen, taus)):
+        em.terms.append(Term(s, float(coef[1 + i]), float(tau), float(u[1 + i]),
+                             float(next(tau_u)) if tau > 0 else 0.0))
+    residual = d - a @ coef
+    return Fit(em, rms0, float(np.sqrt(np.mean(residual ** 2))), float(np.max(np.abs(d - d.mean()))),
+               float(np.max(np.abs(residual))), steps)
+
+
+# ----------------------------------------------------------------------------- simulation
+
+@dataclass
+class Sensor:
+    """A simulated sensor: the hall's temperature through a lag, plus ``rise`` K at full spindle
+    duty reached through another, plus a chiller's triangular swing (coolant)."""
+    name: str
+    rise: float                 # K at full spindle duty, once settled
+    time_constant: float        # s, of the rise
+    ambient_lag: float = 0.0    # s, of the hall's temperature
+    ambient: float = 1.0        # how much of the hall's swing it follows (a cooled spindle: little)
+    swing: float = 0.0          # K, peak to peak
+    swing_period: float = 1.0   # s
+
+
+DEFAULT_SENSORS = [Sensor("T_spindle", 15.0, 1200.0, 600.0, 0.2), Sensor("T_column", 2.0, 5400.0, 2400.0),
+                   Sensor("T_bed", 0.5, 14400.0, 7200.0), Sensor("T_coolant", 1.0, 600.0, 0.0, 0.3, 0.8, 1500.0),
+                   Sensor("T_ambient", 0.0, 0.0, 0.0)]
+# spindle duty (0..1) and how long it is held, s
+CYCLES = {
+    "warmup": [(0.0, 900), (1.0, 10800), (0.4, 5400), (0.0, 9000)],
+    "varied": [(0.7, 7200), (0.0, 3600), (1.0, 5400), (0.2, 3600), (0.0, 7200)],
+}
+# the hall: 20 degC and a sum of slow swings (K amplitude, s period), phases drawn from the seed
+HALL = (20.0, [(1.0, 86400.0), (0.6, 14400.0), (0.4, 5400.0), (0.2, 2700.0)])
+
+
+def parse_cycle(text: str) -> list[tuple[float, float]]:
+    """'1:3600,0:1800' (duty:seconds, ...) or a named cycle."""
+    if text in CYCLES:
+        return CYCLES[text]
+    out = []
+    for part in text.split(","):
+        bits = part.split(":")
+        if len(bits) != 2 or not all(_DECIMAL.fullmatch(b.strip()) for b in bits):
+            raise ChaincompError(f"--cycle: expected {' or '.join(CYCLES)} or DUTY:SECONDS,..., e.g. 1:3600,0:1800, "
+                                 f"got {part!r}")
+        duty, seconds = float(bits[0]), float(bits[1])
+        if not 0 <= duty <= 1 or not 0 < seconds <= 1e6:
+            raise ChaincompError(f"--cycle: {part!r}: the duty is from 0 to 1, the time from 0 to 1e6 s")
+        out.append((duty, seconds))
+    return out
+
+
+def simulate(model: ThermalModel, sensors: list[Sensor], cycle: list[tuple[float, float]], rate: float,
+             temperature_noise: float, drift_noise: float, seed: int, start: float = 0.0):
+    """Times, temperatures and drift (each error in its model's unit) of a machine following
+    ``model``, run through ``cycle``. The truth is computed on a step 10 times finer than the
+    log's and then sampled, so that a fit does not see its own discretisation."""
+    duration = sum(s for _, s in cycle)
+    fine = min(1.0, 0.1 / rate)
+    tf = np.arange(0.0, duration + fine / 2, fine)
+    edges = np.cumsum([0.0] + [s for _, s in cycle])
+    duty = np.array([d for d, _ in cycle] + [cycle[-1][0]])[np.clip(np.searchsorted(edges, tf, side="right") - 1,
+                                                                   0, len(cycle))]
+    rng = np.random.default_rng(seed)
+    mean, swings = HALL
+    hall = mean + sum(a * np.sin(2 * np.pi * tf / p + rng.uniform(0, 2 * np.pi)) for a, p in swings)
+    truth = {}
+    for s in sensors:
+        v = mean + s.ambient * (lag(tf, hall, s.ambient_lag) - mean) + s.rise * lag(tf, duty, s.time_constant)
+        if s.swing:
+            v = v + s.swing * (2 * np.abs(((tf + start) / s.swing_period) % 1.0 - 0.5) - 0.5)
+        truth[s.name] = v
+    drift = {name: em.evaluate(tf, truth, model.reference) for name, em in model.errors.items()}
+    step = int(round(1.0 / (rate * fine)))
+    t = tf[::step]
+    temps = {n: v[::step] + rng.normal(0.0, temperature_noise, len(t)) for n, v in truth.items()}
+    # drift_noise: um for a length error, arcsec for an angle, whatever unit the model writes it in
+    per = {n: (1e-3 if em.unit.kind == "length" else math.pi / 648000) / em.unit.to_internal
+           for n, em in model.errors.items()}
+    drift = {n: v[::step] + rng.normal(0.0, drift_noise * per[n], len(t)) for n, v in drift.items()}
+    return t, temps, drift
