@@ -9,7 +9,7 @@ _chaincomp() {
         case "${COMP_WORDS[i]}" in -*) ;; *) verb="${COMP_WORDS[i]}"; break;; esac
     done
     if [[ -z $verb ]]; then
-        words='derive eval generate testvectors protocol identify simulate-measurements simulate-log replay plot check report budget simulate-calibration build lint iso230-2 laser-to-params status import-urdf ballbar export -h --help --version'
+        words='derive eval generate testvectors protocol identify simulate-measurements simulate-log replay plot check report budget simulate-calibration build lint iso230-2 laser-to-params status import-urdf ballbar export thermal simulate-thermal -h --help --version'
     else
         case "$verb" in
         derive)
@@ -132,6 +132,16 @@ _chaincomp() {
             --comp-file-type) words='0 1';;
             --report) words='text json';;
             *) words='-h --help --params --set --format -o --output --grid --entries --comp-file-type --joints --reversal --report --json --no-breakdown'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        thermal)
+          case "$prev" in
+            thermal) words='fit check';;
+            --format) words='text json';;
+            *) words='-h --help -o --output --errors --sensors --max-sensors --min-improvement --no-lag --reference --drift --check --format --json'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        simulate-thermal)
+          case "$prev" in
+            *) words='-h --help --model -o --output --cycle --rate --temperature-noise --drift-noise --seed'; [[ $cur == -* ]] || return 0;;
           esac;;
         *) return 0;;
         esac

@@ -95,23 +95,31 @@ def _metavar(parser: argparse.ArgumentParser, action: argparse.Action) -> str:
     return _code(formatter._format_args(action, action.dest.upper()))
 
 
-def verb_page(verb: str, one_line: str, parser: argparse.ArgumentParser) -> str:
-    out = [f"# chaincomp {verb}", "", _text(one_line), "", "```text", parser.format_usage().strip(), "```", ""]
+def verb_page(verb: str, one_line: str, parser: argparse.ArgumentParser, level: int = 1) -> str:
+    """A verb's page; a group's (thermal) holds a section for each of its verbs (thermal fit)."""
+    h = "#" * level
+    out = [f"{h} chaincomp {verb}", "", _text(one_line), "", "```text", parser.format_usage().strip(), "```", ""]
     if parser.description:
         out += [_text(parser.description), ""]
-    for group in parser._action_groups:
-        actions = [a for a in group._group_actions if a.help is not argparse.SUPPRESS]
+    group = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    for g in parser._action_groups:
+        actions = [a for a in g._group_actions if a.help is not argparse.SUPPRESS and a not in group]
         if not actions:
             continue
-        out += [f"## {group.title[:1].upper()}{group.title[1:]}", "",
+        out += [f"{h}# {g.title[:1].upper()}{g.title[1:]}", "",
                 "| option | value | default | meaning |", "|---|---|---|---|"]
         for a in actions:
             out.append(f"| {_names(a)} | {_metavar(parser, a)} | {_default(a)} | {_text(_help(parser, a))} |")
         out.append("")
+    if group:
+        helps = {a.dest: a.help or "" for a in group[0]._choices_actions}
+        for child, p in group[0].choices.items():
+            out.append(verb_page(f"{verb} {child}", helps.get(child, ""), p, level + 1))
     if parser.epilog:
         out += [_text(parser.epilog), ""]
-    out += ["*Generated from the parser (`chaincomp.cli.main.build_parser`) when the manual is built; "
-            f"`chaincomp {verb} --help` prints the same.*", ""]
+    if level == 1:
+        out += ["*Generated from the parser (`chaincomp.cli.main.build_parser`) when the manual is built; "
+                f"`chaincomp {verb} --help` prints the same.*", ""]
     return "\n".join(out)
 
 

@@ -29,12 +29,17 @@ def bash_script(parser: argparse.ArgumentParser | None = None) -> str:
     top = [s for a in parser._actions for s in a.option_strings]
     cases = []
     for verb, p in sub.choices.items():
-        opts = [s for a in p._actions for s in a.option_strings]
-        values = []
-        for a in p._actions:
+        actions = list(p._actions)
+        group = [a for a in actions if isinstance(a, argparse._SubParsersAction)]
+        if group:   # a group of verbs (thermal fit, thermal check): their names, and all their options
+            actions = [a for a in actions if a not in group] + [a for q in group[0].choices.values() for a in q._actions]
+        opts = list(dict.fromkeys(s for a in actions for s in a.option_strings))
+        values = [f"            {verb}) words={shlex.quote(' '.join(group[0].choices))};;"] if group else []
+        for a in actions:
             words = _values(a)
             if a.option_strings and words and a.nargs != 0:
                 values.append(f"            {'|'.join(a.option_strings)}) words={shlex.quote(' '.join(words))};;")
+        values = list(dict.fromkeys(values))
         cases.append(f"        {verb})\n"
                      f"          case \"$prev\" in\n" + "".join(v + "\n" for v in values) +
                      f"            *) words={shlex.quote(' '.join(opts))}; [[ $cur == -* ]] || return 0;;\n"

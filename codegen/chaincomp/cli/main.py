@@ -92,6 +92,8 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:   # --help, or a bad option (already reported in one line)
         return exc.code if isinstance(exc.code, int) else 0
     debug = os.environ.get("CHAINCOMP_DEBUG") == "1"
+    if getattr(args, "thermal_verb", None):   # a verb of a group (thermal fit): named as argparse names it
+        args.verb = f"{args.verb} {args.thermal_verb}"
     try:
         # numpy's warnings on nan and overflow would print formulas on stderr: the verbs
         # check their results and name what is not finite instead

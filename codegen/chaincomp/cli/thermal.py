@@ -137,7 +137,15 @@ def run_fit(args) -> int:
     text = T.model_text(model, [f"Written by: {' '.join(shlex.quote(c) for c in command)}",
                                 f"Fitted to {len(log.t)} rows over {log.t[-1] - log.t[0]:g} s; each error's "
                                 "value is its params value plus offset + sum gain * (lag - reference)."])
-    held_result = _check(model, held) if held is not None else None
+    held_result = None
+
+    def loads(tmp: str) -> None:   # the file written reads back, and the held-out log is checked on it
+        nonlocal held_result
+        written = T.load_model(tmp, machine)
+        if held is not None:
+            held_result = _check(written, held)
+            check_finite(held_result)
+
     doc = {"machine": machine.name, "log": args.log, "rows": int(len(log.t)), "reference": args.reference,
            "errors": {e: {"unit": f.model.unit.name, "offset": f.model.offset, "offset_u": f.model.offset_u,
                           "rms_before": f.rms_before, "rms_after": f.rms_after, "max_before": f.max_before,
@@ -145,17 +153,13 @@ def run_fit(args) -> int:
                           "terms": [{"sensor": t.sensor, "gain": t.gain, "gain_u": t.gain_u,
                                      "time_constant": t.time_constant, "time_constant_u": t.time_constant_u}
                                     for t in f.model.terms]} for e, f in fits.items()}}
-    if held_result is not None:
-        doc["check"] = {"log": args.check, "errors": held_result}
     check_finite(doc)
-
-    def loads(tmp: str) -> None:   # the file written reads back as the model fitted
-        T.load_model(tmp, machine)
-
     try:
         write_checked(args.output, text, loads)
     except OSError as exc:
         raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
+    if held_result is not None:
+        doc["check"] = {"log": args.check, "errors": held_result}
     if args.format == "json":
         print(to_json(doc))
         return 0
@@ -163,7 +167,7 @@ def run_fit(args) -> int:
     for e, f in fits.items():
         u = f.model.unit.name
         lines.append(f"  {e}: offset {f.model.offset:.4g} ± {f.model.offset_u:.2g} {u}; drift RMS "
-                     f"{f.rms_before:.4g} -> {f.rms_after:.4g} {u}, max {f.max_before:.4g} -> {f.max_after:.4g} {u}")
+                     f"{f.rms_before:.4g} (about its mean) -> {f.rms_after:.4g} {u}, max {f.max_before:.4g} -> {f.max_after:.4g} {u}")
         for t in f.model.terms:
             lines.append(f"    {t.sensor}: gain {t.gain:.5g} ± {t.gain_u:.2g} {u}/K, time constant "
                          f"{t.time_constant:.5g} ± {t.time_constant_u:.2g} s")

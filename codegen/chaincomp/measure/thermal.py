@@ -272,7 +272,7 @@ def read_log(path: str, machine: Machine, rename: dict[str, str] | None = None) 
     if len(header) > MAX_COLUMNS:
         raise ChaincompError(f"{len(header)} columns: a log holds at most {MAX_COLUMNS}", path, hline)
     errors = {s.name: s for s in machine.errors}
-    time_col, kinds, names, scale = None, [], [], []
+    time_col, kinds, names = None, [], []   # per column: time, temperature or drift; sensor or error
     for k, cell in enumerate(header):
         m = _HEADER_UNIT.match(cell.strip())
         name, unit = (m.group(1).strip(), m.group(2).strip()) if m else (cell.strip(), None)
@@ -285,13 +285,15 @@ def read_log(path: str, machine: Machine, rename: dict[str, str] | None = None) 
             if time_col is not None:
                 raise ChaincompError(f"two time columns ({time_col + 1} and {k + 1})", path, hline, cell.strip())
             time_col = k
-            kinds.append("time"), names.append("time"), scale.append(1.0)
+            kinds.append("time")
+            names.append("time")
             continue
         if unit in TEMPERATURE_UNITS:
             if not SENSOR.fullmatch(name):
                 raise ChaincompError(f"sensor name {name!r}: a letter or _, then letters, digits or _ (at most 32)",
                                      path, hline, cell.strip())
-            kinds.append("temperature"), names.append(name), scale.append(1.0)
+            kinds.append("temperature")
+            names.append(name)
             continue
         try:
             u = U.unit(unit)
@@ -306,7 +308,8 @@ def read_log(path: str, machine: Machine, rename: dict[str, str] | None = None) 
         if u.kind != errors[error].unit.kind:
             raise ChaincompError(f"{error} is {'an' if errors[error].unit.kind == 'angle' else 'a'} "
                                  f"{errors[error].unit.kind} but the column is in {u.name}", path, hline, cell.strip())
-        kinds.append("drift"), names.append(error), scale.append(1.0)
+        kinds.append("drift")
+        names.append(error)
     if rename:
         raise ChaincompError(f"--drift: no column {', '.join(sorted(rename))} in the header", path, hline)
     if time_col is None:

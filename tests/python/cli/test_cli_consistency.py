@@ -36,9 +36,14 @@ UNITS_VERBS = {"eval", "plot", "identify", "budget"}   # verbs that print errors
 
 
 def _verbs() -> dict[str, argparse.ArgumentParser]:
+    """Every verb; a group's (thermal) as 'thermal fit', 'thermal check'."""
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    return dict(sub.choices)
+    out = {}
+    for verb, p in sub.choices.items():
+        group = [a for a in p._actions if isinstance(a, argparse._SubParsersAction)]
+        out.update({f"{verb} {v}": q for v, q in group[0].choices.items()} if group else {verb: p})
+    return out
 
 
 VERBS = _verbs()
@@ -182,8 +187,8 @@ def test_version():
 
 def test_top_level_help_lists_every_verb_on_one_line():
     text = build_parser().format_help()
-    for verb, p in VERBS.items():
-        sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    for verb in dict.fromkeys(v.split()[0] for v in VERBS):   # a group (thermal) once
         help_text = next(c.help for c in sub._choices_actions if c.dest == verb)
         assert re.search(rf"^    {re.escape(verb)} +{re.escape(help_text)}$", text, re.M), verb
     assert "--version" in text
@@ -219,7 +224,9 @@ def _complete(*words: str) -> list[str]:
 
 
 def test_bash_completes_verbs_options_and_values():
-    assert _complete("chaincomp", "simulate-") == ["simulate-measurements", "simulate-log", "simulate-calibration"]
+    assert _complete("chaincomp", "simulate-") == ["simulate-measurements", "simulate-log", "simulate-calibration",
+                                                   "simulate-thermal"]
+    assert _complete("chaincomp", "thermal", "") == ["fit", "check"]   # a group's verbs
     assert _complete("chaincomp", "--ver") == ["--version"]
     assert _complete("chaincomp", "budget", M, "--se") == ["--set", "--seed"]
     assert _complete("chaincomp", "budget", M, "--order", "") == ["1", "2", "exact"]

@@ -117,7 +117,8 @@ def test_mkdocs_build_strict_has_a_page_per_verb_with_every_option(tmp_path):
         html = page.read_text(encoding="utf-8")
         assert f"chaincomp {verb}" in html
         assert f'href="{verb}/"' in index, f"the CLI index does not link {verb}"
-        for action in parser._actions:
+        group = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        for action in parser._actions + [a for q in (group[0].choices.values() if group else []) for a in q._actions]:
             if action.help is argparse.SUPPRESS:
                 continue
             for flag in action.option_strings:

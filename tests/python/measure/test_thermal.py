@@ -1,0 +1,273 @@
+"""Thermal models: the lag against its closed forms, the fit against the known model a
+simulation ran, on a machine this file writes and on vmc_xyz; held-out logs; bad input.
+
+Truth from outside the code: the first-order lag's responses to a ramp and to a sine are
+solved here by hand (dy/dt = (u - y)/tau, y(0) = u(0)); the fit's truth is the model the
+test hands to simulate-thermal."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from chaincomp.measure.thermal import lag
+from helpers import cli, machine_path, one_error_line, run_cli, run_in_process
+
+LATHE = """\
+name: lathe_zx
+description: a two-axis lathe written by the test
+length_unit: mm
+rotation_sense: right_hand
+error_block_order: txyz
+symbols:
+  - {name: Z, role: axis, unit: mm, limits: [-300, 0], meaning: carriage}
+  - {name: X, role: axis, unit: mm, limits: [0, 100], meaning: cross slide}
+  - {name: EZS, role: error, unit: um, meaning: spindle growth along z}
+  - {name: EBS, role: error, unit: arcsec, meaning: headstock tilt about y}
+loop:
+  tool:
+    - {translate: [X, 0, Z], label: slides}
+  workpiece:
+    - {errors: {dz: EZS, ey: EBS}, label: headstock}
+tool:
+  point: [0, 0, 0]
+  direction: [0, 0, 1]
+"""
+# the truth: the headstock grows with the spindle's temperature and tilts with the bed's
+LATHE_TRUE = """\
+machine: lathe_zx
+errors:
+  EZS:
+    unit: um
+    terms:
+      - {sensor: T_spindle, gain: 2.0, time_constant: 1500}
+  EBS:
+    unit: arcsec
+    offset: 0.5
+    terms:
+      - {sensor: T_column, gain: -1.2, time_constant: 1200}
+      - {sensor: T_coolant, gain: 0.8}
+"""
+VMC_TRUE = {"EZZ": [("T_spindle", -1.5, 900.0), ("T_column", 0.6, 3600.0)], "EYZ": [("T_column", -0.8, 2400.0)]}
+
+
+@pytest.fixture(scope="module")
+def lathe(tmp_path_factory):
+    d = tmp_path_factory.mktemp("thermal")
+    (d / "lathe.yaml").write_text(LATHE)
+    (d / "true.yaml").write_text(LATHE_TRUE)
+    return d
+
+
+# ----------------------------------------------------------------------------- the lag
+
+@pytest.mark.parametrize("tau", [0.5, 7.0, 60.0, 3000.0])
+def test_lag_of_a_ramp_is_the_closed_form_at_uneven_times(tau):
+    rng = np.random.default_rng(3)
+    t = np.cumsum(np.r_[0.0, rng.uniform(0.05, 3.0, 2000)])
+    r = 0.01   # K/s: linear between readings, so the lag is exact there
+    y = lag(t, r * t, tau)
+    exact = r * (t - tau * (1 - np.exp(-t / tau)))
+    assert np.max(np.abs(y - exact)) < 1e-9 * max(1.0, r * t[-1])
+
+
+def test_lag_of_a_sine_is_the_closed_form_within_the_sampling_error():
+    tau, w, a = 600.0, 2 * math.pi / 3000.0, 3.0
+    t = np.arange(0.0, 20000.0, 1.0)
+    y = lag(t, a * np.sin(w * t), tau)
+    k = 1 + (w * tau) ** 2
+    exact = a / k * (np.sin(w * t) - w * tau * np.cos(w * t)) + a * w * tau / k * np.exp(-t / tau)
+    # input linear between readings 1 s apart: the error is of order a (w dt)^2 / 8
+    assert np.max(np.abs(y - exact)) < a * (w * 1.0) ** 2
+
+
+def test_lag_zero_follows_the_input():
+    t = np.arange(5.0)
+    assert np.array_equal(lag(t, t ** 2, 0.0), t ** 2)
+
+
+# ----------------------------------------------------------------------------- the fit
+
+def _terms(model_path):
+    doc = yaml.safe_load(open(model_path))
+    return {e: [(t["sensor"], t["gain"], t.get("time_constant", 0.0)) for t in m["terms"]] for e, m in doc["errors"].items()}
+
+
+def _simulate(machine, true, out, *extra):
+    cli("simulate-thermal", machine, "--model", true, "-o", out, *extra)
+
+
+def test_fit_recovers_the_lathe_written_here_and_compensates_a_held_out_cycle(lathe):
+    m, true = lathe / "lathe.yaml", lathe / "true.yaml"
+    _simulate(m, true, lathe / "warm.csv")
+    _simulate(m, true, lathe / "held.csv", "--cycle", "varied", "--seed", "7", "--drift-noise", "0",
+              "--temperature-noise", "0")
+    res = cli("thermal", "fit", m, lathe / "warm.csv", "-o", lathe / "fit.yaml", "--check", lathe / "held.csv",
+              "--json")
+    doc = json.loads(res.stdout)
+    fitted = _terms(lathe / "fit.yaml")
+    truth = {"EZS": [("T_spindle", 2.0, 1500.0)], "EBS": [("T_column", -1.2, 1200.0), ("T_coolant", 0.8, 0.0)]}
+    for error, terms in truth.items():
+        got = {s: (g, tau) for s, g, tau in fitted[error]}
+        assert set(got) == {s for s, _, _ in terms}, (error, fitted[error])
+        for s, g, tau in terms:
+            assert got[s][0] == pytest.approx(g, rel=0.05), (error, s)
+            if tau:
+                assert got[s][1] == pytest.approx(tau, rel=0.05), (error, s)
+            else:   # the fit still gives a lag: a short one, next to the coolant's 1500 s swing
+                assert got[s][1] < 60.0, (error, s, got[s])
+        held = doc["check"]["errors"][error]
+        assert held["after_max"] <= 0.3 * held["before_max"], (error, held)
+    assert doc["errors"]["EBS"]["offset"] == pytest.approx(0.5, abs=0.2)
+
+
+def test_fit_recovers_vmc_xyz_within_5_percent_with_honest_uncertainties(tmp_path):
+    m = machine_path("vmc_xyz")
+    true = tmp_path / "true.yaml"
+    true.write_text("machine: vmc_xyz\nerrors:\n" + "".join(
+        f"  {e}:\n    unit: um\n    terms:\n" + "".join(
+            f"      - {{sensor: {s}, gain: {g}, time_constant: {tau}}}\n" for s, g, tau in terms)
+        for e, terms in VMC_TRUE.items()))
+    _simulate(m, true, tmp_path / "warm.csv")
+    _simulate(m, true, tmp_path / "held.csv", "--cycle", "varied", "--seed", "2", "--drift-noise", "0")
+    doc = json.loads(cli("thermal", "fit", m, tmp_path / "warm.csv", "-o", tmp_path / "fit.yaml",
+                         "--check", tmp_path / "held.csv", "--json").stdout)
+    for error, terms in VMC_TRUE.items():
+        got = {t["sensor"]: t for t in doc["errors"][error]["terms"]}
+        assert set(got) == {s for s, _, _ in terms}, (error, got)   # two of five sensors, one of five
+        for s, g, tau in terms:
+            t = got[s]
+            assert t["gain"] == pytest.approx(g, rel=0.05) and t["time_constant"] == pytest.approx(tau, rel=0.05)
+            # white noise on the drift, and the model the simulation ran: the truth within 4 u
+            assert abs(t["gain"] - g) <= 4 * t["gain_u"] and abs(t["time_constant"] - tau) <= 4 * t["time_constant_u"]
+        held = doc["check"]["errors"][error]
+        assert held["after_max"] <= 0.3 * held["before_max"], (error, held)
+    # the model written reads back, and thermal check on it agrees with fit --check
+    check = json.loads(run_cli("thermal", "check", m, tmp_path / "fit.yaml", tmp_path / "held.csv", "--json").stdout)
+    for error in VMC_TRUE:
+        assert check["errors"][error]["after_max"] == pytest.approx(doc["check"]["errors"][error]["after_max"], rel=1e-9)
+
+
+def test_fit_without_lags_and_with_a_chosen_sensor(lathe):
+    m = lathe / "lathe.yaml"
+    if not (lathe / "warm.csv").exists():
+        _simulate(m, lathe / "true.yaml", lathe / "warm.csv")
+    cli("thermal", "fit", m, lathe / "warm.csv", "-o", lathe / "nolag.yaml", "--no-lag", "--sensors", "T_spindle",
+        "--errors", "EZS")
+    fitted = _terms(lathe / "nolag.yaml")
+    assert list(fitted) == ["EZS"] and [(s, tau) for s, _, tau in fitted["EZS"]] == [("T_spindle", 0.0)]
+
+
+# ----------------------------------------------------------------------------- bad input
+
+GOOD_LOG = "time [s],T_a [degC],EZS [um]\n" + "".join(f"{i},{20 + 0.1 * i},{0.2 * i}\n" for i in range(12))
+
+
+def _log(lathe, text, name="bad.csv"):
+    p = lathe / name
+    p.write_text(text)
+    return p
+
+
+@pytest.mark.parametrize("text, words", [
+    ("T_a [degC],EZS [um]\n1,2\n", ["no 'time [s]' column"]),
+    ("time [s],T_a,EZS [um]\n", ["has no unit", "T_a"]),
+    ("time [min],T_a [degC],EZS [um]\n", ["seconds"]),
+    ("time [s],T_a [degC],EQQ [um]\n", ["EQQ", "not an error of lathe_zx"]),
+    ("time [s],T_a [degC],EBS [um]\n", ["EBS is an angle", "um"]),
+    ("time [s],T_a [degC],EZS [furlong]\n", ["unknown unit 'furlong'"]),
+    ("time [s],T_a [degC],T_a [degC],EZS [um]\n", ["two columns of T_a"]),
+    ("time [s],T a [degC],EZS [um]\n", ["sensor name 'T a'"]),
+    ("time [s],EZS [um]\n1,2\n", ["no temperature column"]),
+    (GOOD_LOG.replace("\n5,20.5,", "\n5,nan,"), [":7: T_a [degC]: expected a number, got 'nan'"]),
+    (GOOD_LOG.replace("\n5,20.5,", "\n5,999,"), [":7: T_a [degC]: 999 degC is outside"]),
+    (GOOD_LOG.replace("\n5,", "\n4,"), [":7: time [s]: time 4 s does not follow 4 s"]),
+    (GOOD_LOG.replace("\n5,20.5,1.0\n", "\n5,20.5\n"), [":7: 2 cells, the header has 3"]),
+    (GOOD_LOG.replace("\n5,20.5,1.0\n", "\n5,20.5,1e999\n"), ["larger than"]),
+    ("time [s],T_a [degC],EZS [um]\n1,20,0\n2,21,1\n", ["2 rows: a fit needs at least 10"]),
+    ("", ["no header row"]),
+])
+def test_bad_logs_are_refused_on_one_line_naming_the_file(lathe, text, words):
+    p = _log(lathe, text)
+    out = lathe / "never.yaml"
+    res = run_in_process("thermal", "fit", lathe / "lathe.yaml", p, "-o", out)
+    one_error_line(res, "thermal fit", str(p), *words)
+    assert not out.exists()
+
+
+MODEL = "machine: lathe_zx\nerrors:\n  EZS:\n    unit: um\n    terms:\n      - {sensor: T_spindle, gain: 2.0, time_constant: 1500}\n"
+
+
+@pytest.mark.parametrize("old, new, words", [
+    ("machine: lathe_zx", "machine: vmc_xyz", [":1: machine: the model is of machine 'vmc_xyz'"]),
+    ("  EZS:", "  EQQ:", [":3: EQQ: 'EQQ' is not an error of lathe_zx"]),
+    ("unit: um", "unit: arcsec", [":4: unit: EZS is a length in lathe_zx, not an angle"]),
+    ("unit: um", "unit: degC", [":4: unit: unknown unit 'degC'"]),
+    ("time_constant: 1500", "time_constant: -1", [":6: time_constant: -1.0 is outside [0, 1e+06]"]),
+    ("time_constant: 1500", "time_constant: .nan", [":6: time_constant: nan is outside"]),
+    ("gain: 2.0", "gain: 1.0e+300", [":6: gain: 1e+300 is outside"]),
+    ("gain: 2.0", "gain: 1e300", [":6: gain: expected a number", "write 1.0e+300"]),
+    ("gain: 2.0", "gain: '2'", [":6: gain: expected a number"]),
+    ("sensor: T_spindle", "sensor: 'T spindle'", [":6: sensor: expected a sensor name"]),
+    ("    terms:", "    offsets: 1\n    terms:", [":5: offsets: unknown key 'offsets'"]),
+    ("gain: 2.0, time_constant: 1500}", "gain: 2.0, time_constant: 1500}\n      - {sensor: T_spindle, gain: 1, "
+     "time_constant: 1500}", [":7: terms: a second term of sensor T_spindle"]),
+    ("      - {sensor: T_spindle, gain: 2.0, time_constant: 1500}\n", "".join(
+        f"      - {{sensor: T{i}, gain: 1}}\n" for i in range(9)), [":5: terms: expected a list of 1 to 8 terms"]),
+])
+def test_bad_models_are_refused_naming_the_line_and_field(lathe, old, new, words):
+    assert old in MODEL
+    p = lathe / "badmodel.yaml"
+    p.write_text(MODEL.replace(old, new))
+    out = lathe / "never.csv"
+    res = run_in_process("simulate-thermal", lathe / "lathe.yaml", "--model", p, "-o", out)
+    one_error_line(res, "simulate-thermal", str(p), *words)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--sensors", "T_nope"], ["--sensors: no temperature column T_nope"]),
+    (["--errors", "EBS"], ["--errors: no drift column of EBS"]),
+    (["--drift", "EZS"], ["--drift: expected COLUMN=ERROR"]),
+    (["--drift", "X=EZS"], ["--drift: no column X in the header"]),
+    (["--max-sensors", "9"], ["--max-sensors"]),
+    (["--min-improvement", "nan"], ["--min-improvement"]),
+])
+def test_bad_fit_options_are_refused(lathe, args, words):
+    p = _log(lathe, GOOD_LOG, "good.csv")
+    out = lathe / "never.yaml"
+    res = run_in_process("thermal", "fit", lathe / "lathe.yaml", p, "-o", out, *args)
+    one_error_line(res, "thermal fit", *words)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--cycle", "1:60,x"], ["--cycle: expected warmup or varied or DUTY:SECONDS"]),
+    (["--cycle", "2:60"], ["the duty is from 0 to 1"]),
+    (["--cycle", "1:5"], ["fewer than 10 readings"]),
+    (["--rate", "100"], ["--rate"]),
+])
+def test_bad_simulation_options_are_refused(lathe, args, words):
+    out = lathe / "never.csv"
+    res = run_in_process("simulate-thermal", lathe / "lathe.yaml", "--model", lathe / "true.yaml", "-o", out, *args)
+    one_error_line(res, "simulate-thermal", *words)
+    assert not out.exists()
+
+
+def test_a_model_of_sensors_not_simulated_or_not_logged_is_refused(lathe):
+    p = lathe / "other.yaml"
+    p.write_text(MODEL.replace("T_spindle", "T_motor"))
+    res = run_in_process("simulate-thermal", lathe / "lathe.yaml", "--model", p, "-o", lathe / "never.csv")
+    one_error_line(res, "simulate-thermal", "sensor T_motor is not simulated")
+    log = _log(lathe, GOOD_LOG, "good.csv")
+    res = run_in_process("thermal", "check", lathe / "lathe.yaml", p, log)
+    one_error_line(res, "thermal check", "reads sensor T_motor, not in the log")
+
+
+def test_the_output_is_not_an_input(lathe):
+    log = _log(lathe, GOOD_LOG, "good.csv")
+    res = run_in_process("thermal", "fit", lathe / "lathe.yaml", log, "-o", log)
+    one_error_line(res, "thermal fit", "is also an input")
+    assert log.read_text() == GOOD_LOG
