@@ -444,3 +444,36 @@ def test_export_linuxcnc_tables(name, tmp_path):
     residual = np.linalg.norm(actual - commanded, axis=1) * 1e3
     assert doc["after"]["max_um"] == pytest.approx(residual.max(), rel=1e-6, abs=1e-6)
     assert doc["after"]["max_um"] <= doc["before"]["max_um"] * (1 + 1e-9)
+
+
+# ---------------------------------------------------------------- thermal
+
+@machine
+def test_simulate_thermal_then_fit(name, tmp_path):
+    """A thermal model of the machine's first length error (and first angle error, if any),
+    written here: simulate-thermal's log at 0.2 Hz, then thermal fit finds each error's one
+    sensor out of five, its gain and time constant within 5 %."""
+    errors = [s for s in raw(name)["symbols"] if s["role"] == "error"]
+    chosen = {}
+    for kind, (sensor, gain, tau, u) in (("length", ("T_spindle", 1.0, 900.0, "um")),
+                                         ("angle", ("T_coolant", 3.0, 600.0, "arcsec"))):
+        first = next((s["name"] for s in errors if unit(s["unit"]).kind == kind), None)
+        if first:
+            chosen[first] = (sensor, gain, tau, u)
+    true = tmp_path / "true.yaml"
+    true.write_text(f"machine: {raw(name)['name']}\nerrors:\n" + "".join(
+        f"  {e}:\n    unit: {u}\n    terms:\n      - {{sensor: {s}, gain: {g}, time_constant: {tau}}}\n"
+        for e, (s, g, tau, u) in chosen.items()))
+    log, fit = tmp_path / "log.csv", tmp_path / "fit.yaml"
+    run_cli("simulate-thermal", machine_path(name), "--model", str(true), "-o", str(log), "--rate", "0.2")
+    doc = json.loads(run_cli("thermal", "fit", machine_path(name), str(log), "-o", str(fit), "--json").stdout)
+    assert sorted(doc["errors"]) == sorted(chosen)
+    for e, (s, g, tau, u) in chosen.items():
+        terms = doc["errors"][e]["terms"]
+        assert [t["sensor"] for t in terms] == [s], (e, terms)
+        assert doc["errors"][e]["unit"] == u
+        assert terms[0]["gain"] == pytest.approx(g, rel=0.05) and terms[0]["time_constant"] == pytest.approx(tau, rel=0.05)
+    with open(fit) as f:   # the file holds what the report says
+        written = yaml.safe_load(f)["errors"]
+    for e in chosen:
+        assert written[e]["terms"][0]["gain"] == pytest.approx(doc["errors"][e]["terms"][0]["gain"], rel=1e-5)
