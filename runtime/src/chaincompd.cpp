@@ -107,6 +107,9 @@ int main(int argc, char** argv) {
   const chaincomp::RealtimeObtained rt = realtime_settings(config);
   auto node = std::make_unique<chaincomp::LcmNode>(lcm, *entry, model, config, params_path, chaincomp::file_hash_hex(params_path), rt);
 
+  chaincomp::ParamsUpdater updater(*entry, model, &loaded.varying, loaded.params, config.params_updates);
+  node->accept_params_updates(updater);
+
   struct sigaction sa {};
   sa.sa_handler = on_signal;
   sigaction(SIGINT, &sa, nullptr);
@@ -143,6 +146,11 @@ int main(int argc, char** argv) {
     }
   }
   node->publish_status(true);
+  long long refused = 0;
+  for (const auto n : updater.refused()) refused += n;
+  std::fprintf(stderr, "chaincompd: params updates: received %lld, applied %lld (last seq %lld), refused %lld\n",
+               static_cast<long long>(updater.received()), static_cast<long long>(updater.version()),
+               static_cast<long long>(updater.last_seq()), refused);
   const auto& k = node->counters();
   std::fprintf(stderr, "chaincompd: stopped: received %lld, published %lld; clamped %lld (held back %lld), "
                "clamped input %lld; seq gaps %lld (%lld missing), stream restarts %lld, resets %lld, kernel drops "

@@ -123,7 +123,8 @@ bool load_daemon_config(const MachineInfo& info, const std::string& path, Daemon
   if (!load_strict_yaml(path, text.str(), doc, error)) return false;
   Reader r{path, error};
   if (!r.keys(doc, "", {"lcm_url", "channels", "status_period", "latency_window", "start_enabled", "ramp_time",
-                        "out_of_limits", "linear_axes", "rotary_axes", "axes", "realtime", "recv_buf_size"}))
+                        "out_of_limits", "linear_axes", "rotary_axes", "axes", "realtime", "recv_buf_size",
+                        "params_updates"}))
     return false;
   if (doc["lcm_url"] && !r.text(doc["lcm_url"], "lcm_url", out.lcm_url)) return false;
   if (out.lcm_url.find("recv_buf_size=") != std::string::npos)
@@ -135,11 +136,21 @@ bool load_daemon_config(const MachineInfo& info, const std::string& path, Daemon
   }
   out.lcm_url = udpm_url(out.lcm_url, out.recv_buf_size);
   if (const YAML::Node ch = doc["channels"]) {
-    if (!r.keys(ch, "channels", {"command", "corrected", "status", "control"})) return false;
+    if (!r.keys(ch, "channels", {"command", "corrected", "status", "control", "params"})) return false;
     if (ch["command"] && !r.text(ch["command"], "channels.command", out.command_channel)) return false;
     if (ch["corrected"] && !r.text(ch["corrected"], "channels.corrected", out.corrected_channel)) return false;
     if (ch["status"] && !r.text(ch["status"], "channels.status", out.status_channel)) return false;
     if (ch["control"] && !r.text(ch["control"], "channels.control", out.control_channel)) return false;
+    if (ch["params"] && !r.text(ch["params"], "channels.params", out.params_channel)) return false;
+  }
+  if (const YAML::Node pu = doc["params_updates"]) {
+    ParamsUpdateLimits& l = out.params_updates;
+    if (!r.keys(pu, "params_updates", {"max_length", "max_angle", "max_ratio", "min_interval"})) return false;
+    if (pu["max_length"] && !r.number(pu["max_length"], "params_updates.max_length", l.max_length, 0)) return false;
+    if (pu["max_angle"] && !r.number(pu["max_angle"], "params_updates.max_angle", l.max_angle, 0)) return false;
+    if (pu["max_ratio"] && !r.number(pu["max_ratio"], "params_updates.max_ratio", l.max_ratio, 0)) return false;
+    if (pu["min_interval"] && !r.number(pu["min_interval"], "params_updates.min_interval", l.min_interval_s, 0))
+      return false;
   }
   if (doc["status_period"] && !r.number(doc["status_period"], "status_period", out.status_period_s, 0.001))
     return false;

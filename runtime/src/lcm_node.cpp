@@ -1,6 +1,7 @@
 #include "chaincomp/lcm_node.hpp"
 
 #include "chaincomp/params_io.hpp"
+#include "chaincomp_lcm/lcmt_params_update.hpp"
 
 #include <dirent.h>
 #include <dlfcn.h>
@@ -14,6 +15,9 @@
 #include <random>
 
 namespace chaincomp {
+
+static_assert(chaincomp_lcm::lcmt_params_update::MAX_VALUES == kMaxUpdateValues, "lcmt_params_update.MAX_VALUES");
+static_assert(chaincomp_lcm::lcmt_chaincomp_status::NUM_PARAMS_REASONS == kNumRefusals, "params_refused's size");
 
 namespace {
 
@@ -123,6 +127,23 @@ LcmNode::~LcmNode() {
   lcm_unsubscribe(lcm_, command_sub_);
   lcm_unsubscribe(lcm_, control_sub_);
   lcm_unsubscribe(lcm_, target_sub_);
+  if (params_sub_) lcm_unsubscribe(lcm_, params_sub_);
+}
+
+void LcmNode::accept_params_updates(ParamsUpdater& updater) {
+  updater_ = &updater;
+  params_sub_ = lcm_subscribe(lcm_, config_.params_channel.c_str(), &LcmNode::on_params, this);
+  // a flood is refused one by one (min_interval), never dropped unseen by a short queue
+  lcm_subscription_set_queue_capacity(params_sub_, kQueueCapacity);
+}
+
+void LcmNode::on_params(const lcm_recv_buf_t* rbuf, const char*, void* user) {
+  auto* self = static_cast<LcmNode*>(user);
+  if (!decode_params_update(rbuf->data, rbuf->data_size, chaincomp_lcm::lcmt_params_update::getHash(), self->update_)) {
+    self->updater_->count_undecodable();
+    return;
+  }
+  self->updater_->apply(self->update_, self->instance_id_, self->comp_.last_utime());
 }
 
 // LCM's udpm provider receives on a socket of its own thread; lcm_get_fileno gives a
@@ -258,6 +279,12 @@ void LcmNode::publish_status(bool final) {
   s.foreign_targets = foreign_;
   s.foreign_instance = foreign_instance_;
   s.held_back = k.held_back;
+  if (updater_) {
+    s.params_version = updater_->version();
+    s.params_seq = updater_->last_seq();
+    s.params_received = updater_->received();
+    for (int i = 0; i < kNumRefusals; ++i) s.params_refused[i] = updater_->refused()[i];
+  }
   const int n = s.encode(status_buf_.data(), 0, static_cast<int>(status_buf_.size()));
   if (n > 0) lcm_publish(lcm_, config_.status_channel.c_str(), status_buf_.data(), n);
 }

@@ -16,6 +16,9 @@
 #include "chaincomp/loaded_model.hpp"
 #include "chaincomp/lcm_node.hpp"
 #include "chaincomp/params_io.hpp"
+#include "chaincomp/params_update.hpp"
+#include "chaincomp_lcm/lcmt_chaincomp_status.hpp"
+#include "chaincomp_lcm/lcmt_params_update.hpp"
 
 namespace {
 
@@ -126,6 +129,15 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "chaincomp replay: %s: %s\n", params_path.c_str(), chaincomp::describe_varying(varying).c_str());
   }
   chaincomp::Compensator comp(*entry, model, config.compensator);
+  // Params updates on the log's params channel change the model as they changed the daemon's.
+  // Those addressed to one daemon apply when it is the one whose status or targets the log
+  // holds (the first for this machine found before them); the others are refused as the
+  // daemon refused them.
+  chaincomp::ParamsUpdater updater(*entry, model, &varying, loaded.params, config.params_updates);
+  chaincomp::ParamsUpdate update;
+  std::int64_t daemon_instance = 0;
+  chaincomp_lcm::lcmt_chaincomp_status status_scratch;
+  chaincomp_lcm::lcmt_corrected_target target_scratch;
 
   // One file for both outputs would hold the log and the CSV interleaved: neither readable.
   if (!out_path.empty() && (out_path == csv_path || same_file(out_path, csv_path))) {
@@ -186,6 +198,26 @@ int main(int argc, char** argv) {
     list_damage();
     ++events;
     if (write_log) out.write(ev.timestamp, ev.channel, ev.data, ev.datalen);  // the original record, untouched
+    if (daemon_instance == 0 && (ev.channel == config.status_channel || ev.channel == config.corrected_channel)) {
+      const bool status = ev.channel == config.status_channel;
+      const int size = static_cast<int>(ev.datalen);
+      if (status ? status_scratch.decode(ev.data, 0, size) >= 0 && status_scratch.machine == entry->info->name
+                 : target_scratch.decode(ev.data, 0, size) >= 0 && target_scratch.machine == entry->info->name) {
+        daemon_instance = status ? status_scratch.instance_id : target_scratch.instance_id;
+      }
+    }
+    if (ev.channel == config.params_channel) {
+      chaincomp::Refuse refused = chaincomp::Refuse::kUndecodable;
+      if (!chaincomp::decode_params_update(ev.data, ev.datalen, chaincomp_lcm::lcmt_params_update::getHash(), update)) {
+        updater.count_undecodable();
+      } else if (!updater.apply(update, daemon_instance, comp.last_utime(), &refused) && listed < 20) {
+        ++listed;
+        std::fprintf(stderr, "chaincomp replay: event %lld (timestamp %lld): params update refused: %s\n",
+                     static_cast<long long>(ev.eventnum), static_cast<long long>(ev.timestamp),
+                     chaincomp::refuse_name(refused));
+      }
+      continue;
+    }
     if (ev.channel != channel) continue;
     ++commands;
     chaincomp::Reject why = chaincomp::Reject::kUndecodable;
@@ -272,7 +304,14 @@ int main(int argc, char** argv) {
                   json_string(entry->info->axes[i].name).c_str(), json_string(entry->info->axes[i].unit).c_str(),
                   max_abs[i], k.published ? std::sqrt(sum_sq[i] / k.published) : 0.0);
     }
-    std::printf("]}\n");
+    std::printf("],\n \"params_updates\": {\"received\": %lld, \"applied\": %lld, \"last_seq\": %lld, \"refused\": {",
+                static_cast<long long>(updater.received()), static_cast<long long>(updater.version()),
+                static_cast<long long>(updater.last_seq()));
+    for (int r = 0; r < chaincomp::kNumRefusals; ++r) {
+      std::printf("%s\"%s\": %lld", r ? ", " : "", chaincomp::refuse_name(static_cast<chaincomp::Refuse>(r)),
+                  static_cast<long long>(updater.refused()[r]));
+    }
+    std::printf("}}}\n");
     return std::fflush(stdout) == 0 ? 0 : fail("cannot write the summary to standard output");
   }
   std::fprintf(stderr, "chaincomp replay: %lld events, %lld commands on %s, %lld corrected, %lld rejected "
@@ -298,6 +337,17 @@ int main(int argc, char** argv) {
     if (k.rejected[r]) {
       std::fprintf(stderr, "  rejected %-20s %lld\n", chaincomp::reject_name(static_cast<chaincomp::Reject>(r)),
                    static_cast<long long>(k.rejected[r]));
+    }
+  }
+  if (updater.received()) {
+    std::fprintf(stderr, "  params updates: %lld received, %lld applied (last seq %lld)\n",
+                 static_cast<long long>(updater.received()), static_cast<long long>(updater.version()),
+                 static_cast<long long>(updater.last_seq()));
+    for (int r = 0; r < chaincomp::kNumRefusals; ++r) {
+      if (updater.refused()[r]) {
+        std::fprintf(stderr, "  params updates refused %-14s %lld\n", chaincomp::refuse_name(static_cast<chaincomp::Refuse>(r)),
+                     static_cast<long long>(updater.refused()[r]));
+      }
     }
   }
   for (int i = 0; i < n; ++i) {

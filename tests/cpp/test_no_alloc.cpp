@@ -3,6 +3,8 @@
 #include <catch2/catch.hpp>
 
 #include <cstddef>
+#include <cstdint>
+#include <cstring>
 #include <cstdlib>
 #include <new>
 #include <string>
@@ -10,6 +12,7 @@
 
 #include "chaincomp/model_info.hpp"
 #include "chaincomp/params_io.hpp"
+#include "chaincomp/params_update.hpp"
 #include "chaincomp/varying.hpp"
 
 extern "C" {
@@ -125,4 +128,62 @@ TEST_CASE("with 18 tables of 101 points attached, compensate and the poses never
   CHECK(g_allocations - before == 0);
   CHECK(ok == 2 * kCalls);
   CHECK(sink == sink);
+}
+
+namespace {
+
+// An lcmt_params_update payload as LCM encodes it (big-endian; strings with their NUL).
+struct Payload {
+  std::vector<unsigned char> b;
+  void u64(std::uint64_t v) { for (int i = 7; i >= 0; --i) b.push_back(static_cast<unsigned char>(v >> (8 * i))); }
+  void u32(std::uint32_t v) { for (int i = 3; i >= 0; --i) b.push_back(static_cast<unsigned char>(v >> (8 * i))); }
+  void str(const std::string& s) { u32(static_cast<std::uint32_t>(s.size() + 1)); b.insert(b.end(), s.begin(), s.end()); b.push_back(0); }
+  void f64(double d) { std::uint64_t v; std::memcpy(&v, &d, 8); u64(v); }
+};
+
+}  // namespace
+
+TEST_CASE("decoding and applying params updates never allocates, nor does compensating between them", "[alloc]") {
+  constexpr int kUpdates = 20000;
+  const chaincomp::ModelEntry& e = *chaincomp::find_model("five_axis_ac");
+  std::string error;
+  std::vector<double> params;
+  chaincomp::VaryingErrors varying;
+  REQUIRE(chaincomp::load_params(*e.info, std::string(CHAINCOMP_SOURCE_DIR) + "/configs/params/five_axis_ac-laser.yaml",
+                                 params, varying, error));
+  alignas(64) static unsigned char model[1 << 14];
+  e.prepare(params.data(), model);
+  e.attach_varying(model, &varying);
+  chaincomp::ParamsUpdater up(e, model, &varying, params, chaincomp::ParamsUpdateLimits{});
+  // two payloads set up before counting: seq and values are patched in place
+  const std::uint64_t hash = 0x1234567890abcdefULL;
+  Payload p;
+  p.u64(hash);
+  p.u64(0);          // utime
+  p.u64(0);          // seq (at byte 16)
+  p.str("five_axis_ac");
+  p.u64(0);          // every instance
+  p.u32(3);
+  for (const char* name : {"Oas", "ThetaAs", "Ocx"}) p.str(name);
+  const std::size_t values_at = p.b.size();
+  for (int i = 0; i < 3; ++i) p.f64(0.0);
+  chaincomp::ParamsUpdate u;
+  double axes[5] = {10.0, -20.0, -100.0, 0.5, -0.8}, out[16], residual[2];
+  const std::size_t before = g_allocations;
+  int applied = 0;
+  for (int k = 1; k <= kUpdates; ++k) {
+    for (int i = 0; i < 8; ++i) p.b[16 + i] = static_cast<unsigned char>(std::uint64_t(k) >> (8 * (7 - i)));
+    const double v[3] = {1e-3 * (k % 5), 1e-5 * (k % 3), -2e-3 * (k % 7)};
+    for (int j = 0; j < 3; ++j) {
+      std::uint64_t bits;
+      std::memcpy(&bits, &v[j], 8);
+      for (int i = 0; i < 8; ++i) p.b[values_at + 8 * j + i] = static_cast<unsigned char>(bits >> (8 * (7 - i)));
+    }
+    REQUIRE(chaincomp::decode_params_update(p.b.data(), p.b.size(), static_cast<std::int64_t>(hash), u));
+    applied += up.apply(u, 1, 10000LL * k);   // 10 ms of command time apart: each is applied
+    e.compensate(model, nullptr, axes, out, residual);
+  }
+  CHECK(g_allocations - before == 0);
+  CHECK(applied == kUpdates);
+  CHECK(up.params()[0] == up.params()[0]);
 }

@@ -104,6 +104,8 @@ class Compensator {
   bool enabled() const noexcept { return enabled_; }
   double ramp() const noexcept { return ramp_; }
   const Counters& counters() const noexcept { return counters_; }
+  // The last accepted command's utime (µs; 0 before the first): the params updates' clock.
+  std::int64_t last_utime() const noexcept { return have_last_ ? last_utime_ : 0; }
   void count_published() noexcept { ++counters_.published; }
 
  private:

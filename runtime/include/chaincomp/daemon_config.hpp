@@ -5,6 +5,7 @@
 
 #include "chaincomp/compensator.hpp"
 #include "chaincomp/model_info.hpp"
+#include "chaincomp/params_update.hpp"
 
 namespace chaincomp {
 
@@ -17,6 +18,8 @@ struct DaemonConfig {
   std::string corrected_channel = "CHAINCOMP_CORRECTED";
   std::string status_channel = "CHAINCOMP_STATUS";
   std::string control_channel = "CHAINCOMP_CONTROL";
+  std::string params_channel = "CHAINCOMP_PARAMS";   // lcmt_params_update
+  ParamsUpdateLimits params_updates;
   double status_period_s = 1.0;
   int latency_window = 1000;
   bool mlockall = false;

@@ -16,6 +16,7 @@
 #include "chaincomp_lcm/lcmt_chaincomp_control.hpp"
 #include "chaincomp_lcm/lcmt_chaincomp_status.hpp"
 #include "chaincomp_lcm/lcmt_corrected_target.hpp"
+#include "chaincomp/params_update.hpp"
 
 namespace chaincomp {
 
@@ -40,6 +41,9 @@ class LcmNode {
   LcmNode& operator=(const LcmNode&) = delete;
 
   void publish_status(bool final);
+  // Take lcmt_params_update on the params channel and apply them through `updater` (which
+  // changes the model this node compensates with); it outlives the node.
+  void accept_params_updates(ParamsUpdater& updater);
   const Counters& counters() const { return comp_.counters(); }
   std::int64_t instance_id() const { return instance_id_; }
   // Datagrams the kernel dropped at the process's UDP sockets (-1: none), and the receive
@@ -56,6 +60,7 @@ class LcmNode {
   static void on_command(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
   static void on_control(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
   static void on_target(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
+  static void on_params(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
   void handle_command(const lcm_recv_buf_t* rbuf);
   void handle_target(const lcm_recv_buf_t* rbuf);
   void find_sockets();
@@ -78,6 +83,9 @@ class LcmNode {
   lcm_subscription_t* command_sub_ = nullptr;
   lcm_subscription_t* control_sub_ = nullptr;
   lcm_subscription_t* target_sub_ = nullptr;
+  lcm_subscription_t* params_sub_ = nullptr;
+  ParamsUpdater* updater_ = nullptr;
+  ParamsUpdate update_;
   std::int64_t instance_id_ = 0;
   std::string machine_;
   // Targets on the corrected channel: this node's own, heard back, and another instance's
