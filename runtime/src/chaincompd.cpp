@@ -26,13 +26,15 @@ std::atomic<bool> g_stop{false};
 void on_signal(int) { g_stop = true; }
 
 const char* kUsage =
-    "usage: chaincompd --machine M.yaml --params P.yaml [--config R.yaml] [--model LIB.so]\n"
+    "usage: chaincompd --machine M.yaml --params P.yaml [--config R.yaml] [--model LIB.so] [--thermal T.yaml]\n"
     "Subscribes to commanded axis positions over LCM and publishes corrected targets.\n"
     "  --machine M.yaml  machine description: its compiled-in model, else one built at start-up\n"
     "                    (chaincomp build; cached in $XDG_CACHE_HOME/chaincomp)\n"
     "  --model LIB.so    a model library made by chaincomp build for exactly this machine file\n"
     "  --params P.yaml   error values of the machine (configs/params/)\n"
     "  --config R.yaml   runtime settings (configs/runtime/default.yaml documents every key)\n"
+    "  --thermal T.yaml  a thermal model (chaincomp thermal fit): errors that follow the temperatures\n"
+    "                    on the temperatures channel\n"
     "  --version         print the version and exit\n";
 
 // Each setting degrades with one warning when the system does not permit it.
@@ -71,7 +73,7 @@ int fail(const std::string& msg) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string machine_path, params_path, config_path, model_path;
+  std::string machine_path, params_path, config_path, model_path, thermal_path;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "-h" || a == "--help") {
@@ -82,9 +84,10 @@ int main(int argc, char** argv) {
       std::puts("chaincompd " CHAINCOMP_VERSION);
       return 0;
     }
-    if ((a == "--machine" || a == "--params" || a == "--config" || a == "--model") && i + 1 < argc) {
-      (a == "--machine" ? machine_path : a == "--params" ? params_path : a == "--model" ? model_path : config_path) =
-          argv[++i];
+    if ((a == "--machine" || a == "--params" || a == "--config" || a == "--model" || a == "--thermal") &&
+        i + 1 < argc) {
+      (a == "--machine" ? machine_path : a == "--params" ? params_path : a == "--model" ? model_path
+       : a == "--thermal" ? thermal_path : config_path) = argv[++i];
     } else {
       std::fputs(kUsage, stderr);
       return fail("unexpected argument '" + a + "'");
@@ -101,6 +104,9 @@ int main(int argc, char** argv) {
   const chaincomp::ModelEntry* entry = loaded.entry;
   const chaincomp::DaemonConfig& config = loaded.config;
   void* model = loaded.model;
+  chaincomp::ThermalModel thermal_model;
+  if (!thermal_path.empty() && !chaincomp::load_thermal_model(*entry->info, thermal_path, thermal_model, error))
+    return fail(error);
 
   lcm_t* lcm = lcm_create(config.lcm_url.c_str());
   if (!lcm) return fail("cannot open LCM at '" + config.lcm_url + "'");
@@ -109,6 +115,13 @@ int main(int argc, char** argv) {
 
   chaincomp::ParamsUpdater updater(*entry, model, &loaded.varying, loaded.params, config.params_updates);
   node->accept_params_updates(updater);
+  std::unique_ptr<chaincomp::ThermalState> thermal;
+  if (!thermal_path.empty()) {
+    thermal = std::make_unique<chaincomp::ThermalState>(thermal_model, loaded.params);
+    node->accept_temperatures(*thermal);
+    std::fprintf(stderr, "chaincompd: thermal model %s: %d errors from %zu sensors on %s\n", thermal_path.c_str(),
+                 thermal_model.num_errors, thermal_model.sensors.size(), config.temperatures_channel.c_str());
+  }
 
   struct sigaction sa {};
   sa.sa_handler = on_signal;

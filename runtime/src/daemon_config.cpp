@@ -136,12 +136,14 @@ bool load_daemon_config(const MachineInfo& info, const std::string& path, Daemon
   }
   out.lcm_url = udpm_url(out.lcm_url, out.recv_buf_size);
   if (const YAML::Node ch = doc["channels"]) {
-    if (!r.keys(ch, "channels", {"command", "corrected", "status", "control", "params"})) return false;
+    if (!r.keys(ch, "channels", {"command", "corrected", "status", "control", "params", "temperatures"})) return false;
     if (ch["command"] && !r.text(ch["command"], "channels.command", out.command_channel)) return false;
     if (ch["corrected"] && !r.text(ch["corrected"], "channels.corrected", out.corrected_channel)) return false;
     if (ch["status"] && !r.text(ch["status"], "channels.status", out.status_channel)) return false;
     if (ch["control"] && !r.text(ch["control"], "channels.control", out.control_channel)) return false;
     if (ch["params"] && !r.text(ch["params"], "channels.params", out.params_channel)) return false;
+    if (ch["temperatures"] && !r.text(ch["temperatures"], "channels.temperatures", out.temperatures_channel))
+      return false;
   }
   if (const YAML::Node pu = doc["params_updates"]) {
     ParamsUpdateLimits& l = out.params_updates;

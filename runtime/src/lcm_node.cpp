@@ -2,6 +2,7 @@
 
 #include "chaincomp/params_io.hpp"
 #include "chaincomp_lcm/lcmt_params_update.hpp"
+#include "chaincomp_lcm/lcmt_temperatures.hpp"
 
 #include <dirent.h>
 #include <dlfcn.h>
@@ -18,6 +19,8 @@ namespace chaincomp {
 
 static_assert(chaincomp_lcm::lcmt_params_update::MAX_VALUES == kMaxUpdateValues, "lcmt_params_update.MAX_VALUES");
 static_assert(chaincomp_lcm::lcmt_chaincomp_status::NUM_PARAMS_REASONS == kNumRefusals, "params_refused's size");
+static_assert(chaincomp_lcm::lcmt_temperatures::MAX_VALUES == kMaxReadings, "lcmt_temperatures.MAX_VALUES");
+static_assert(chaincomp_lcm::lcmt_chaincomp_status::NUM_READING_REASONS == kNumReadingRefusals, "readings_refused");
 
 namespace {
 
@@ -128,6 +131,23 @@ LcmNode::~LcmNode() {
   lcm_unsubscribe(lcm_, control_sub_);
   lcm_unsubscribe(lcm_, target_sub_);
   if (params_sub_) lcm_unsubscribe(lcm_, params_sub_);
+  if (readings_sub_) lcm_unsubscribe(lcm_, readings_sub_);
+}
+
+void LcmNode::accept_temperatures(ThermalState& thermal) {
+  thermal_ = &thermal;
+  readings_sub_ = lcm_subscribe(lcm_, config_.temperatures_channel.c_str(), &LcmNode::on_readings, this);
+  lcm_subscription_set_queue_capacity(readings_sub_, kQueueCapacity);
+}
+
+void LcmNode::on_readings(const lcm_recv_buf_t* rbuf, const char*, void* user) {
+  auto* self = static_cast<LcmNode*>(user);
+  if (!decode_readings(rbuf->data, rbuf->data_size, chaincomp_lcm::lcmt_temperatures::getHash(), self->readings_)) {
+    self->thermal_->count_undecodable();
+    return;
+  }
+  if (self->thermal_->take(self->readings_, self->machine_, self->thermal_update_) && self->updater_)
+    self->updater_->apply_values(self->thermal_update_, self->comp_.last_utime());
 }
 
 void LcmNode::accept_params_updates(ParamsUpdater& updater) {
@@ -284,6 +304,10 @@ void LcmNode::publish_status(bool final) {
     s.params_seq = updater_->last_seq();
     s.params_received = updater_->received();
     for (int i = 0; i < kNumRefusals; ++i) s.params_refused[i] = updater_->refused()[i];
+  }
+  if (thermal_) {
+    s.readings_received = thermal_->received();
+    for (int i = 0; i < kNumReadingRefusals; ++i) s.readings_refused[i] = thermal_->refused()[i];
   }
   const int n = s.encode(status_buf_.data(), 0, static_cast<int>(status_buf_.size()));
   if (n > 0) lcm_publish(lcm_, config_.status_channel.c_str(), status_buf_.data(), n);

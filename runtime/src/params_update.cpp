@@ -1,61 +1,13 @@
 #include "chaincomp/params_update.hpp"
 
+#include "chaincomp/lcm_wire.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 
 namespace chaincomp {
 
-namespace {
-
-constexpr std::int32_t kMaxNameBytes = 255;
-
-// LCM's encoding: big-endian integers and doubles, strings as int32 length (with the NUL),
-// the bytes and the NUL.
-struct Reader {
-  const unsigned char* p;
-  std::size_t left;
-
-  bool u64(std::uint64_t& v) noexcept {
-    if (left < 8) return false;
-    v = 0;
-    for (int i = 0; i < 8; ++i) v = (v << 8) | p[i];
-    p += 8;
-    left -= 8;
-    return true;
-  }
-  bool i64(std::int64_t& v) noexcept {
-    std::uint64_t u;
-    if (!u64(u)) return false;
-    v = static_cast<std::int64_t>(u);
-    return true;
-  }
-  bool i32(std::int32_t& v) noexcept {
-    if (left < 4) return false;
-    v = static_cast<std::int32_t>((std::uint32_t(p[0]) << 24) | (std::uint32_t(p[1]) << 16) |
-                                  (std::uint32_t(p[2]) << 8) | std::uint32_t(p[3]));
-    p += 4;
-    left -= 4;
-    return true;
-  }
-  bool f64(double& v) noexcept {
-    std::uint64_t u;
-    if (!u64(u)) return false;
-    std::memcpy(&v, &u, sizeof v);
-    return true;
-  }
-  bool str(std::string_view& s) noexcept {
-    std::int32_t len;
-    if (!i32(len) || len < 1 || len > kMaxNameBytes + 1 || static_cast<std::size_t>(len) > left || p[len - 1] != 0)
-      return false;
-    s = std::string_view(reinterpret_cast<const char*>(p), static_cast<std::size_t>(len - 1));
-    p += len;
-    left -= static_cast<std::size_t>(len);
-    return true;
-  }
-};
-
-}  // namespace
 
 const char* refuse_name(Refuse r) noexcept {
   switch (r) {
@@ -75,7 +27,7 @@ const char* refuse_name(Refuse r) noexcept {
 }
 
 bool decode_params_update(const void* data, std::size_t size, std::int64_t fingerprint, ParamsUpdate& out) noexcept {
-  Reader r{static_cast<const unsigned char*>(data), size};
+  WireReader r{static_cast<const unsigned char*>(data), size};
   std::int64_t hash;
   std::int32_t n;
   if (!r.i64(hash) || hash != fingerprint || !r.i64(out.utime) || !r.i64(out.seq) || !r.str(out.machine) ||
@@ -122,6 +74,19 @@ bool ParamsUpdater::apply(const ParamsUpdate& u, std::int64_t instance_id, std::
   if (u.instance_id != 0 && u.instance_id != instance_id) return refuse(Refuse::kOtherInstance, why);
   if (u.num_values < 1 || u.num_values > kMaxUpdateValues) return refuse(Refuse::kBadCount, why);
   if (applied_any_ && u.seq <= last_seq_) return refuse(Refuse::kStaleSeq, why);
+  if (!check_and_apply(u, command_utime, why)) return false;
+  last_seq_ = u.seq;
+  return true;
+}
+
+bool ParamsUpdater::apply_values(const ParamsUpdate& u, std::int64_t command_utime, Refuse* why) noexcept {
+  ++received_;
+  return check_and_apply(u, command_utime, why);
+}
+
+bool ParamsUpdater::check_and_apply(const ParamsUpdate& u, std::int64_t command_utime, Refuse* why) noexcept {
+  const MachineInfo& info = *entry_.info;
+  if (u.num_values < 1 || u.num_values > kMaxUpdateValues) return refuse(Refuse::kBadCount, why);
   // (a command stream that goes back in time, a new one, does not hold updates off)
   if (applied_any_ && command_utime >= applied_utime_ &&
       static_cast<double>(command_utime - applied_utime_) < limits_.min_interval_s * 1e6)
@@ -148,7 +113,6 @@ bool ParamsUpdater::apply(const ParamsUpdate& u, std::int64_t instance_id, std::
   if (varying_ != nullptr && varying_->count > 0) entry_.attach_varying(model_, varying_);
   params_.swap(scratch_);
   ++version_;
-  last_seq_ = u.seq;
   applied_utime_ = command_utime;
   applied_any_ = true;
   return true;

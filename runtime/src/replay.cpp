@@ -19,13 +19,15 @@
 #include "chaincomp/params_update.hpp"
 #include "chaincomp_lcm/lcmt_chaincomp_status.hpp"
 #include "chaincomp_lcm/lcmt_params_update.hpp"
+#include "chaincomp_lcm/lcmt_temperatures.hpp"
+#include "chaincomp/thermal.hpp"
 
 namespace {
 
 const char* kUsage =
     "usage: chaincomp_replay --machine M.yaml --params P.yaml --in IN.lcmlog [--out OUT.lcmlog]\n"
     "                        [--csv OUT.csv] [--config R.yaml] [--channel NAME] [--model LIB.so] [--quiet]\n"
-    "                        [--format text|json]\n"
+    "                        [--format text|json] [--thermal T.yaml]\n"
     "       chaincomp_replay --version\n";
 
 int fail(const std::string& msg) {
@@ -89,7 +91,7 @@ bool same_file(const std::string& a, const std::string& b) {
 
 int main(int argc, char** argv) {
   std::string machine_path, params_path, config_path, in_path, out_path, csv_path, model_path,
-      channel = "CHAINCOMP_COMMAND", format = "text";
+      channel = "CHAINCOMP_COMMAND", format = "text", thermal_path;
   bool quiet = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -97,7 +99,7 @@ int main(int argc, char** argv) {
                      : a == "--config"  ? &config_path  : a == "--in"     ? &in_path
                      : a == "--out"     ? &out_path     : a == "--csv"    ? &csv_path
                      : a == "--channel" ? &channel      : a == "--model"  ? &model_path
-                     : a == "--format"  ? &format       : nullptr;
+                     : a == "--format"  ? &format       : a == "--thermal" ? &thermal_path : nullptr;
     if (a == "-h" || a == "--help") {
       std::fputs(kUsage, stdout);
       return 0;
@@ -135,6 +137,12 @@ int main(int argc, char** argv) {
   // daemon refused them.
   chaincomp::ParamsUpdater updater(*entry, model, &varying, loaded.params, config.params_updates);
   chaincomp::ParamsUpdate update;
+  // A thermal model takes the log's temperature readings as the daemon took them.
+  chaincomp::ThermalModel thermal_model;
+  if (!thermal_path.empty() && !chaincomp::load_thermal_model(*entry->info, thermal_path, thermal_model, error))
+    return fail(error);
+  chaincomp::ThermalState thermal(thermal_model, loaded.params);
+  chaincomp::Readings readings;
   std::int64_t daemon_instance = 0;
   chaincomp_lcm::lcmt_chaincomp_status status_scratch;
   chaincomp_lcm::lcmt_corrected_target target_scratch;
@@ -205,6 +213,14 @@ int main(int argc, char** argv) {
                  : target_scratch.decode(ev.data, 0, size) >= 0 && target_scratch.machine == entry->info->name) {
         daemon_instance = status ? status_scratch.instance_id : target_scratch.instance_id;
       }
+    }
+    if (!thermal_path.empty() && ev.channel == config.temperatures_channel) {
+      if (!chaincomp::decode_readings(ev.data, ev.datalen, chaincomp_lcm::lcmt_temperatures::getHash(), readings)) {
+        thermal.count_undecodable();
+      } else if (thermal.take(readings, entry->info->name, update)) {
+        updater.apply_values(update, comp.last_utime());
+      }
+      continue;
     }
     if (ev.channel == config.params_channel) {
       chaincomp::Refuse refused = chaincomp::Refuse::kUndecodable;

@@ -2,6 +2,8 @@
 // compiled-in machine, for tests/python/model/test_conformance.py to compare with the Python loaders.
 //   chaincomp_params_dump MACHINE params FILE   ->  NAME VALUE (internal units, 17 digits) per line
 //   chaincomp_params_dump MACHINE config FILE   ->  ok
+//   chaincomp_params_dump MACHINE thermal FILE  ->  reference, then per error its offset and
+//                                                   terms (internal units per K, s)
 // A refusal is the loader's message on stderr, exit 2.
 #include <cstdio>
 #include <string>
@@ -9,10 +11,11 @@
 
 #include "chaincomp/daemon_config.hpp"
 #include "chaincomp/params_io.hpp"
+#include "chaincomp/thermal.hpp"
 
 int main(int argc, char** argv) {
   if (argc != 4) {
-    std::fprintf(stderr, "usage: chaincomp_params_dump MACHINE params|config FILE\n");
+    std::fprintf(stderr, "usage: chaincomp_params_dump MACHINE params|config|thermal FILE\n");
     return 2;
   }
   const chaincomp::ModelEntry* entry = chaincomp::find_model(argv[1]);
@@ -29,6 +32,23 @@ int main(int argc, char** argv) {
       return 2;
     }
     std::printf("ok\n");
+    return 0;
+  }
+  if (std::string(argv[2]) == "thermal") {
+    chaincomp::ThermalModel model;
+    if (!chaincomp::load_thermal_model(info, argv[3], model, error)) {
+      std::fprintf(stderr, "%s\n", error.c_str());
+      return 2;
+    }
+    std::printf("reference %.17g\n", model.reference);
+    for (int e = 0; e < model.num_errors; ++e) {
+      const auto& err = model.errors[e];
+      std::printf("%s %.17g", err.name, err.offset);
+      for (int k = 0; k < err.num_terms; ++k)
+        std::printf(" %s:%.17g:%.17g", model.sensors[err.terms[k].sensor].c_str(), err.terms[k].gain,
+                    err.terms[k].time_constant);
+      std::printf("\n");
+    }
     return 0;
   }
   std::vector<double> values;

@@ -26,6 +26,8 @@ def add_parser(sub) -> None:
     p.add_argument("--model", metavar="LIB.so", help="a model library made by chaincomp build for this machine file")
     p.add_argument("--params", required=True, metavar="P.yaml", help="error values (configs/params/*.yaml)")
     p.add_argument("--config", metavar="R.yaml", help="runtime settings (default: built-in defaults)")
+    p.add_argument("--thermal", metavar="T.yaml", help="a thermal model (chaincomp thermal fit): the log's "
+                   "temperature readings drive its errors, as chaincompd --thermal does")
     p.add_argument("-o", "--output", metavar="OUT.lcmlog", help="corrected log")
     p.add_argument("--csv", metavar="OUT.csv", help="CSV of every command")
     p.add_argument("--channel", default="CHAINCOMP_COMMAND", help="command channel (default CHAINCOMP_COMMAND)")
@@ -40,7 +42,7 @@ def run(args) -> int:
     if not os.path.isfile(args.input):
         raise ChaincompError(f"{args.input}: no such log file")
     load(args.machine)  # the machine's mistakes with file, line and field, as every verb reports them
-    inputs = (args.input, args.machine, args.params, args.config, args.model)
+    inputs = (args.input, args.machine, args.params, args.config, args.model, args.thermal)
     check_output(args.output, *inputs, option="-o")
     check_output(args.csv, *inputs, option="--csv")
     if args.csv and args.output and os.path.abspath(args.csv) == os.path.abspath(args.output):
@@ -48,7 +50,7 @@ def run(args) -> int:
     cmd = [binary("chaincomp_replay"), "--machine", args.machine, "--params", args.params, "--in", args.input,
            "--channel", args.channel]
     for flag, value in (("--config", args.config), ("--out", args.output), ("--csv", args.csv),
-                        ("--model", args.model), ("--format", args.format)):
+                        ("--model", args.model), ("--format", args.format), ("--thermal", args.thermal)):
         if value:
             cmd += [flag, value]
     return subprocess.run(cmd).returncode

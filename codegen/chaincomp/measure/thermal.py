@@ -35,6 +35,7 @@ from ..model.yamlsource import LineDict, LineList, describe, line_of, load_yaml,
 REFERENCE_TEMPERATURE = 20.0   # degC: ISO 1, the reference temperature of geometrical specifications
 MAX_ERRORS = 64                # errors of one thermal model
 MAX_TERMS = 8                  # terms of one error
+MAX_SENSORS = 64               # sensors one model reads
 MAX_TIME_CONSTANT = 1e6        # s (11.6 days): a machine tool's slowest structure takes hours
 MAX_GAIN = 1e6                 # in the error's unit per K
 TEMPERATURE_RANGE = (-100.0, 300.0)   # degC: a reading outside is a broken sensor, not a temperature
@@ -166,10 +167,7 @@ def load_model(path: str, machine: Machine | None = None) -> ThermalModel:
             raise ChaincompError(f"expected a mapping with unit, offset and terms, got {describe(node)}", path,
                                  line, str(err))
         _keys(node, ("unit", "offset", "terms"), ("unit", "terms"), path, f"error {err}")
-        try:
-            unit = U.unit(node["unit"]) if isinstance(node["unit"], str) else None
-        except KeyError as exc:
-            raise ChaincompError(exc.args[0], path, line_of(node, "unit"), "unit") from None
+        unit = U.UNITS.get(node["unit"]) if isinstance(node["unit"], str) else None
         if unit is None or unit.kind not in ("length", "angle"):
             raise ChaincompError(f"expected a length or angle unit (um, arcsec, ...), got {describe(node['unit'])}",
                                  path, line_of(node, "unit"), "unit")
@@ -205,6 +203,8 @@ def load_model(path: str, machine: Machine | None = None) -> ThermalModel:
             seen[key] = tline
             em.terms.append(Term(sensor, gain, tau))
         model.errors[em.error] = em
+        if len(model.sensors) > MAX_SENSORS:
+            raise ChaincompError(f"more than {MAX_SENSORS} sensors in the model", path, line, str(err))
     return model
 
 

@@ -19,6 +19,7 @@ struct DaemonConfig {
   std::string status_channel = "CHAINCOMP_STATUS";
   std::string control_channel = "CHAINCOMP_CONTROL";
   std::string params_channel = "CHAINCOMP_PARAMS";   // lcmt_params_update
+  std::string temperatures_channel = "CHAINCOMP_TEMPERATURES";   // lcmt_temperatures (with a thermal model)
   ParamsUpdateLimits params_updates;
   double status_period_s = 1.0;
   int latency_window = 1000;

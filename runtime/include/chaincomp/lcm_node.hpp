@@ -17,6 +17,7 @@
 #include "chaincomp_lcm/lcmt_chaincomp_status.hpp"
 #include "chaincomp_lcm/lcmt_corrected_target.hpp"
 #include "chaincomp/params_update.hpp"
+#include "chaincomp/thermal.hpp"
 
 namespace chaincomp {
 
@@ -44,6 +45,9 @@ class LcmNode {
   // Take lcmt_params_update on the params channel and apply them through `updater` (which
   // changes the model this node compensates with); it outlives the node.
   void accept_params_updates(ParamsUpdater& updater);
+  // Take lcmt_temperatures on the temperatures channel into `thermal` and apply the error
+  // values it gives through the updater (accept_params_updates first); it outlives the node.
+  void accept_temperatures(ThermalState& thermal);
   const Counters& counters() const { return comp_.counters(); }
   std::int64_t instance_id() const { return instance_id_; }
   // Datagrams the kernel dropped at the process's UDP sockets (-1: none), and the receive
@@ -61,6 +65,7 @@ class LcmNode {
   static void on_control(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
   static void on_target(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
   static void on_params(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
+  static void on_readings(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
   void handle_command(const lcm_recv_buf_t* rbuf);
   void handle_target(const lcm_recv_buf_t* rbuf);
   void find_sockets();
@@ -85,7 +90,10 @@ class LcmNode {
   lcm_subscription_t* target_sub_ = nullptr;
   lcm_subscription_t* params_sub_ = nullptr;
   ParamsUpdater* updater_ = nullptr;
-  ParamsUpdate update_;
+  ParamsUpdate update_, thermal_update_;
+  lcm_subscription_t* readings_sub_ = nullptr;
+  ThermalState* thermal_ = nullptr;
+  Readings readings_;
   std::int64_t instance_id_ = 0;
   std::string machine_;
   // Targets on the corrected channel: this node's own, heard back, and another instance's

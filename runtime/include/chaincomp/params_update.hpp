@@ -63,6 +63,9 @@ class ParamsUpdater {
   // `instance_id`: this daemon's; `command_utime`: the last accepted command's (µs).
   bool apply(const ParamsUpdate& u, std::int64_t instance_id, std::int64_t command_utime,
              Refuse* why = nullptr) noexcept;
+  // The same checks and application for values from inside the daemon (a thermal model): no
+  // machine, instance or seq to check; counted as updates (received, refused, version).
+  bool apply_values(const ParamsUpdate& u, std::int64_t command_utime, Refuse* why = nullptr) noexcept;
   void count_undecodable() noexcept;
 
   std::int64_t received() const noexcept { return received_; }
@@ -73,6 +76,7 @@ class ParamsUpdater {
 
  private:
   bool refuse(Refuse r, Refuse* why) noexcept;
+  bool check_and_apply(const ParamsUpdate& u, std::int64_t command_utime, Refuse* why) noexcept;
 
   const ModelEntry& entry_;
   void* model_;

@@ -204,7 +204,7 @@ MODEL = "machine: lathe_zx\nerrors:\n  EZS:\n    unit: um\n    terms:\n      - {
     ("machine: lathe_zx", "machine: vmc_xyz", [":1: machine: the model is of machine 'vmc_xyz'"]),
     ("  EZS:", "  EQQ:", [":3: EQQ: 'EQQ' is not an error of lathe_zx"]),
     ("unit: um", "unit: arcsec", [":4: unit: EZS is a length in lathe_zx, not an angle"]),
-    ("unit: um", "unit: degC", [":4: unit: unknown unit 'degC'"]),
+    ("unit: um", "unit: degC", [":4: unit: expected a length or angle unit (um, arcsec, ...), got str 'degC'"]),
     ("time_constant: 1500", "time_constant: -1", [":6: time_constant: -1.0 is outside [0, 1e+06]"]),
     ("time_constant: 1500", "time_constant: .nan", [":6: time_constant: nan is outside"]),
     ("gain: 2.0", "gain: 1.0e+300", [":6: gain: 1e+300 is outside"]),

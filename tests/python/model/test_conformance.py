@@ -7,7 +7,8 @@ hand from YAML 1.1/1.2 and the params format (not from either loader):
 ``# expect: ok NAME=VALUE ...`` (values in internal units: mm, rad; ``varying=NAME`` for an
 error given as a table) or ``# expect: LINE: FIELD: message`` (the refusal after ``FILE:``).
 params/ files are read by both loaders, which must agree with each other and with that line;
-config/ files (runtime settings, read only by C++) and tolerances/ files (read only by Python,
+thermal/ files (thermal models: ``# expect: ok ref=T NAME:OFFSET[:SENSOR:GAIN:TAU]...`` in internal
+units per K and s) are read by both loaders too; config/ files (runtime settings, read only by C++) and tolerances/ files (read only by Python,
 through the same YAML rules and value grammar) must match it.
 """
 
@@ -23,6 +24,7 @@ from chaincomp.errors import ChaincompError
 from chaincomp.model.machine import load_machine
 from chaincomp.model.params import load_params
 from chaincomp.analysis.tolerances import load_tolerances
+from chaincomp.measure.thermal import load_model as load_thermal
 from chaincomp.model.varying import Varying
 from helpers import ROOT
 
@@ -116,3 +118,39 @@ def test_tolerance_corpus(path, machine):
     for item in expect.split()[1:]:
         name, value = item.split("=")
         assert bounds[name] == pytest.approx(float(value), rel=1e-15, abs=0), name
+
+
+@pytest.mark.parametrize("path", _files("thermal"), ids=lambda p: os.path.basename(p)[:-5])
+def test_both_loaders_read_the_thermal_corpus_alike(path, machine):
+    expect = _expect(path)
+    try:
+        model, py_error = load_thermal(path, machine), None
+    except ChaincompError as exc:
+        model, py_error = None, str(exc)
+    rc, out, err = _cpp("thermal", path)
+    if not expect.startswith("ok"):
+        want = f"{path}:{expect}"
+        assert py_error == want, "Python"
+        assert (rc, err) == (2, want), "C++"
+        return
+    assert py_error is None and rc == 0, (py_error, err)
+    lines = out.split("\n")
+    assert lines[0] == f"reference {model.reference!r}" or float(lines[0].split()[1]) == model.reference
+    cpp = {}
+    for line in lines[1:]:
+        if line:
+            name, offset, *terms = line.split()
+            cpp[name] = (float(offset), [(t.split(":")[0], float(t.split(":")[1]), float(t.split(":")[2])) for t in terms])
+    py = {n: (em.offset * em.unit.to_internal, [(t.sensor, t.gain * em.unit.to_internal, t.time_constant) for t in em.terms])
+          for n, em in model.errors.items()}
+    assert py == cpp   # the same doubles from both
+    tokens = expect.split()[1:]
+    assert float(tokens[0].split("=")[1]) == model.reference
+    for token in tokens[1:]:   # and the hand-worked values
+        name, offset, *rest = token.split(":")
+        assert cpp[name][0] == pytest.approx(float(offset), rel=1e-15, abs=0), name
+        want = [(rest[i], float(rest[i + 1]), float(rest[i + 2])) for i in range(0, len(rest), 3)]
+        for (s, g, tau), (ws, wg, wtau) in zip(cpp[name][1], want):
+            assert (s, tau) == (ws, wtau) and g == pytest.approx(wg, rel=1e-15, abs=0), name
+        assert len(cpp[name][1]) == len(want), name
+    assert sorted(cpp) == sorted(t.split(":")[0] for t in tokens[1:])
