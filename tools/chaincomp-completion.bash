@@ -54,7 +54,7 @@ _chaincomp() {
         replay)
           case "$prev" in
             --format) words='text json';;
-            *) words='-h --help --machine --model --params --config -o --output --csv --channel --format --json'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --machine --model --params --config --thermal -o --output --csv --channel --format --json'; [[ $cur == -* ]] || return 0;;
           esac;;
         plot)
           case "$prev" in

@@ -102,7 +102,8 @@ bool load_thermal_model(const MachineInfo& info, const std::string& path, Therma
   const YAML::Node errors = doc["errors"];
   const int errors_line = line_of(L.key(doc, "errors"));
   if (!errors.IsMap() || errors.size() == 0)
-    return L.fail(errors_line, "errors", "expected a mapping of error names to their models, got " + describe(errors));
+    return L.fail(errors_line, "errors", "expected a mapping of error names to their models, got " +
+                                             (errors.IsMap() ? std::string("an empty mapping") : describe(errors)));
   if (errors.size() > static_cast<std::size_t>(kMaxThermalErrors))
     return L.fail(errors_line, "errors", std::to_string(errors.size()) + " errors: a thermal model holds at most " +
                                              std::to_string(kMaxThermalErrors));

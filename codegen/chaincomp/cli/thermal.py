@@ -100,9 +100,9 @@ def _check(model: T.ThermalModel, log: T.Log) -> dict:
 def _check_lines(result: dict, what: str) -> list[str]:
     lines = [f"{what}:"]
     for name, r in result.items():
-        share = r["after_max"] / r["before_max"] if r["before_max"] > 0 else 0.0
+        share = f"{100 * r['after_max'] / r['before_max']:.0f} % of the largest" if r["before_max"] > 0 else "no drift"
         lines.append(f"  {name}: drift {r['before_max']:.4g} {r['unit']} max, {r['before_rms']:.4g} RMS -> left "
-                     f"{r['after_max']:.4g} max, {r['after_rms']:.4g} RMS ({100 * share:.0f} % of the largest)")
+                     f"{r['after_max']:.4g} max, {r['after_rms']:.4g} RMS ({share})")
     return lines
 
 
@@ -118,6 +118,10 @@ def run_fit(args) -> int:
             raise ChaincompError(f"--errors: no drift column of {e} in the log (drift columns: {', '.join(log.drift)})",
                                  args.log)
     sensors = names(args.sensors, "--sensors") if args.sensors else list(log.temperatures)
+    for option, given in (("--sensors", sensors), ("--errors", errors)):
+        twice = sorted({x for x in given if given.count(x) > 1})
+        if twice:
+            raise ChaincompError(f"{option}: {', '.join(twice)} given twice")
     for s in sensors:
         if s not in log.temperatures:
             raise ChaincompError(f"--sensors: no temperature column {s} in the log (sensors: "
@@ -125,7 +129,8 @@ def run_fit(args) -> int:
     model = T.ThermalModel(machine.name, args.reference)
     fits = {}
     for e in errors:
-        print(f"thermal fit: {e} from {len(log.t)} rows, {len(sensors)} sensors", file=sys.stderr)
+        if len(log.t) >= 100_000:   # a long fit: say what it is doing
+            print(f"thermal fit: {e} from {len(log.t)} rows, {len(sensors)} sensors", file=sys.stderr)
         f = T.fit(log, e, sensors, args.reference, args.max_sensors, args.min_improvement, not args.no_lag,
                   progress=lambda text: print(f"thermal fit: {text}", file=sys.stderr))
         if not f.model.terms:

@@ -25,12 +25,13 @@ import re
 from dataclasses import dataclass, field
 
 import numpy as np
+import yaml
 
 from ..errors import ChaincompError
 from ..model import units as U
 from ..model.expressions import MAX_LITERAL
 from ..model.machine import Machine
-from ..model.yamlsource import LineDict, LineList, describe, line_of, load_yaml, read_text
+from ..model.yamlsource import LineDict, LineList, describe, line_of, load_yaml, read_text, yaml11_number
 
 REFERENCE_TEMPERATURE = 20.0   # degC: ISO 1, the reference temperature of geometrical specifications
 MAX_ERRORS = 64                # errors of one thermal model
@@ -40,11 +41,14 @@ MAX_TIME_CONSTANT = 1e6        # s (11.6 days): a machine tool's slowest structu
 MAX_GAIN = 1e6                 # in the error's unit per K
 TEMPERATURE_RANGE = (-100.0, 300.0)   # degC: a reading outside is a broken sensor, not a temperature
 MAX_ROWS = 2_000_000           # rows of a log (a week at 3 Hz)
+MAX_LOG_BYTES = 256 * 1024 * 1024
+MIN_TIME_STEP = 1e-6           # s: a log's time resolution (LCM's utime)
 MAX_COLUMNS = 64
 SENSOR = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,31}")
-_DECIMAL = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+_DECIMAL = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")   # ASCII digits only
 _HEADER_UNIT = re.compile(r"^(.*?)\s*\[([^\]]*)\]\s*$")
 TEMPERATURE_UNITS = ("degC", "°C")
+SIMULATION_POINTS = 4_000_000   # the truth's time steps at most (then fewer per reading)
 BLOCK = 30.0                   # lag: time constants per vectorised block (exp(30) stays far from overflow)
 
 
@@ -118,7 +122,10 @@ def _number(node, key, path: str, what: str, lo: float, hi: float) -> float:
     value = node[key]
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ChaincompError(f"expected a number ({what}), got {describe(value)}", path, line_of(node, key), key)
-    value = float(value)
+    try:
+        value = float(value)
+    except OverflowError:   # an integer of hundreds of digits
+        value = math.inf if value > 0 else -math.inf
     if not (lo <= value <= hi):
         raise ChaincompError(f"{value!r} is outside [{lo:g}, {hi:g}] ({what})", path, line_of(node, key), key)
     return value
@@ -152,7 +159,8 @@ def load_model(path: str, machine: Machine | None = None) -> ThermalModel:
         model.reference = _number(doc, "reference_temperature", path, "degC", *TEMPERATURE_RANGE)
     errors = doc["errors"]
     if not isinstance(errors, LineDict) or not errors:
-        raise ChaincompError(f"expected a mapping of error names to their models, got {describe(errors)}", path,
+        raise ChaincompError("expected a mapping of error names to their models, got "
+                             f"{describe(errors) if errors != {} else 'an empty mapping'}", path,
                              line_of(doc, "errors"), "errors")
     if len(errors) > MAX_ERRORS:
         raise ChaincompError(f"{len(errors)} errors: a thermal model holds at most {MAX_ERRORS}", path,
@@ -196,7 +204,7 @@ def load_model(path: str, machine: Machine | None = None) -> ThermalModel:
             gain = _number(term, "gain", path, f"{unit.name}/K", -MAX_GAIN, MAX_GAIN)
             tau = _number(term, "time_constant", path, "s, 0 for no lag", 0.0, MAX_TIME_CONSTANT) \
                 if "time_constant" in term else 0.0
-            key = f"{sensor}@{tau!r}"
+            key = f"{sensor}@{tau + 0.0!r}"   # (-0.0 is 0)
             if key in seen:
                 raise ChaincompError(f"a second term of sensor {sensor} with time constant {tau:g} s (the first on "
                                      f"line {seen[key]}): add their gains", path, tline, "terms")
@@ -209,8 +217,14 @@ def load_model(path: str, machine: Machine | None = None) -> ThermalModel:
 
 
 def _g(v: float) -> str:
+    """6 significant digits, spelled so that YAML 1.1 reads a number back (1.0e+06, not 1e+06)."""
     text = f"{v:.6g}"
-    return "0" if text in ("-0", "0") else text
+    return "0" if text in ("-0", "0") else yaml11_number(text) or text
+
+
+def _name(sensor: str) -> str:
+    """A sensor's name as YAML reads it back: quoted where it would be a bool or null (on, No, null)."""
+    return sensor if yaml.safe_load(sensor) == sensor else f"'{sensor}'"
 
 
 def model_text(model: ThermalModel, header: list[str]) -> str:
@@ -229,7 +243,7 @@ def model_text(model: ThermalModel, header: list[str]) -> str:
             u = ""
             if term.gain_u is not None:
                 u = f"   # ± {_g(term.gain_u)} {em.unit.name}/K, ± {_g(term.time_constant_u or 0.0)} s"
-            lines.append(f"      - {{sensor: {term.sensor}, gain: {_g(term.gain)}, "
+            lines.append(f"      - {{sensor: {_name(term.sensor)}, gain: {_g(term.gain)}, "
                          f"time_constant: {_g(term.time_constant)}}}{u}")
     return "\n".join(lines) + "\n"
 
@@ -250,17 +264,25 @@ def read_log(path: str, machine: Machine, rename: dict[str, str] | None = None) 
     """A CSV log: a 'time [s]' column, temperature columns ('NAME [degC]') and drift columns
     named by errors of the machine ('EZZ [um]'; ``rename`` maps other names to errors)."""
     rename = dict(rename or {})
-    text = read_text(path, limit=256 * 1024 * 1024)
+    text = read_text(path, limit=MAX_LOG_BYTES)
     if text.startswith("\ufeff"):
         text = text[1:]
-    rows = [(i, line) for i, line in enumerate(text.splitlines(), 1)
-            if line.strip() and not line.lstrip().startswith("#")]
-    if not rows:
+
+    def lines():
+        """(number, line) of the lines that are not blank or comments: split at line ends only
+        (not at U+2028 or a form feed inside a comment, as str.splitlines would)."""
+        for number, line in enumerate(text.split("\n"), 1):
+            line = line.removesuffix("\r")
+            if line.strip(" \t") and not line.lstrip(" \t").startswith("#"):
+                yield number, line
+
+    rows = lines()
+    hline, htext = next(rows, (1, None))
+    if htext is None:
         raise ChaincompError("no header row (expected e.g. 'time [s],T_spindle [degC],EZZ [um]')", path, 1)
-    if len(rows) - 1 > MAX_ROWS:
-        raise ChaincompError(f"{len(rows) - 1} rows: a log holds at most {MAX_ROWS}", path)
-    hline, htext = rows[0]
     delimiter = ";" if htext.count(";") > htext.count(",") else "\t" if "\t" in htext and "," not in htext else ","
+    if htext.count(delimiter) + 1 > MAX_COLUMNS:
+        raise ChaincompError(f"{htext.count(delimiter) + 1} columns: a log holds at most {MAX_COLUMNS}", path, hline)
 
     def cells(number: int, line: str) -> list[str]:
         try:
@@ -289,6 +311,9 @@ def read_log(path: str, machine: Machine, rename: dict[str, str] | None = None) 
             names.append("time")
             continue
         if unit in TEMPERATURE_UNITS:
+            if name in rename:
+                raise ChaincompError(f"--drift {name}={rename[name]}: column {name} is a temperature, not a drift",
+                                     path, hline, cell.strip())
             if not SENSOR.fullmatch(name):
                 raise ChaincompError(f"sensor name {name!r}: a letter or _, then letters, digits or _ (at most 32)",
                                      path, hline, cell.strip())
@@ -300,10 +325,12 @@ def read_log(path: str, machine: Machine, rename: dict[str, str] | None = None) 
         except KeyError as exc:
             raise ChaincompError(f"{exc.args[0]}; or a temperature in {' or '.join(TEMPERATURE_UNITS)}", path,
                                  hline, cell.strip()) from None
+        mapped = name in rename
         error = rename.pop(name, name)
         if error not in errors:
-            raise ChaincompError(f"drift column {name!r} is not an error of {machine.name} (name the column by the "
-                                 f"error it measures, e.g. EZZ, or map it with --drift {name}=ERROR)", path, hline,
+            hint = (f"--drift {name}={error} names no error of it" if mapped else "name the column by the error it "
+                    f"measures, e.g. EZZ, or map it with --drift {name}=ERROR")
+            raise ChaincompError(f"drift column {name!r} is not an error of {machine.name} ({hint})", path, hline,
                                  cell.strip())
         if u.kind != errors[error].unit.kind:
             raise ChaincompError(f"{error} is {'an' if errors[error].unit.kind == 'angle' else 'a'} "
@@ -323,13 +350,18 @@ def read_log(path: str, machine: Machine, rename: dict[str, str] | None = None) 
         if name in seen:
             raise ChaincompError(f"two columns of {name} ({seen[name] + 1} and {k + 1})", path, hline, header[k].strip())
         seen[name] = k
-    data = np.empty((len(rows) - 1, len(header)))
-    for r, (line, raw) in enumerate(rows[1:]):
+    data = np.empty((min(text.count("\n") + 1, MAX_ROWS), len(header)))
+    n = 0
+    previous = None
+    for line, raw in rows:
+        if n == MAX_ROWS:
+            raise ChaincompError(f"more than {MAX_ROWS} rows: a log holds at most {MAX_ROWS}", path, line)
         row = cells(line, raw)
         if len(row) != len(header):
             raise ChaincompError(f"{len(row)} cells, the header has {len(header)}", path, line)
+        values = []
         for k, cell in enumerate(row):
-            t = cell.strip()
+            t = cell.strip(" \t")
             if not _DECIMAL.fullmatch(t):
                 raise ChaincompError(f"expected a number, got {cell!r}", path, line, header[k].strip())
             v = float(t)
@@ -338,10 +370,15 @@ def read_log(path: str, machine: Machine, rename: dict[str, str] | None = None) 
             if kinds[k] == "temperature" and not TEMPERATURE_RANGE[0] <= v <= TEMPERATURE_RANGE[1]:
                 raise ChaincompError(f"{v:g} degC is outside [{TEMPERATURE_RANGE[0]:g}, {TEMPERATURE_RANGE[1]:g}] "
                                      "degC: a broken sensor?", path, line, header[k].strip())
-            data[r, k] = v
-        if r and not data[r, time_col] > data[r - 1, time_col]:
-            raise ChaincompError(f"time {data[r, time_col]:g} s does not follow {data[r - 1, time_col]:g} s "
+            values.append(v)
+        now = values[time_col]
+        if previous is not None and not now >= previous + MIN_TIME_STEP:
+            raise ChaincompError(f"time {now:g} s does not follow {previous:g} s by at least {MIN_TIME_STEP:g} s "
                                  "(times must increase)", path, line, header[time_col].strip())
+        previous = now
+        data[n] = values
+        n += 1
+    data = data[:n]
     if len(data) < 10:
         raise ChaincompError(f"{len(data)} rows: a fit needs at least 10", path, hline)
     units = {}
@@ -450,11 +487,16 @@ def fit(log: Log, error: str, sensors: list[str], reference: float = REFERENCE_T
     hi = min(10 * duration, MAX_TIME_CONSTANT)
     grid = [0.0] + (list(np.geomspace(lo, hi, 24)) if lags and hi > lo else [])
     rms0 = float(np.sqrt(np.mean((d - d.mean()) ** 2)))
+    if not rms0 > 0:
+        raise ChaincompError(f"{error}: the drift is constant ({float(d[0]):g} {log.drift_units[error].name}): "
+                             "nothing to fit", log.path)
+    # a sensor that does not vary (below any sensor's resolution) explains nothing but rounding
+    sensors = [s for s in dict.fromkeys(sensors) if np.ptp(temps[s]) > 1e-6]
     chosen: list[str] = []
     taus: list[float] = []
     rss = float(np.sum((d - d.mean()) ** 2))
     steps = []
-    while len(chosen) < min(max_sensors, len(sensors)):
+    while len(chosen) < min(max_sensors, len(sensors)) and rss > 0:
         best = None
         for s in sensors:
             if s in chosen:
@@ -468,7 +510,7 @@ def fit(log: Log, error: str, sensors: list[str], reference: float = REFERENCE_T
         n = len(d)
         # Schwarz's criterion (BIC): a sensor adds a gain and a time constant, and must lower
         # n ln(RSS) by more than 2 ln(n); and it must lower the RMS by min_improvement
-        if n * math.log(rss / max(new_rss, 1e-300)) <= 2 * math.log(n) or \
+        if n * math.log(rss / max(new_rss, 1e-300 * rss)) <= 2 * math.log(n) or \
                 math.sqrt(new_rss) > (1 - min_improvement) * math.sqrt(rss):
             break
         chosen, taus, rss = chosen + [s], new_taus, new_rss
@@ -483,6 +525,10 @@ def fit(log: Log, error: str, sensors: list[str], reference: float = REFERENCE_T
     for i, (s, tau) in enumerate(zip(chosen, taus)):
         em.terms.append(Term(s, float(coef[1 + i]), float(tau), float(u[1 + i]),
                              float(next(tau_u)) if tau > 0 else 0.0))
+    for term in em.terms:   # what a model file can hold (and the daemon takes)
+        if not abs(term.gain) <= MAX_GAIN:
+            raise ChaincompError(f"{error}: the fitted gain on {term.sensor} is {term.gain:.3g} {em.unit.name}/K, beyond "
+                                 f"{MAX_GAIN:g}: the sensor hardly varies over the log", log.path)
     residual = d - a @ coef
     return Fit(em, rms0, float(np.sqrt(np.mean(residual ** 2))), float(np.max(np.abs(d - d.mean()))),
                float(np.max(np.abs(residual))), steps)
@@ -536,9 +582,12 @@ def simulate(model: ThermalModel, sensors: list[Sensor], cycle: list[tuple[float
              temperature_noise: float, drift_noise: float, seed: int, start: float = 0.0):
     """Times, temperatures and drift (each error in its model's unit) of a machine following
     ``model``, run through ``cycle``. The truth is computed on a step 10 times finer than the
-    log's and then sampled, so that a fit does not see its own discretisation."""
+    log's (fewer on a long log: at most SIMULATION_POINTS) and then sampled, so that a fit does
+    not see its own discretisation."""
     duration = sum(s for _, s in cycle)
-    fine = min(1.0, 0.1 / rate)
+    rows = int(duration * rate) + 1
+    substeps = max(1, min(10, SIMULATION_POINTS // rows))   # 10 per reading, fewer on a long log
+    fine = 1.0 / (rate * substeps)
     tf = np.arange(0.0, duration + fine / 2, fine)
     edges = np.cumsum([0.0] + [s for _, s in cycle])
     duty = np.array([d for d, _ in cycle] + [cycle[-1][0]])[np.clip(np.searchsorted(edges, tf, side="right") - 1,
@@ -553,7 +602,7 @@ def simulate(model: ThermalModel, sensors: list[Sensor], cycle: list[tuple[float
             v = v + s.swing * (2 * np.abs(((tf + start) / s.swing_period) % 1.0 - 0.5) - 0.5)
         truth[s.name] = v
     drift = {name: em.evaluate(tf, truth, model.reference) for name, em in model.errors.items()}
-    step = int(round(1.0 / (rate * fine)))
+    step = substeps
     t = tf[::step]
     temps = {n: v[::step] + rng.normal(0.0, temperature_noise, len(t)) for n, v in truth.items()}
     # drift_noise: um for a length error, arcsec for an angle, whatever unit the model writes it in

@@ -12,7 +12,10 @@ import numpy as np
 import pytest
 import yaml
 
+from chaincomp.measure import thermal as T
 from chaincomp.measure.thermal import lag
+from chaincomp.model import units as U
+from chaincomp.model.machine import load_machine
 from helpers import cli, machine_path, one_error_line, run_cli, run_in_process
 
 LATHE = """\
@@ -271,3 +274,93 @@ def test_the_output_is_not_an_input(lathe):
     res = run_in_process("thermal", "fit", lathe / "lathe.yaml", log, "-o", log)
     one_error_line(res, "thermal fit", "is also an input")
     assert log.read_text() == GOOD_LOG
+
+
+# ----------------------------------------------------------------------------- found by a bad-input hunt
+
+def _rows(n, temp, drift, step=1.0):
+    return "time [s],T_a [degC],T_b [degC],EZS [um]\n" + "".join(
+        f"{step * i!r},{temp(i)!r},{20 + 0.5 * math.sin(i / 30)!r},{drift(i)!r}\n" for i in range(n))
+
+
+@pytest.mark.parametrize("drift, words", [
+    (lambda i: 0.0, ["EZS: the drift is constant (0 um): nothing to fit"]),
+    (lambda i: 3.0, ["EZS: the drift is constant (3 um)"]),
+])
+def test_a_constant_drift_is_refused(lathe, drift, words):
+    p = _log(lathe, _rows(200, lambda i: 20 + i / 100, drift), "flat.csv")
+    one_error_line(run_in_process("thermal", "fit", lathe / "lathe.yaml", p, "-o", lathe / "never.yaml"),
+                   "thermal fit", str(p), *words)
+
+
+def test_a_sensor_that_does_not_vary_is_never_taken(lathe):
+    # the fit took it with a gain of -4.9e12 um/K, fitting the rounding of its lag
+    p = _log(lathe, "time [s],T_a [degC],EZS [um]\n" + "".join(f"{i},21.0,{0.001 * i!r}\n" for i in range(200)),
+             "const.csv")
+    one_error_line(run_in_process("thermal", "fit", lathe / "lathe.yaml", p, "-o", lathe / "never.yaml"),
+                   "thermal fit", "no sensor explains its drift")
+
+
+def test_a_sensor_or_error_given_twice_is_refused(lathe):
+    p = _log(lathe, GOOD_LOG, "good.csv")
+    one_error_line(run_in_process("thermal", "fit", lathe / "lathe.yaml", p, "-o", lathe / "never.yaml",
+                                  "--sensors", "T_a,T_a"), "thermal fit", "--sensors: T_a given twice")
+
+
+def test_the_model_written_reads_back_whatever_its_values_and_names(lathe):
+    # 1e+06, 1e-05 (YAML 1.1 reads them as text) and sensor names YAML reads as bool or null
+    machine = load_machine(str(lathe / "lathe.yaml"))
+    model = T.ThermalModel("lathe_zx", 1e-5)
+    model.errors["EZS"] = T.ErrorModel("EZS", U.unit("um"), 2.5e-7, [
+        T.Term("on", 1.5e5, 1e6), T.Term("No", -2e-9, 0.0), T.Term("null", 3.0, 1e-5), T.Term("True", 1.0, 120.0)])
+    p = lathe / "written.yaml"
+    p.write_text(T.model_text(model, ["written by the test"]))
+    back = T.load_model(str(p), machine)
+    assert back.reference == pytest.approx(1e-5)
+    terms = [(t.sensor, t.gain, t.time_constant) for t in back.errors["EZS"].terms]
+    assert terms == [("on", pytest.approx(1.5e5), pytest.approx(1e6)), ("No", pytest.approx(-2e-9), 0.0),
+                     ("null", pytest.approx(3.0), pytest.approx(1e-5)), ("True", pytest.approx(1.0), pytest.approx(120.0))]
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda t: t.replace("gain: 2.0", "gain: -" + "9" * 400), [":6: gain: -inf is outside"]),
+    (lambda t: t.replace("time_constant: 1500", "time_constant: " + "9" * 300), [":6: time_constant: 1e+300 is outside"]),
+    (lambda t: t.replace("gain: 2.0, time_constant: 1500}", "gain: 2.0, time_constant: 0}\n"
+                         "      - {sensor: T_spindle, gain: 1, time_constant: -0.0}"), [":7: terms: a second term"]),
+    (lambda t: t.replace("  EZS:\n    unit: um\n    terms:\n      - {sensor: T_spindle, gain: 2.0, time_constant: 1500}\n",
+                         " {}\n"), ["errors: expected a mapping of error names to their models, got an empty mapping"]),
+])
+def test_more_bad_models(lathe, edit, words):
+    p = lathe / "bad2.yaml"
+    p.write_text(edit(MODEL))
+    res = run_in_process("simulate-thermal", lathe / "lathe.yaml", "--model", p, "-o", lathe / "never.csv")
+    one_error_line(res, "simulate-thermal", str(p), *words)
+
+
+@pytest.mark.parametrize("old, new, words", [
+    ("\n5,20.5,1.0\n", "\n5,\u0662\u0660.\u0665,1.0\n", [":7: T_a [degC]: expected a number"]),   # Arabic-Indic digits
+    ("\n5,20.5,1.0\n", "\n5,\uff12\uff10.5,1.0\n", [":7: T_a [degC]: expected a number"]),        # fullwidth
+    ("\n5,20.5,1.0\n", "\n5,\u300020.5,1.0\n", [":7: T_a [degC]: expected a number"]),            # ideographic space
+    ("\n5,20.5,", "\n4.0000000001,20.5,", [":7: time [s]: time 4 s does not follow 4 s by at least 1e-06 s"]),
+])
+def test_more_bad_logs(lathe, old, new, words):
+    assert old in GOOD_LOG
+    p = _log(lathe, GOOD_LOG.replace(old, new), "bad2.csv")
+    one_error_line(run_in_process("thermal", "fit", lathe / "lathe.yaml", p, "-o", lathe / "never.yaml"),
+                   "thermal fit", str(p), *words)
+
+
+def test_a_line_separator_in_a_comment_does_not_split_it(lathe):
+    # str.splitlines split there: the rest of the comment was taken for the header, one line off
+    p = _log(lathe, "# a note\u2028on two lines\n# and\x0ca form feed\n" + GOOD_LOG.replace("\n5,20.5,", "\n5,nan,"),
+             "sep.csv")
+    one_error_line(run_in_process("thermal", "fit", lathe / "lathe.yaml", p, "-o", lathe / "never.yaml"),
+                   "thermal fit", f"{p}:9: T_a [degC]: expected a number, got 'nan'")
+
+
+def test_the_simulated_log_is_read_every_1_over_rate_seconds(lathe):
+    out = lathe / "slow.csv"
+    cli("simulate-thermal", lathe / "lathe.yaml", "--model", lathe / "true.yaml", "-o", out, "--rate", "0.09",
+        "--cycle", "1:3600")
+    t = np.loadtxt(out, delimiter=",", skiprows=3, usecols=0)
+    assert np.diff(t) == pytest.approx(1 / 0.09, abs=1e-3) and len(t) == 325   # (written to 1 ms)
