@@ -32,13 +32,16 @@ def exact_check(commands: np.ndarray, targets: np.ndarray, machine: str = MACHIN
 
 
 def exact_errors(commands: np.ndarray, targets: np.ndarray, machine: str = MACHINE,
-                 params: str = PARAMS) -> tuple[np.ndarray, np.ndarray]:
+                 params: str = PARAMS, added: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per target: the point (mm) and direction (rad) difference between the actual pose at
-    the target and the nominal pose at its command, by the independent exact chain."""
+    the target and the nominal pose at its command, by the independent exact chain; `added`:
+    values (internal units, one per target) added to some errors (a thermal drift)."""
     m = load_machine(machine)
     exact = ExactModel(m)
     base = m.nominal_values()
     base.update(load_params(params, m))
+    for name, extra in (added or {}).items():
+        base[name] = base[name] + np.asarray(extra, float)
     nominal = {k: (0.0 if m.symbol(k).role == "error" else v) for k, v in base.items()}
     def pose(values, axes):
         v = dict(values)

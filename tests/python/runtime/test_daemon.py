@@ -135,6 +135,13 @@ def test_params_updates_during_a_stream_are_bumpless_counted_and_replayed():
 
 @pytest.mark.slow
 @needs_netns
+def test_a_fitted_thermal_model_takes_out_at_least_70_percent_of_a_held_out_drift():
+    out = _scenario("tests/e2e/e2e_thermal.py", timeout=300)
+    assert "differing from the daemon's: 0" in out and "% reduction" in out
+
+
+@pytest.mark.slow
+@needs_netns
 def test_switching_is_bumpless():
     _scenario("tests/e2e/e2e_switch.py")
 
