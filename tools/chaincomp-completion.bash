@@ -135,9 +135,11 @@ _chaincomp() {
           esac;;
         thermal)
           case "$prev" in
-            thermal) words='fit check';;
+            thermal) words='fit check stream';;
             --format) words='text json';;
-            *) words='-h --help -o --output --errors --sensors --max-sensors --min-improvement --no-lag --reference --drift --check --format --json'; [[ $cur == -* ]] || return 0;;
+            --format) words='siemens isg';;
+            --report) words='text json';;
+            *) words='-h --help -o --output --errors --sensors --max-sensors --min-improvement --no-lag --reference --drift --check --format --json --reference-position --report'; [[ $cur == -* ]] || return 0;;
           esac;;
         simulate-thermal)
           case "$prev" in

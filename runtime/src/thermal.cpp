@@ -123,8 +123,7 @@ bool load_thermal_model(const MachineInfo& info, const std::string& path, Therma
     const YAML::Node unit_node = node["unit"];
     const UnitInfo* unit = resolve(unit_node) == Yaml11::kStr ? find_unit(unit_node.Scalar().c_str()) : nullptr;
     const int unit_line = line_of(L.key(node, "unit"));
-    if (unit == nullptr || unit->kind == UnitKind::kRatio)
-      return L.fail(unit_line, "unit", "expected a length or angle unit (um, arcsec, ...), got " + describe(unit_node));
+    if (unit == nullptr) return L.fail(unit_line, "unit", "expected a unit (um, arcsec, ppm, ...), got " + describe(unit_node));
     const ParamInfo& p = info.params[param];
     if (p.kind != unit->kind)
       return L.fail(unit_line, "unit", err + " is " + article(p.kind) + " " + kind_word(p.kind) + " in " + info.name +

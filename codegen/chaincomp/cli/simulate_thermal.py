@@ -34,8 +34,8 @@ def add_parser(sub) -> None:
     p.add_argument("--temperature-noise", type=number(0, 10), default=0.02, metavar="K",
                    help="standard deviation of each temperature reading (default 0.02 K)")
     p.add_argument("--drift-noise", type=number(0, 1e3), default=0.3, metavar="SIGMA",
-                   help="standard deviation of each drift reading, um for a length error, arcsec for an angle "
-                        "(default 0.3)")
+                   help="standard deviation of each drift reading, um for a length error, arcsec for an angle, "
+                        "ppm for a ratio (default 0.3)")
     add_seed_argument(p, "random seed of the noise and the hall's swings")
     p.set_defaults(run=run)
 

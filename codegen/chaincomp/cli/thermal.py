@@ -13,7 +13,7 @@ from ..errors import ChaincompError
 from ..measure import thermal as T
 from ..model.yamlsource import write_checked
 from .common import (add_format_argument, add_machine_argument, check_finite, check_output, integer, load, names,
-                     number, to_json)
+                     number, parse_number, to_json)
 
 LOG_HELP = ("a CSV log: 'time [s]', temperature columns 'NAME [degC]' and drift columns named by the errors they "
             "measure, e.g. 'EZZ [um]'")
@@ -59,6 +59,30 @@ def add_parser(sub) -> None:
                    help="a drift column measuring ERROR under another name (repeatable)")
     add_format_argument(c)
     c.set_defaults(run=run_check)
+    s = verbs.add_parser("stream", help="per-axis offset and slope over a log, as Siemens or ISG controllers take them",
+                         description="Evaluate the model on the log's temperatures and turn its errors into what a "
+                                     "controller's per-axis temperature compensation takes: for each linear axis an "
+                                     "offset at a reference position and a slope (the tool's error along the axis' "
+                                     "travel over its range, the other axes at their default positions, fitted by a "
+                                     "line), negated: the correction to add to the axis. --format siemens: SD43900 "
+                                     "$SA_TEMP_COMP_ABS_VALUE (mm), SD43910 $SA_TEMP_COMP_SLOPE (tan beta) and "
+                                     "SD43920 $SA_TEMP_COMP_REF_POSITION (mm), K = SD43900 + SD43910 (P - SD43920); "
+                                     "isg: P-AXIS-00273 temp_comp_offset_0 (0.1 um), P-AXIS-00274 "
+                                     "temp_comp_coefficient (um/m) and P-AXIS-00272 temp_comp_position_0 (0.1 um), "
+                                     "integers. One row per row of the log; the report gives each axis' largest "
+                                     "values, their fastest change and what the line leaves (docs/guide/thermal.md).")
+    add_machine_argument(s)
+    s.add_argument("model", metavar="MODEL.yaml", help="thermal model (as thermal fit writes)")
+    s.add_argument("log", metavar="LOG.csv", help="a CSV log of the temperatures ('time [s]', 'NAME [degC]'; drift "
+                   "columns are not needed)")
+    s.add_argument("--format", dest="target", required=True, choices=("siemens", "isg"), help="the controller's")
+    s.add_argument("-o", "--output", required=True, metavar="OUT.csv", help="the stream to write")
+    s.add_argument("--reference-position", action="append", default=[], metavar="AXIS=VALUE",
+                   help="the line's reference position of an axis, in its unit (default its lower limit; repeatable)")
+    s.add_argument("--report", choices=("text", "json"), default="text",
+                   help="the report's format (default text; --format names the controller's)")
+    s.add_argument("--json", dest="report", action="store_const", const="json", help="the same as --report json")
+    s.set_defaults(run=run_stream)
 
 
 def _renames(items: list[str]) -> dict[str, str]:
@@ -193,4 +217,84 @@ def run_check(args) -> int:
         print(to_json(doc))
     else:
         print("\n".join(_check_lines(result, f"{args.model} on {args.log}")))
+    return 0
+
+
+STREAM_COLUMNS = {   # per axis: (parameter, unit, scale from mm or mm/mm, integer)
+    "siemens": [("SD43900 $SA_TEMP_COMP_ABS_VALUE", "mm", 1.0, False),
+                ("SD43910 $SA_TEMP_COMP_SLOPE", "1", 1.0, False),
+                ("SD43920 $SA_TEMP_COMP_REF_POSITION", "mm", 1.0, False)],
+    "isg": [("P-AXIS-00273 temp_comp_offset_0", "0.1um", 1e4, True),
+            ("P-AXIS-00274 temp_comp_coefficient", "um/m", 1e6, True),
+            ("P-AXIS-00272 temp_comp_position_0", "0.1um", 1e4, True)],
+}
+
+
+def run_stream(args) -> int:
+    check_output(args.output, args.machine, args.model, args.log)
+    machine = load(args.machine)
+    model = T.load_model(args.model, machine)
+    refs = {}
+    for item in args.reference_position:
+        name, eq, raw = (x.strip() for x in item.partition("="))
+        axes = {a.name: a for a in machine.axes if a.unit.kind == "length"}
+        if not eq or name not in axes:
+            raise ChaincompError(f"--reference-position: expected AXIS=VALUE with a linear axis of {machine.name} "
+                                 f"({', '.join(axes)}), got {item!r}")
+        if name in refs:
+            raise ChaincompError(f"--reference-position: {name} given twice")
+        try:
+            refs[name] = axes[name].to_internal(float(parse_number(raw)))
+        except ValueError as exc:
+            raise ChaincompError(f"--reference-position {item}: {exc}") from None
+    log = T.read_log(args.log, machine, require_drift=False)
+    missing = [s for s in model.sensors if s not in log.temperatures]
+    if missing:
+        raise ChaincompError(f"the model reads sensor {', '.join(missing)}, not in the log (sensors: "
+                             f"{', '.join(log.temperatures)})", args.log)
+    lines = T.axis_lines(machine, list(model.errors), refs)
+    if not lines:
+        raise ChaincompError(f"{machine.name} has no linear axis: nothing for a per-axis compensation", machine.file)
+    values = {e: em.evaluate(log.t, log.temperatures, model.reference) * em.unit.to_internal
+              for e, em in model.errors.items()}   # internal units, per row
+    cols = STREAM_COLUMNS[args.target]
+    header = ["time [s]"] + [f"{ln.axis} {name} [{unit}]" for ln in lines for name, unit, _, _ in cols]
+    table = [log.t]
+    report = {}
+    for ln in lines:
+        offset = -sum(values[e] * ln.offset[e] for e in values)      # the correction, mm at the reference
+        slope = -sum(values[e] * ln.slope[e] for e in values)        # mm/mm
+        departure = sum(np.abs(values[e]) * ln.departure[e] for e in values)
+        for (name, unit, scale, integer), series in zip(cols, (offset, slope, np.full(len(log.t), ln.reference))):
+            table.append(np.rint(series * scale) if integer else series * scale)
+        rate = np.abs(np.diff(offset)) / np.diff(log.t) if len(log.t) > 1 else np.zeros(1)
+        lo, hi = (machine.symbol(ln.axis).to_internal(v) for v in machine.symbol(ln.axis).limits)
+        report[ln.axis] = {"reference_mm": ln.reference, "offset_max_um": float(np.max(np.abs(offset)) * 1e3),
+                           "slope_max_um_per_m": float(np.max(np.abs(slope)) * 1e6),
+                           "offset_rate_max_um_per_s": float(np.max(rate) * 1e3),
+                           "line_departure_max_um": float(np.max(departure) * 1e3)}
+        if args.target == "isg":   # what the integers' steps round away, at the far end of the axis
+            report[ln.axis]["rounding_max_um"] = 0.05 + 0.5e-6 * max(abs(hi - ln.reference), abs(lo - ln.reference)) * 1e3
+    doc = {"machine": machine.name, "model": args.model, "log": args.log, "format": args.target, "rows": len(log.t),
+           "axes": report}
+    check_finite(doc)
+    text_rows = [",".join(header)]
+    for k in range(len(log.t)):
+        text_rows.append(",".join(f"{c[k] + 0.0:.0f}" if cols[(i - 1) % 3][3] and i else f"{c[k] + 0.0:.10g}"
+                                  for i, c in enumerate(table)))   # (+ 0.0: never -0)
+    try:
+        write_checked(args.output, "\n".join(text_rows) + "\n")
+    except OSError as exc:
+        raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
+    if args.report == "json":
+        print(to_json(doc))
+        return 0
+    out = [f"{args.target} temperature compensation of {machine.name} from {args.model} over {args.log} "
+           f"({len(log.t)} rows) -> {args.output}"]
+    for axis, r in report.items():
+        out.append(f"  {axis}: reference {r['reference_mm']:g} mm; offset up to {r['offset_max_um']:.3g} um, slope up "
+                   f"to {r['slope_max_um_per_m']:.3g} um/m; fastest change {r['offset_rate_max_um_per_s']:.3g} um/s; "
+                   f"the line leaves up to {r['line_departure_max_um']:.3g} um"
+                   + (f"; the integers round by up to {r['rounding_max_um']:.3g} um" if "rounding_max_um" in r else ""))
+    print("\n".join(out))
     return 0

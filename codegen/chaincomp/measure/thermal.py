@@ -176,8 +176,8 @@ def load_model(path: str, machine: Machine | None = None) -> ThermalModel:
                                  line, str(err))
         _keys(node, ("unit", "offset", "terms"), ("unit", "terms"), path, f"error {err}")
         unit = U.UNITS.get(node["unit"]) if isinstance(node["unit"], str) else None
-        if unit is None or unit.kind not in ("length", "angle"):
-            raise ChaincompError(f"expected a length or angle unit (um, arcsec, ...), got {describe(node['unit'])}",
+        if unit is None:
+            raise ChaincompError(f"expected a unit (um, arcsec, ppm, ...), got {describe(node['unit'])}",
                                  path, line_of(node, "unit"), "unit")
         if machine is not None and known[err].unit.kind != unit.kind:
             raise ChaincompError(f"{err} is {'an' if known[err].unit.kind == 'angle' else 'a'} {known[err].unit.kind} "
@@ -260,7 +260,7 @@ class Log:
     columns: dict[str, str]               # sensor or error -> its header cell
 
 
-def read_log(path: str, machine: Machine, rename: dict[str, str] | None = None) -> Log:
+def read_log(path: str, machine: Machine, rename: dict[str, str] | None = None, require_drift: bool = True) -> Log:
     """A CSV log: a 'time [s]' column, temperature columns ('NAME [degC]') and drift columns
     named by errors of the machine ('EZZ [um]'; ``rename`` maps other names to errors)."""
     rename = dict(rename or {})
@@ -341,7 +341,7 @@ def read_log(path: str, machine: Machine, rename: dict[str, str] | None = None) 
         raise ChaincompError(f"--drift: no column {', '.join(sorted(rename))} in the header", path, hline)
     if time_col is None:
         raise ChaincompError(f"no 'time [s]' column (header: {', '.join(header)})", path, hline)
-    for kind in ("temperature", "drift"):
+    for kind in ("temperature", "drift") if require_drift else ("temperature",):
         if kind not in kinds:
             raise ChaincompError(f"no {kind} column ({'NAME [degC]' if kind == 'temperature' else 'ERROR [um]'}; "
                                  f"header: {', '.join(header)})", path, hline)
@@ -605,8 +605,59 @@ def simulate(model: ThermalModel, sensors: list[Sensor], cycle: list[tuple[float
     step = substeps
     t = tf[::step]
     temps = {n: v[::step] + rng.normal(0.0, temperature_noise, len(t)) for n, v in truth.items()}
-    # drift_noise: um for a length error, arcsec for an angle, whatever unit the model writes it in
-    per = {n: (1e-3 if em.unit.kind == "length" else math.pi / 648000) / em.unit.to_internal
+    # drift_noise: um for a length error, arcsec for an angle, ppm for a ratio, whatever unit the model writes
+    per = {n: {"length": 1e-3, "angle": math.pi / 648000, "ratio": 1e-6}[em.unit.kind] / em.unit.to_internal
            for n, em in model.errors.items()}
     drift = {n: v[::step] + rng.normal(0.0, drift_noise * per[n], len(t)) for n, v in drift.items()}
     return t, temps, drift
+
+
+# ----------------------------------------------------------------------------- per-axis streams
+
+@dataclass
+class AxisLine:
+    """What a unit of each thermal error does along one linear axis: the tool's error along
+    the axis' travel, over the axis' range with the other axes at their default positions,
+    fitted by a line value(P) = offset + slope * (P - reference) (mm and mm/mm per internal
+    unit of the error), and the largest departure from that line (mm per unit)."""
+    axis: str
+    reference: float             # mm: the line's reference position (P0)
+    offset: dict[str, float]
+    slope: dict[str, float]
+    departure: dict[str, float]
+
+
+def axis_lines(machine: Machine, errors: list[str], references: dict[str, float], points: int = 41) -> list[AxisLine]:
+    """Per linear axis, the line of each error (a first-order sensitivity: the thermal errors
+    are small)."""
+    from ..symbolic.numeric import ExactModel
+    exact = ExactModel(machine)
+    base = machine.nominal_values()
+    for a in machine.axes:
+        base[a.name] = a.to_internal(a.default_position)
+    out = []
+    for a in machine.axes:
+        if a.unit.kind != "length":
+            continue
+        lo, hi = (a.to_internal(v) for v in a.limits)
+        q = np.linspace(lo, hi, points)
+
+        def tool(values):
+            p, _ = exact.pose({**values, a.name: q})
+            return np.stack([np.broadcast_to(np.asarray(c, float), q.shape) for c in p])
+
+        p0 = tool(base)
+        travel = (p0[:, -1] - p0[:, 0]) / (hi - lo)   # tool motion per mm of the axis
+        scale = float(np.linalg.norm(travel))
+        u = travel / scale
+        ref = references.get(a.name, lo)
+        line = AxisLine(a.name, ref, {}, {}, {})
+        for e in errors:
+            sym = machine.symbol(e)
+            step = 1e-3 if sym.unit.kind == "length" else 1e-6   # mm or rad: well inside the linear range
+            along = (u @ (tool({**base, e: step}) - p0)) / (scale * step)   # axis mm per unit of the error
+            slope, offset = np.polyfit(q - ref, along, 1)
+            line.offset[e], line.slope[e] = float(offset), float(slope)
+            line.departure[e] = float(np.max(np.abs(along - (offset + slope * (q - ref)))))
+        out.append(line)
+    return out

@@ -226,7 +226,7 @@ def _complete(*words: str) -> list[str]:
 def test_bash_completes_verbs_options_and_values():
     assert _complete("chaincomp", "simulate-") == ["simulate-measurements", "simulate-log", "simulate-calibration",
                                                    "simulate-thermal"]
-    assert _complete("chaincomp", "thermal", "") == ["fit", "check"]   # a group's verbs
+    assert _complete("chaincomp", "thermal", "") == ["fit", "check", "stream"]   # a group's verbs
     assert _complete("chaincomp", "--ver") == ["--version"]
     assert _complete("chaincomp", "budget", M, "--se") == ["--set", "--seed"]
     assert _complete("chaincomp", "budget", M, "--order", "") == ["1", "2", "exact"]

@@ -207,7 +207,7 @@ MODEL = "machine: lathe_zx\nerrors:\n  EZS:\n    unit: um\n    terms:\n      - {
     ("machine: lathe_zx", "machine: vmc_xyz", [":1: machine: the model is of machine 'vmc_xyz'"]),
     ("  EZS:", "  EQQ:", [":3: EQQ: 'EQQ' is not an error of lathe_zx"]),
     ("unit: um", "unit: arcsec", [":4: unit: EZS is a length in lathe_zx, not an angle"]),
-    ("unit: um", "unit: degC", [":4: unit: expected a length or angle unit (um, arcsec, ...), got str 'degC'"]),
+    ("unit: um", "unit: degC", [":4: unit: expected a unit (um, arcsec, ppm, ...), got str 'degC'"]),
     ("time_constant: 1500", "time_constant: -1", [":6: time_constant: -1.0 is outside [0, 1e+06]"]),
     ("time_constant: 1500", "time_constant: .nan", [":6: time_constant: nan is outside"]),
     ("gain: 2.0", "gain: 1.0e+300", [":6: gain: 1e+300 is outside"]),
@@ -364,3 +364,74 @@ def test_the_simulated_log_is_read_every_1_over_rate_seconds(lathe):
         "--cycle", "1:3600")
     t = np.loadtxt(out, delimiter=",", skiprows=3, usecols=0)
     assert np.diff(t) == pytest.approx(1 / 0.09, abs=1e-3) and len(t) == 325   # (written to 1 ms)
+
+
+# ----------------------------------------------------------------------------- per-axis streams
+
+SCALED_LATHE = LATHE.replace("    - {translate: [X, 0, Z], label: slides}", "    - {translate: [X*(1 + SXS), 0, Z], label: slides}").replace(
+    "  - {name: EBS, role: error, unit: arcsec, meaning: headstock tilt about y}",
+    "  - {name: EBS, role: error, unit: arcsec, meaning: headstock tilt about y}\n"
+    "  - {name: SXS, role: error, unit: ppm, meaning: scale of the cross slide}")
+SCALED_TRUE = """\
+machine: lathe_zx
+errors:
+  EZS:
+    unit: um
+    terms:
+      - {sensor: T_spindle, gain: 2.0, time_constant: 1500}
+  SXS:
+    unit: ppm
+    terms:
+      - {sensor: T_bed, gain: 11.5, time_constant: 3600}
+"""
+
+
+def _stream(path):
+    with open(path) as f:
+        header = f.readline().strip().split(",")
+    data = np.loadtxt(path, delimiter=",", skiprows=1)
+    return {h: data[:, k] for k, h in enumerate(header)}
+
+
+def test_streams_are_the_negated_errors_along_each_axis(tmp_path):
+    """A scale error of the cross slide (ppm, the steel's expansion) is X's slope; the headstock's
+    growth along z is Z's offset: both against the simulated truth (the log's drift columns)."""
+    (tmp_path / "m.yaml").write_text(SCALED_LATHE)
+    (tmp_path / "true.yaml").write_text(SCALED_TRUE)
+    m, true, log = tmp_path / "m.yaml", tmp_path / "true.yaml", tmp_path / "log.csv"
+    cli("simulate-thermal", m, "--model", true, "-o", log, "--drift-noise", "0", "--temperature-noise", "0",
+        "--rate", "0.1")
+    truth = np.loadtxt(log, delimiter=",", skiprows=3)
+    ezs, sxs = truth[:, -2] * 1e-3, truth[:, -1] * 1e-6    # mm, 1 (the truth on a 1 s step; the stream on the log's 10 s)
+    doc = json.loads(cli("thermal", "stream", m, true, log, "--format", "siemens", "-o", tmp_path / "s.csv",
+                         "--reference-position", "X=50", "--json").stdout)
+    s = _stream(tmp_path / "s.csv")
+    # X moves the tool by X (1 + SXS): the correction along X is -SXS X = -SXS 50 - SXS (X - 50)
+    assert s["X SD43910 $SA_TEMP_COMP_SLOPE [1]"] == pytest.approx(-sxs, rel=1e-3, abs=1e-11)
+    assert s["X SD43900 $SA_TEMP_COMP_ABS_VALUE [mm]"] == pytest.approx(-sxs * 50, rel=1e-3, abs=1e-9)
+    assert np.all(s["X SD43920 $SA_TEMP_COMP_REF_POSITION [mm]"] == 50)
+    # the headstock (workpiece side) grows by EZS towards the tool: the tool relative to the workpiece moves -EZS in z
+    assert s["Z SD43900 $SA_TEMP_COMP_ABS_VALUE [mm]"] == pytest.approx(ezs, rel=1e-3, abs=1e-7)   # (readings 10 s apart)
+    assert np.max(np.abs(s["Z SD43910 $SA_TEMP_COMP_SLOPE [1]"])) < 1e-12   # (rounding: 0.01 nm over 1 m)
+    assert doc["axes"]["X"]["line_departure_max_um"] < 1e-6   # a scale is a line
+    cli("thermal", "stream", m, true, log, "--format", "isg", "-o", tmp_path / "i.csv", "--reference-position", "X=50")
+    i = _stream(tmp_path / "i.csv")
+    assert np.array_equal(i["X P-AXIS-00274 temp_comp_coefficient [um/m]"],
+                          np.rint(s["X SD43910 $SA_TEMP_COMP_SLOPE [1]"] * 1e6))   # the same values, rounded
+    assert np.array_equal(i["Z P-AXIS-00273 temp_comp_offset_0 [0.1um]"], np.rint(s["Z SD43900 $SA_TEMP_COMP_ABS_VALUE [mm]"] * 1e4))
+    assert np.max(np.abs(i["X P-AXIS-00274 temp_comp_coefficient [um/m]"] + sxs * 1e6)) <= 0.5 + 1e-3
+    assert np.all(i["X P-AXIS-00272 temp_comp_position_0 [0.1um]"] == 500000)
+
+
+def test_stream_bad_options(lathe):
+    log = _log(lathe, GOOD_LOG, "good.csv")
+    out = lathe / "never.csv"
+    p = lathe / "tmodel.yaml"
+    p.write_text(MODEL)
+    one_error_line(run_in_process("thermal", "stream", lathe / "lathe.yaml", p, log, "--format", "isg", "-o", out),
+                   "thermal stream", "reads sensor T_spindle, not in the log")
+    p.write_text(MODEL.replace("T_spindle", "T_a"))
+    for bad in ("Q=1", "X", "X=abc"):
+        one_error_line(run_in_process("thermal", "stream", lathe / "lathe.yaml", p, log, "--format", "isg", "-o", out,
+                                      "--reference-position", bad), "thermal stream", "--reference-position")
+    assert not out.exists()
