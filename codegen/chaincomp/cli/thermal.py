@@ -265,8 +265,8 @@ def run_stream(args) -> int:
         offset = -sum(values[e] * ln.offset[e] for e in values)      # the correction, mm at the reference
         slope = -sum(values[e] * ln.slope[e] for e in values)        # mm/mm
         departure = sum(np.abs(values[e]) * ln.departure[e] for e in values)
-        for (name, unit, scale, integer), series in zip(cols, (offset, slope, np.full(len(log.t), ln.reference))):
-            table.append(np.rint(series * scale) if integer else series * scale)
+        for (_, _, scale, whole), series in zip(cols, (offset, slope, np.full(len(log.t), ln.reference))):
+            table.append(np.rint(series * scale) if whole else series * scale)
         rate = np.abs(np.diff(offset)) / np.diff(log.t) if len(log.t) > 1 else np.zeros(1)
         lo, hi = (machine.symbol(ln.axis).to_internal(v) for v in machine.symbol(ln.axis).limits)
         report[ln.axis] = {"reference_mm": ln.reference, "offset_max_um": float(np.max(np.abs(offset)) * 1e3),
