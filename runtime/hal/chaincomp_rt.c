@@ -18,6 +18,12 @@
  *   chaincomp-rt.residual-point      float out  mm left at the last target (by the model)
  *   chaincomp-rt.cost-ns             s32 out    time of the last call (compensation included), ns
  *   chaincomp-rt.cost-max-ns         s32 out    largest cost-ns so far (write 0 to restart it)
+ *   chaincomp-rt.error.NAME          float in   each constant error of the machine, in its declared unit (um,
+ *                                               arcsec, ...), the params file's value at load
+ *   chaincomp-rt.params-seq          s32 in     change it to apply every error pin at once (all or none)
+ *   chaincomp-rt.params-version      s32 out    sets applied so far
+ *   chaincomp-rt.params-refused      s32 out    sets refused so far
+ *   chaincomp-rt.params-reason       s32 out    -1, or why the last set was refused (chaincompd's params reasons)
  * Function: chaincomp-rt.update (floating point), between motion-controller and the offsets.
  */
 #include "rtapi.h"
@@ -33,6 +39,7 @@ MODULE_DESCRIPTION("chaincomp geometric error compensation in the servo thread")
 MODULE_LICENSE("GPL");
 
 #define CCRT_MAX_AXES 8
+#define CCRT_MAX_ERRORS 64  /* chaincomp::kMaxUpdateValues */
 
 struct ccrt_pins {
   hal_float_t *pos_cmd[CCRT_MAX_AXES];
@@ -40,11 +47,14 @@ struct ccrt_pins {
   hal_bit_t *enable, *compensating, *clamped, *fault;
   hal_float_t *ramp, *residual_point;
   hal_s32_t *reject_reason, *rejected, *status, *cost_ns, *cost_max_ns;
+  hal_float_t *error[CCRT_MAX_ERRORS];
+  hal_s32_t *params_seq, *params_version, *params_refused, *params_reason;
 };
 
 static int comp_id;
 static struct ccrt_pins *pins;
-static int num_axes;
+static int num_axes, num_errors;
+static hal_s32_t last_params_seq;
 static long long utime_ns;  /* command time: the sum of the servo periods */
 
 static void update(void *arg, long period) {
@@ -54,6 +64,19 @@ static void update(void *arg, long period) {
   int i;
   (void)arg;
   utime_ns += period;
+  if (*pins->params_seq != last_params_seq) {  /* a new set of errors: all of them, before this period's command */
+    double values[CCRT_MAX_ERRORS];
+    int reason;
+    last_params_seq = *pins->params_seq;
+    for (i = 0; i < num_errors; ++i) values[i] = *pins->error[i];
+    reason = ccrt_set_errors(values, utime_ns / 1000);
+    if (reason < 0) {
+      *pins->params_version += 1;
+    } else {
+      *pins->params_refused += 1;
+    }
+    *pins->params_reason = reason;
+  }
   for (i = 0; i < num_axes; ++i) cmd[i] = *pins->pos_cmd[i];
   if (ccrt_step(cmd, *pins->enable, utime_ns / 1000, corr, &r)) {
     for (i = 0; i < num_axes; ++i) *pins->correction[i] = corr[i];
@@ -109,6 +132,19 @@ int rtapi_app_main(void) {
   PIN(s32, HAL_OUT, &pins->cost_ns, CCRT_PREFIX ".cost-ns");
   PIN(s32, HAL_IO, &pins->cost_max_ns, CCRT_PREFIX ".cost-max-ns");
   *pins->reject_reason = -1;
+  num_errors = ccrt_num_errors();
+  if (num_errors > CCRT_MAX_ERRORS) goto fail;
+  for (i = 0; i < num_errors; ++i) {
+    PIN(float, HAL_IN, &pins->error[i], CCRT_PREFIX ".error.%s", ccrt_error_name(i));
+    *pins->error[i] = ccrt_error_value(i);
+  }
+  PIN(s32, HAL_IN, &pins->params_seq, CCRT_PREFIX ".params-seq");
+  PIN(s32, HAL_OUT, &pins->params_version, CCRT_PREFIX ".params-version");
+  PIN(s32, HAL_OUT, &pins->params_refused, CCRT_PREFIX ".params-refused");
+  PIN(s32, HAL_OUT, &pins->params_reason, CCRT_PREFIX ".params-reason");
+  *pins->params_seq = 0;
+  last_params_seq = 0;
+  *pins->params_reason = -1;
   if (hal_export_funct(CCRT_PREFIX ".update", update, 0, 1, 0, comp_id) != 0) goto fail;
   rtapi_print_msg(RTAPI_MSG_INFO, CCRT_MODULE ": machine %s, %d joints, params %s\n", ccrt_machine(), num_axes,
                   ccrt_params_file());

@@ -28,6 +28,16 @@ const char* ccrt_axis_name(int i);
  * corrections (LinuxCNC units) are in correction[]; on 0 the command was refused. */
 int ccrt_step(const double* joint_cmd, int enable, long long utime_us, double* correction,
               struct ccrt_result* result);
+/* The errors a HAL pin may set while running (the machine's constant errors), their names,
+ * declared units and baked-in values (declared units). */
+int ccrt_num_errors(void);
+const char* ccrt_error_name(int i);
+const char* ccrt_error_unit(int i);
+double ccrt_error_value(int i);
+/* All errors at once (declared units, ccrt_num_errors() of them), allocation-free: checked
+ * together and applied all or none (chaincompd's params updates: ParamsUpdater). -1 applied,
+ * else the chaincomp::Refuse reason. */
+int ccrt_set_errors(const double* values, long long utime_us);
 
 #ifdef __cplusplus
 }

@@ -9,6 +9,7 @@
 #include <new>
 
 #include "chaincomp/compensator.hpp"
+#include "chaincomp/params_update.hpp"
 #include "chaincomp_rt.h"
 #include "chaincomp_rt_model.hpp"  // generated: the model's namespace, params and limits
 
@@ -25,6 +26,11 @@ static_assert(kN <= chaincomp::kMaxAxes, "the compensator takes at most kMaxAxes
 alignas(model::Model) unsigned char g_model_storage[sizeof(model::Model)];
 alignas(Compensator) unsigned char g_comp_storage[sizeof(Compensator)];
 Compensator* g_comp = nullptr;
+alignas(chaincomp::ParamsUpdater) unsigned char g_updater_storage[sizeof(chaincomp::ParamsUpdater)];
+chaincomp::ParamsUpdater* g_updater = nullptr;
+// The errors the pins set: kParams indices (at most kMaxUpdateValues, as an update carries).
+int g_num_errors = 0;
+int g_error_param[chaincomp::kMaxUpdateValues];
 // LinuxCNC joint units (mm, deg) -> the machine file's axis units (the compensator's).
 double g_to_axis[kN];
 std::int64_t g_seq = 0;
@@ -45,6 +51,20 @@ extern "C" int ccrt_init(char* error, int size) {
   config.clamp_out_of_limits = ccrt_params::kClampOutOfLimits;
   config.start_enabled = false;  // the enable pin decides, and the correction ramps in from 0
   g_comp = new (g_comp_storage) Compensator(entry, g_model_storage, config);
+  // Module load may allocate: the updater's copies of the params.
+  const std::vector<double> params(ccrt_params::kValues, ccrt_params::kValues + entry.info->num_params);
+  g_updater = new (g_updater_storage) chaincomp::ParamsUpdater(entry, g_model_storage, nullptr, params,
+                                                               chaincomp::ParamsUpdateLimits{});
+  g_num_errors = 0;
+  for (int i = 0; i < entry.info->num_params; ++i) {
+    if (entry.info->params[i].role != chaincomp::ParamRole::kError) continue;
+    if (g_num_errors == chaincomp::kMaxUpdateValues) {
+      std::snprintf(error, size, "machine %s: more than %d errors; HAL pins set at most %d", model::kName,
+                    chaincomp::kMaxUpdateValues, chaincomp::kMaxUpdateValues);
+      return -1;
+    }
+    g_error_param[g_num_errors++] = i;
+  }
   // The model must give a pose at the zero command: a check that prepare() took the params.
   double q[kN] = {}, pose[6];
   entry.pose_exact(g_model_storage, q, pose);
@@ -58,6 +78,33 @@ extern "C" int ccrt_init(char* error, int size) {
 extern "C" void ccrt_fini(void) {
   if (g_comp != nullptr) g_comp->~Compensator();
   g_comp = nullptr;
+  if (g_updater != nullptr) g_updater->~ParamsUpdater();
+  g_updater = nullptr;
+}
+
+extern "C" int ccrt_num_errors(void) { return g_num_errors; }
+extern "C" const char* ccrt_error_name(int i) {
+  return i >= 0 && i < g_num_errors ? model::kEntry.info->params[g_error_param[i]].name : "";
+}
+extern "C" const char* ccrt_error_unit(int i) {
+  return i >= 0 && i < g_num_errors ? model::kEntry.info->params[g_error_param[i]].unit : "";
+}
+extern "C" double ccrt_error_value(int i) {
+  if (i < 0 || i >= g_num_errors) return 0.0;
+  const chaincomp::ParamInfo& p = model::kEntry.info->params[g_error_param[i]];
+  return ccrt_params::kValues[g_error_param[i]] / p.to_internal;
+}
+
+extern "C" int ccrt_set_errors(const double* values, long long utime_us) {
+  chaincomp::ParamsUpdate u;
+  u.num_values = g_num_errors;
+  for (int i = 0; i < g_num_errors; ++i) {
+    const chaincomp::ParamInfo& p = model::kEntry.info->params[g_error_param[i]];
+    u.names[i] = p.name;
+    u.values[i] = values[i] * p.to_internal;
+  }
+  chaincomp::Refuse why = chaincomp::Refuse::kUndecodable;
+  return g_updater->apply_values(u, utime_us, &why) ? -1 : static_cast<int>(why);
 }
 
 extern "C" int ccrt_num_axes(void) { return kN; }

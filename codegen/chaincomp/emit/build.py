@@ -329,12 +329,18 @@ def build_linuxcnc(machine_path: str, params_path: str | None, module: str = RT_
         if isinstance(v, Varying):
             raise ChaincompError(f"{params_path}: {name} is a table or polynomial; chaincomp_rt takes constant "
                                  "errors only (use chaincompd through the bridge for varying errors)")
+    for s in machine.errors:   # its error pins: PREFIX.error.NAME, within HAL's names
+        pin = f"{module.replace('_', '-')}.error.{s.name}"
+        if len(pin) > 47:
+            raise ChaincompError(f"error {s.name}: its HAL pin {pin} is longer than HAL's 47 characters (HAL_NAME_LEN): "
+                                 "give a shorter --name", machine.file)
     tc = toolchain()
     hal = os.path.join(_runtime_dir(), "hal")
     sources = b"".join(open(os.path.join(hal, n), "rb").read() for n in _HAL_SOURCES)
     # and what the module's code comes from: the runtime headers, the compensator, the emitter
     here = os.path.dirname(os.path.abspath(__file__))
-    inputs = [os.path.join(_runtime_dir(), "src", "compensator.cpp"), os.path.join(here, "cpp.py"),
+    inputs = [os.path.join(_runtime_dir(), "src", "compensator.cpp"), os.path.join(_runtime_dir(), "src", "params_update.cpp"),
+              os.path.join(here, "cpp.py"),
               os.path.join(here, "..", "symbolic", "jets.py")]
     include_dir = os.path.join(_runtime_dir(), "include", "chaincomp")
     inputs += sorted(os.path.join(include_dir, n) for n in os.listdir(include_dir) if n.endswith(".hpp"))

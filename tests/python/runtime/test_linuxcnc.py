@@ -428,3 +428,82 @@ def test_comp_files_leave_the_residual_the_exporter_predicts(comp_run, comp_expo
         sizes.append(float(np.abs(trims[s]).max()))
     assert worst < 1e-4, worst * 1e3
     assert min(sizes) > 1e-3   # the trims were applied: tens of um on the slides
+
+
+UPDATE_SCRIPT = """loadrt threads name1=t period1=1000000
+loadrt chaincomp_rt
+loadrt scale count=5
+loadrt sampler depth=8000 cfg=fffffsss
+addf chaincomp-rt.update t
+addf scale.0 t
+addf scale.1 t
+addf scale.2 t
+addf scale.3 t
+addf scale.4 t
+addf sampler.0 t
+{nets}
+net version chaincomp-rt.params-version => sampler.0.pin.5
+net refused chaincomp-rt.params-refused => sampler.0.pin.6
+net reason chaincomp-rt.params-reason => sampler.0.pin.7
+{cmds}
+start
+loadusr -w sleep 0.2
+setp chaincomp-rt.enable 1
+loadusr -w sleep 1.0
+setp chaincomp-rt.error.EXX 24
+setp chaincomp-rt.error.EYY -15
+setp chaincomp-rt.params-seq 1
+loadusr -w sleep 0.3
+setp chaincomp-rt.error.EZZ 5000000
+setp chaincomp-rt.params-seq 2
+loadusr -w sleep 0.3
+loadusr -w {record}
+"""
+
+
+def test_realtime_component_takes_new_error_values_on_its_pins_bumplessly(rt_module, machine, params):
+    """chaincomp_rt's error pins (declared units) applied together when params-seq changes: the
+    correction moves to the new model within max_correction_step (0.001 mm or deg) a period and
+    puts the tool on the nominal point with the new values; a set with a value past its bound
+    (EZZ 5 m) is refused under its reason (8, out of bound) and changes nothing."""
+    import pathlib
+    import tempfile
+
+    tmp_path = pathlib.Path(tempfile.mkdtemp(prefix="chaincomp-rt-halrun-"))
+    os.chmod(tmp_path, 0o777)
+    out = tmp_path / "rows.txt"
+    nets = "\n".join(f"net c{i} chaincomp-rt.joint.{i}.correction => scale.{i}.in\nsetp scale.{i}.gain 1e6\n"
+                     f"net c{i}e6 scale.{i}.out => sampler.0.pin.{i}" for i in range(5))
+    cmds = "\n".join(f"setp chaincomp-rt.joint.{i}.pos-cmd {v}" for i, v in enumerate(COMMAND))
+    script = tmp_path / "update.hal"
+    record = tmp_path / "record.sh"
+    record.write_text(f"#!/bin/sh\nexec halsampler -n 1700 > {out}\n")
+    os.chmod(record, 0o755)
+    script.write_text(UPDATE_SCRIPT.format(nets=nets, cmds=cmds, record=record))
+    os.chmod(script, 0o644)
+    cmd = ["halrun", "-f", str(script)]
+    if os.geteuid() == 0:
+        cmd = ["runuser", "-u", cnc.USER, "--", *cmd]
+    with open(cnc.LOCK, "w") as lock:
+        import fcntl
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    rows = np.loadtxt(out)
+    shutil.rmtree(tmp_path, ignore_errors=True)
+    corr, version, refused, reason = rows[:, 0:5] * 1e-6, rows[:, 5], rows[:, 6], rows[:, 7]
+    assert np.all(np.abs(np.diff(corr, axis=0)) <= 0.001 + 2e-12)
+    applied = int(np.argmax(version >= 1))
+    assert applied > 0 and version[-1] == 1 and refused[-1] == 1 and reason[-1] == 8
+    # the correction moved (about 20 um: many periods at 1 um) and settled on the new model
+    moved = np.abs(corr[applied + 200] - corr[applied - 1])
+    assert moved.max() > 0.01
+    new = dict(params, EXX=0.024, EYY=-0.015)
+    q = np.array(COMMAND)
+    point, _ = cnc.tool_errors(machine, new, q[None, :], q[None, :] + corr[-1][None, :])
+    assert np.linalg.norm(point) < 1e-6
+    # the refused set changed nothing
+    first_refused = int(np.argmax(refused >= 1))
+    # (to the warm-started solve's last 1e-8 mm)
+    np.testing.assert_allclose(corr[first_refused:], np.repeat(corr[-1][None, :], len(corr) - first_refused, axis=0),
+                               rtol=0, atol=1e-7)
