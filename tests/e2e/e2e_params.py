@@ -6,7 +6,6 @@ max_correction_step, no command is lost, no heap allocation in the steady state,
 chaincomp_replay of the same events reproduces every target bit for bit."""
 
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -16,7 +15,6 @@ import yaml
 
 import lcm_harness as h
 from common import MACHINE, PARAMS, exact_errors, toolpath
-from lcm_harness import BUILD
 from chaincomp_lcm import lcmt_params_update
 
 STEP = 0.002          # mm and deg: max_correction_step
@@ -159,20 +157,8 @@ def main() -> int:
     assert allocations_after_warmup >= 0, "the allocation counter is not loaded"
     assert final.allocations == allocations_after_warmup, "heap allocations in the steady state"
 
-    replayed = os.path.join(tmp, "replay.lcmlog")
-    subprocess.run([os.path.join(BUILD, "bin", "chaincomp_replay"), "--machine", MACHINE, "--params", PARAMS,
-                    "--config", config, "--in", log_path, "--out", replayed, "--quiet"], check=True,
-                   stderr=subprocess.DEVNULL)
-
-    def key(t):
-        return (tuple(t.axes), tuple(t.correction), t.residual_point, t.residual_direction, t.flags, t.status)
-
-    offline = {}
-    for e in h.lcm.EventLog(replayed, "r"):
-        if e.channel == "CHAINCOMP_CORRECTED":
-            t = h.lcmt_corrected_target.decode(e.data)
-            offline[t.seq] = key(t)
-    differing = [s for s in targets if key(targets[s]) != offline.get(s)]
+    offline = h.replay(MACHINE, PARAMS, config, log_path, os.path.join(tmp, "replay.lcmlog"))
+    differing = [s for s in targets if s not in offline or h.target_key(targets[s]) != h.target_key(offline[s])]
     print(f"replay: {len(offline)} targets, differing from the daemon's: {len(differing)}")
     assert len(offline) == total and not differing, differing[:5]
     return 0

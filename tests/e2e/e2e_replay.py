@@ -8,14 +8,12 @@ and heard every one back; the loss is inside lcm-logger's process (LCM's per-sub
 queue holds 30 messages by default)."""
 
 import os
-import subprocess
 import sys
 import tempfile
 import time
 
 import lcm_harness as h
 from common import HERE, MACHINE, PARAMS
-from lcm_harness import BUILD
 
 
 def main(log_path: str) -> int:
@@ -37,20 +35,11 @@ def main(log_path: str) -> int:
     final = h.final_status(listener, daemon)
     listener.close()
     h.print_losses(final)
-    subprocess.run([os.path.join(BUILD, "bin", "chaincomp_replay"), "--machine", MACHINE, "--params", PARAMS,
-                    "--config", config, "--in", log_path, "--out", replayed, "--quiet"], check=True,
-                   stderr=subprocess.DEVNULL)
-
-    def key(t):
-        return (tuple(t.axes), tuple(t.correction), t.residual_point, t.residual_direction, t.flags, t.status)
-
     offline = {}
-    for e in h.lcm.EventLog(replayed, "r"):
-        if e.channel == "CHAINCOMP_CORRECTED":
-            t = h.lcmt_corrected_target.decode(e.data)
-            assert t.machine == "five_axis_ac" and t.instance_id == 0
-            offline[t.seq] = key(t)
-    live = {t.seq: key(t) for _, t in listener.targets if t.instance_id == daemon.instance}
+    for seq, t in h.replay(MACHINE, PARAMS, config, log_path, replayed).items():
+        assert t.machine == "five_axis_ac" and t.instance_id == 0
+        offline[seq] = h.target_key(t)
+    live = {t.seq: h.target_key(t) for _, t in listener.targets if t.instance_id == daemon.instance}
     print(f"daemon (off the bus): {len(live)} targets; replay: {len(offline)} targets; "
           f"missing off the bus: {sorted(set(offline) - set(live))[:10]}")
     assert len(live) == len(commands) == len(offline), (len(live), len(commands), len(offline))

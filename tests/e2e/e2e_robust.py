@@ -2,7 +2,6 @@
 reason, no bad target is published, and the daemon still answers good commands."""
 
 import random
-import struct
 import sys
 import time
 

@@ -110,21 +110,11 @@ def main() -> int:
     assert final.params_version == n   # every reading applied (5 s of command time apart)
 
     def replay(*extra):
-        result = os.path.join(tmp, f"replay{len(extra)}.lcmlog")
-        subprocess.run([os.path.join(BUILD, "bin", "chaincomp_replay"), "--machine", MACHINE, "--params", PARAMS,
-                        "--config", config, "--in", events, "--out", result, "--quiet", *extra], check=True,
-                       stderr=subprocess.DEVNULL)
-        got = {}
-        for e in h.lcm.EventLog(result, "r"):
-            if e.channel == "CHAINCOMP_CORRECTED":
-                t = h.lcmt_corrected_target.decode(e.data)
-                got[t.seq] = t
-        return got
+        return h.replay(MACHINE, PARAMS, config, events, os.path.join(tmp, f"replay{len(extra)}.lcmlog"), *extra)
 
     seqs = range(1, n + 1)
-    key = lambda t: (tuple(t.axes), tuple(t.correction), t.residual_point, t.flags)  # noqa: E731
     offline = replay("--thermal", fitted)
-    differing = [s for s in seqs if key(offline[s]) != key(targets[s])]
+    differing = [s for s in seqs if h.target_key(offline[s]) != h.target_key(targets[s])]
     print(f"replay --thermal: {len(offline)} targets, differing from the daemon's: {len(differing)}")
     assert not differing, differing[:5]
     geometric = replay()   # the same events, compensated without the thermal model

@@ -138,6 +138,20 @@ def print_losses(s: lcmt_chaincomp_status) -> None:
           f"own targets heard back {s.own_targets_heard}, foreign targets {s.foreign_targets}")
 
 
+def replay(machine: str, params: str, config: str, log_path: str, out_path: str, *extra: str) -> dict:
+    """chaincomp_replay of a log (extra options: --thermal T.yaml): its targets by seq."""
+    subprocess.run([os.path.join(BUILD, "bin", "chaincomp_replay"), "--machine", machine, "--params", params,
+                    "--config", config, "--in", log_path, "--out", out_path, "--quiet", *extra], check=True,
+                   stderr=subprocess.DEVNULL)
+    return {t.seq: t for t in (lcmt_corrected_target.decode(e.data) for e in lcm.EventLog(out_path, "r")
+                               if e.channel == "CHAINCOMP_CORRECTED")}
+
+
+def target_key(t: lcmt_corrected_target) -> tuple:
+    """What a target says: equal keys are the same target bit for bit."""
+    return (tuple(t.axes), tuple(t.correction), t.residual_point, t.residual_direction, t.flags, t.status)
+
+
 def pace(t0: float, i: int, rate_hz: float) -> None:
     """Sleep until the i-th slot of a stream at rate_hz started at t0. Sleeping (not
     spinning) leaves the CPU and the GIL to the daemon and the listener thread; above 1 kHz

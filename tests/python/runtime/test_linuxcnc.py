@@ -300,10 +300,10 @@ loadusr -w {record}
 COMMAND = [100.0, -50.0, -200.0, 30.0, -45.0]
 
 
-def test_realtime_component_enables_bumplessly_and_holds_on_a_refused_command(rt_module, machine, params):
-    """chaincomp_rt alone in halrun: enable ramps the correction in over chaincompd's ramp time
-    (0.5 s) and out again, never more than 0.001 (mm or deg) a period; a command that jumps
-    by more than max_step (10 mm) is refused: fault, the correction held."""
+def halrun_rows(script_text: str, samples: int) -> np.ndarray:
+    """chaincomp_rt alone in halrun: the script (with {nets} the five corrections in um on
+    sampler pins 0-4, {cmds} the joints at COMMAND, {record} the halsampler of `samples`
+    rows, and whatever else its format fills) run as LinuxCNC's user; the sampler's rows."""
     import pathlib
     import tempfile
 
@@ -315,9 +315,9 @@ def test_realtime_component_enables_bumplessly_and_holds_on_a_refused_command(rt
     cmds = "\n".join(f"setp chaincomp-rt.joint.{i}.pos-cmd {v}" for i, v in enumerate(COMMAND))
     script = tmp_path / "rt.hal"
     record = tmp_path / "record.sh"  # halcmd passes quotes on, so no sh -c "..." in the HAL file
-    record.write_text(f"#!/bin/sh\nexec halsampler -n 2300 > {out}\n")
+    record.write_text(f"#!/bin/sh\nexec halsampler -n {samples} > {out}\n")
     os.chmod(record, 0o755)
-    script.write_text(HALRUN_SCRIPT.format(nets=nets, cmds=cmds, jump=COMMAND[0] + 20, x=COMMAND[0], record=record))
+    script.write_text(script_text.format(nets=nets, cmds=cmds, jump=COMMAND[0] + 20, x=COMMAND[0], record=record))
     os.chmod(script, 0o644)
     cmd = ["halrun", "-f", str(script)]
     if os.geteuid() == 0:
@@ -329,6 +329,14 @@ def test_realtime_component_enables_bumplessly_and_holds_on_a_refused_command(rt
     assert proc.returncode == 0, proc.stdout + proc.stderr
     rows = np.loadtxt(out)
     shutil.rmtree(tmp_path, ignore_errors=True)
+    return rows
+
+
+def test_realtime_component_enables_bumplessly_and_holds_on_a_refused_command(rt_module, machine, params):
+    """chaincomp_rt alone in halrun: enable ramps the correction in over chaincompd's ramp time
+    (0.5 s) and out again, never more than 0.001 (mm or deg) a period; a command that jumps
+    by more than max_step (10 mm) is refused: fault, the correction held."""
+    rows = halrun_rows(HALRUN_SCRIPT, 2300)
     corr, ramp, fault = rows[:, 0:5] * 1e-6, rows[:, 5], rows[:, 7]
     on = np.argmax(ramp > 0)
     assert 20 < on < 1000 and np.all(corr[:on] == 0)           # off until enabled (0.2 s of wall time)
@@ -466,31 +474,7 @@ def test_realtime_component_takes_new_error_values_on_its_pins_bumplessly(rt_mod
     correction moves to the new model within max_correction_step (0.001 mm or deg) a period and
     puts the tool on the nominal point with the new values; a set with a value past its bound
     (EZZ 5 m) is refused under its reason (8, out of bound) and changes nothing."""
-    import pathlib
-    import tempfile
-
-    tmp_path = pathlib.Path(tempfile.mkdtemp(prefix="chaincomp-rt-halrun-"))
-    os.chmod(tmp_path, 0o777)
-    out = tmp_path / "rows.txt"
-    nets = "\n".join(f"net c{i} chaincomp-rt.joint.{i}.correction => scale.{i}.in\nsetp scale.{i}.gain 1e6\n"
-                     f"net c{i}e6 scale.{i}.out => sampler.0.pin.{i}" for i in range(5))
-    cmds = "\n".join(f"setp chaincomp-rt.joint.{i}.pos-cmd {v}" for i, v in enumerate(COMMAND))
-    script = tmp_path / "update.hal"
-    record = tmp_path / "record.sh"
-    record.write_text(f"#!/bin/sh\nexec halsampler -n 1700 > {out}\n")
-    os.chmod(record, 0o755)
-    script.write_text(UPDATE_SCRIPT.format(nets=nets, cmds=cmds, record=record))
-    os.chmod(script, 0o644)
-    cmd = ["halrun", "-f", str(script)]
-    if os.geteuid() == 0:
-        cmd = ["runuser", "-u", cnc.USER, "--", *cmd]
-    with open(cnc.LOCK, "w") as lock:
-        import fcntl
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=60, cwd=tmp_path)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    rows = np.loadtxt(out)
-    shutil.rmtree(tmp_path, ignore_errors=True)
+    rows = halrun_rows(UPDATE_SCRIPT, 1700)
     corr, version, refused, reason = rows[:, 0:5] * 1e-6, rows[:, 5], rows[:, 6], rows[:, 7]
     assert np.all(np.abs(np.diff(corr, axis=0)) <= 0.001 + 2e-12)
     applied = int(np.argmax(version >= 1))
