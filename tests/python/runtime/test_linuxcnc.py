@@ -269,10 +269,11 @@ def test_trunnion_model_equals_linuxcncs_xyzac_trt_kins():
     np.testing.assert_allclose(np.array(got), np.array(poses)[:, :3], atol=1e-9)
 
 
-HALRUN_SCRIPT = """loadrt threads name1=t period1=1000000
+# chaincomp_rt in a 1 ms thread, its corrections scaled to um into a sampler of CFG pins
+HAL_HEAD = """loadrt threads name1=t period1=1000000
 loadrt chaincomp_rt
 loadrt scale count=5
-loadrt sampler depth=8000 cfg=fffffffb
+loadrt sampler depth=8000 cfg=CFG
 addf chaincomp-rt.update t
 addf scale.0 t
 addf scale.1 t
@@ -281,7 +282,8 @@ addf scale.3 t
 addf scale.4 t
 addf sampler.0 t
 {nets}
-net ramp chaincomp-rt.ramp => sampler.0.pin.5
+"""
+HALRUN_SCRIPT = HAL_HEAD.replace("CFG", "fffffffb") + """net ramp chaincomp-rt.ramp => sampler.0.pin.5
 net cost chaincomp-rt.residual-point => sampler.0.pin.6
 net fault chaincomp-rt.fault => sampler.0.pin.7
 {cmds}
@@ -438,19 +440,7 @@ def test_comp_files_leave_the_residual_the_exporter_predicts(comp_run, comp_expo
     assert min(sizes) > 1e-3   # the trims were applied: tens of um on the slides
 
 
-UPDATE_SCRIPT = """loadrt threads name1=t period1=1000000
-loadrt chaincomp_rt
-loadrt scale count=5
-loadrt sampler depth=8000 cfg=fffffsss
-addf chaincomp-rt.update t
-addf scale.0 t
-addf scale.1 t
-addf scale.2 t
-addf scale.3 t
-addf scale.4 t
-addf sampler.0 t
-{nets}
-net version chaincomp-rt.params-version => sampler.0.pin.5
+UPDATE_SCRIPT = HAL_HEAD.replace("CFG", "fffffsss") + """net version chaincomp-rt.params-version => sampler.0.pin.5
 net refused chaincomp-rt.params-refused => sampler.0.pin.6
 net reason chaincomp-rt.params-reason => sampler.0.pin.7
 {cmds}
