@@ -25,6 +25,8 @@ REASONS = ("undecodable", "wrong machine", "wrong axis count", "non-finite", "ou
 # lcmt_chaincomp_status.params_refused[i], likewise (runtime/include/chaincomp/params_update.hpp)
 PARAMS_REASONS = ("undecodable", "wrong machine", "another instance", "bad count", "unknown name", "not an error",
                   "repeated name", "non-finite", "out of bound", "stale seq", "too frequent")
+# lcmt_chaincomp_status.readings_refused[i] (runtime/include/chaincomp/thermal.hpp)
+READING_REASONS = ("undecodable", "wrong machine", "bad value", "time not increasing")
 COUNTERS = ("received", "published", "clamped", "held_back", "clamped_input", "seq_gaps", "seq_missing",
             "stream_restarts", "resets", "kernel_drops", "own_targets_heard", "foreign_targets")
 FLAGS = ((1, "compensating"), (2, "ramping"), (4, "clamped"), (8, "residual"), (16, "clamped input"))
@@ -175,6 +177,7 @@ def describe(status, heard_at: float, period: float | None, target, axes, now: f
         "rejected": dict(zip(REASONS, s.rejected)),
         "params_updates": {"version": s.params_version, "last_seq": s.params_seq, "received": s.params_received,
                            "refused": dict(zip(PARAMS_REASONS, s.params_refused))},
+        "readings": {"received": s.readings_received, "refused": dict(zip(READING_REASONS, s.readings_refused))},
         "latency_ns": {"window": s.window, "p50": s.latency_p50_ns, "p99": s.latency_p99_ns,
                        "p999": s.latency_p999_ns, "max": s.latency_max_ns},
         "recv_buf_bytes": s.recv_buf_bytes, "foreign_instance": f"{s.foreign_instance & 0xFFFFFFFFFFFFFFFF:016x}",
@@ -230,7 +233,9 @@ def render_text(doc: dict) -> str:
             f"  params    version {d['params_updates']['version']} (last seq {d['params_updates']['last_seq']})  "
             f"updates received {d['params_updates']['received']}  refused "
             f"{sum(d['params_updates']['refused'].values())}"
-            + "".join(f", {k} {v}" for k, v in d["params_updates"]["refused"].items() if v),
+            + "".join(f", {k} {v}" for k, v in d["params_updates"]["refused"].items() if v)
+            + (f"  temperature readings {d['readings']['received']}, refused "
+               f"{sum(d['readings']['refused'].values())}" if d["readings"]["received"] else ""),
             f"  targets   own heard back {c['own_targets_heard']}  foreign {c['foreign_targets']}"
             + (f" (last from instance {d['foreign_instance']})" if c["foreign_targets"] else ""),
             f"  latency   p50 {_us(lat['p50'])}  p99 {_us(lat['p99'])}  p99.9 {_us(lat['p999'])}  "

@@ -42,6 +42,9 @@ def test_reasons_and_counters_are_the_status_types():
     reasons = re.findall(r"(\d+) ([a-z -]+?)(?: \(.*?\))?(?:,|\n|$)", listed.replace("//", " "))
     assert [int(i) for i, _ in reasons] == list(range(11))
     assert tuple(r.strip() for _, r in reasons) == status.PARAMS_REASONS
+    listed = re.search(r"// readings_refused.*?\n(.*?)\n\n", text, re.S).group(1)
+    reasons = re.findall(r"(\d+) ([a-z -]+?)(?:,|\n|$)", listed.replace("//", " "))
+    assert tuple(r.strip() for _, r in reasons) == status.READING_REASONS
     fields = _fields("lcmt_chaincomp_status.lcm")
     assert set(status.COUNTERS) <= set(fields)
     consts = dict(re.findall(r"FLAG_(\w+) = (\d+)", open(os.path.join(LCM_DIR, "lcmt_corrected_target.lcm")).read()))
