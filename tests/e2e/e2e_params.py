@@ -152,7 +152,7 @@ def main() -> int:
     assert dp.max() < 1e-6
     dp, _ = exact_errors(path[W + 2600:], axes[W + 2600:], params=u1)
     assert dp.max() < 1e-6
-    print(f"heap allocations after warm-up: {final.allocations - allocations_after_warmup} (during warm-up "
+    print(f"heap allocations after warm-up {final.allocations - allocations_after_warmup} (during warm-up "
           f"{allocations_after_warmup})")
     assert allocations_after_warmup >= 0, "the allocation counter is not loaded"
     assert final.allocations == allocations_after_warmup, "heap allocations in the steady state"
