@@ -53,13 +53,9 @@ def main() -> int:
                 f"rotary_axes: {{max_step: 5.0, max_correction: 1.0, max_correction_step: {STEP}}}\n")
     daemon = h.start_daemon(MACHINE, PARAMS, config, preload=True)
     listener = h.Listener()
-    pub = h.lcm.LCM(h.URL)
     log_path = os.path.join(tmp, "events.lcmlog")
-    log = h.lcm.EventLog(log_path, "w", overwrite=True)
-
-    def send(channel, data):
-        pub.publish(channel, data)
-        log.write_event(int(time.time() * 1e6), channel, data)
+    pub = h.LoggedPublisher(log_path)
+    send = pub.publish
 
     hostile = [("unknown name", [("NoSuch", 0.0)]), ("non-finite", [("EXX", float("nan"))]),
                ("out of bound", [("EXX", 5.0)]), ("not an error", [("G", 151.0)]),
@@ -111,7 +107,7 @@ def main() -> int:
         elif k == 2500:
             send("CHAINCOMP_PARAMS", update(seq, U1.items()))
             seq += 1
-    log.close()
+    pub.close()
     # every numbered update, the junk, the warm-up's
     expected = seq - 1 + 1 + warm_refusals
     listener.wait_for(lambda: len([t for _, t in listener.targets if t.instance_id == daemon.instance]) >= W + N, 10)

@@ -15,7 +15,7 @@ import numpy as np
 
 import lcm_harness as h
 from common import HERE, MACHINE, PARAMS, exact_errors, toolpath
-from lcm_harness import BUILD, ROOT
+from lcm_harness import ROOT
 from chaincomp_lcm import lcmt_temperatures
 
 # a plausible thermal model of five_axis_ac: the spindle's growth and the column's
@@ -70,22 +70,11 @@ def main() -> int:
     sensors = [k for k in log if k.startswith("T_")]
     n = len(log["time"])
     config = f"{HERE}/config_test.yaml"
-    cmd = [os.path.join(BUILD, "bin", "chaincompd"), "--machine", MACHINE, "--params", PARAMS, "--config", config,
-           "--thermal", fitted]
-    daemon = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
-    line = daemon.stderr.readline()
-    while line and not line.rstrip().endswith("; ready"):
-        assert not line.startswith("chaincompd: error"), line
-        line = daemon.stderr.readline()
-    daemon.instance = int(line.split("instance ")[1].split(";")[0], 16)
+    daemon = h.start_daemon(MACHINE, PARAMS, config, extra=("--thermal", fitted))
     listener = h.Listener()
-    pub = h.lcm.LCM(h.URL)
     events = os.path.join(tmp, "events.lcmlog")
-    out = h.lcm.EventLog(events, "w", overwrite=True)
-
-    def send(channel, data):
-        pub.publish(channel, data)
-        out.write_event(int(time.time() * 1e6), channel, data)
+    pub = h.LoggedPublisher(events)
+    send = pub.publish
 
     path = toolpath(n)
     t0 = time.perf_counter()
@@ -95,7 +84,7 @@ def main() -> int:
         t_us = base_us + int(round(log["time"][k] * 1e6))
         send("CHAINCOMP_TEMPERATURES", readings(t_us, {s: log[s][k] for s in sensors}))
         send("CHAINCOMP_COMMAND", h.command(k + 1, path[k], utime=t_us + 1000))
-    out.close()
+    pub.close()
     listener.wait_for(lambda: len([t for _, t in listener.targets if t.instance_id == daemon.instance]) >= n, 10)
     daemon.terminate()
     daemon.wait(5)

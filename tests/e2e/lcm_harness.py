@@ -30,14 +30,15 @@ def require_namespace() -> None:
 
 
 def start_daemon(machine: str, params: str, config: str, preload: bool = False,
-                 model: str | None = None) -> subprocess.Popen:
+                 model: str | None = None, extra: tuple[str, ...] = ()) -> subprocess.Popen:
     """chaincompd, once it says ready; the lines of a model build (and warnings) before that
     are printed (the warnings kept in proc.warnings); its instance id is proc.instance."""
     env = dict(os.environ)
     if preload:
         env["LD_PRELOAD"] = os.path.join(BUILD, "runtime", "libchaincomp_alloc_counter.so")
     cmd = [os.path.join(BUILD, "bin", "chaincompd"), "--machine", machine, "--params", params, "--config", config]
-    proc = subprocess.Popen(cmd + (["--model", model] if model else []), stderr=subprocess.PIPE, text=True, env=env)
+    proc = subprocess.Popen(cmd + (["--model", model] if model else []) + list(extra), stderr=subprocess.PIPE,
+                            text=True, env=env)
     line = proc.stderr.readline()
     proc.warnings = []
     # before the ready line: a model build's lines, warnings (LCM's own run over lines)
@@ -136,6 +137,22 @@ def print_losses(s: lcmt_chaincomp_status) -> None:
     print(f"daemon {s.instance_id:016x}: received {s.received}, published {s.published}, seq gaps {s.seq_gaps} "
           f"({s.seq_missing} missing), kernel drops {s.kernel_drops} (buffer {s.recv_buf_bytes} B), "
           f"own targets heard back {s.own_targets_heard}, foreign targets {s.foreign_targets}")
+
+
+class LoggedPublisher:
+    """Publishes on the bus and writes the same events, in the same order, to a log that
+    chaincomp_replay can take."""
+
+    def __init__(self, log_path: str):
+        self.lc = lcm.LCM(URL)
+        self.log = lcm.EventLog(log_path, "w", overwrite=True)
+
+    def publish(self, channel: str, data: bytes) -> None:
+        self.lc.publish(channel, data)
+        self.log.write_event(int(time.time() * 1e6), channel, data)
+
+    def close(self) -> None:
+        self.log.close()
 
 
 def replay(machine: str, params: str, config: str, log_path: str, out_path: str, *extra: str) -> dict:
