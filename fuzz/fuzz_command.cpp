@@ -9,20 +9,13 @@
 
 #include "chaincomp/compensator.hpp"
 #include "chaincomp/lcm_node.hpp"
-#include "chaincomp/loaded_model.hpp"
+#include "fuzz_model.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-  static chaincomp::LoadedModel loaded;
   static std::unique_ptr<chaincomp::Compensator> comp;
   static chaincomp_lcm::lcmt_axis_command scratch;
   if (!comp) {
-    std::string error;
-    const std::string dir = CHAINCOMP_SOURCE_DIR "/configs/";
-    if (!chaincomp::load_model(dir + "machines/five_axis_ac.yaml", "", dir + "params/five_axis_ac-demo.yaml",
-                               "", loaded, error)) {
-      std::fprintf(stderr, "%s\n", error.c_str());
-      std::abort();
-    }
+    chaincomp::LoadedModel& loaded = chaincomp_fuzz::demo_model();
     comp = std::make_unique<chaincomp::Compensator>(*loaded.entry, loaded.model, loaded.config.compensator);
     scratch.machine.reserve(chaincomp::LcmNode::kMaxMachineName + 1);
   }

@@ -9,23 +9,16 @@
 #include <memory>
 
 #include "chaincomp/compensator.hpp"
-#include "chaincomp/loaded_model.hpp"
+#include "fuzz_model.hpp"
 #include "chaincomp/params_update.hpp"
 #include "chaincomp_lcm/lcmt_params_update.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-  static chaincomp::LoadedModel loaded;
+  chaincomp::LoadedModel& loaded = chaincomp_fuzz::demo_model();
   static std::unique_ptr<chaincomp::Compensator> comp;
   static std::unique_ptr<chaincomp::ParamsUpdater> updater;
   static std::int64_t seq = 0;
   if (!comp) {
-    std::string error;
-    const std::string dir = CHAINCOMP_SOURCE_DIR "/configs/";
-    if (!chaincomp::load_model(dir + "machines/five_axis_ac.yaml", "", dir + "params/five_axis_ac-demo.yaml",
-                               "", loaded, error)) {
-      std::fprintf(stderr, "%s\n", error.c_str());
-      std::abort();
-    }
     comp = std::make_unique<chaincomp::Compensator>(*loaded.entry, loaded.model, loaded.config.compensator);
     updater = std::make_unique<chaincomp::ParamsUpdater>(*loaded.entry, loaded.model, &loaded.varying, loaded.params,
                                                          loaded.config.params_updates);

@@ -34,13 +34,7 @@ bool decode_params_update(const void* data, std::size_t size, std::int64_t finge
       !r.i64(out.instance_id) || !r.i32(n) || n < 0 || n > kMaxUpdateValues)
     return false;
   out.num_values = n;
-  for (int i = 0; i < n; ++i) {
-    if (!r.str(out.names[i])) return false;
-  }
-  for (int i = 0; i < n; ++i) {
-    if (!r.f64(out.values[i])) return false;
-  }
-  return r.left == 0;
+  return r.names_then_values(n, out.names.data(), out.values.data());
 }
 
 ParamsUpdater::ParamsUpdater(const ModelEntry& entry, void* model, const VaryingErrors* varying,

@@ -184,13 +184,7 @@ bool decode_readings(const void* data, std::size_t size, std::int64_t fingerprin
       n > kMaxReadings)
     return false;
   out.num_values = n;
-  for (int i = 0; i < n; ++i) {
-    if (!r.str(out.names[i])) return false;
-  }
-  for (int i = 0; i < n; ++i) {
-    if (!r.f64(out.values[i])) return false;
-  }
-  return r.left == 0;
+  return r.names_then_values(n, out.names.data(), out.values.data());
 }
 
 ThermalState::ThermalState(const ThermalModel& model, const std::vector<double>& base)

@@ -52,6 +52,16 @@ struct WireReader {
     left -= static_cast<std::size_t>(len);
     return true;
   }
+  // The end of a message: `n` strings (names[]) and then `n` doubles (values[]), nothing after.
+  bool names_then_values(int n, std::string_view* names, double* values) noexcept {
+    for (int i = 0; i < n; ++i) {
+      if (!str(names[i])) return false;
+    }
+    for (int i = 0; i < n; ++i) {
+      if (!f64(values[i])) return false;
+    }
+    return left == 0;
+  }
 };
 
 }  // namespace chaincomp
