@@ -97,12 +97,16 @@ def _renames(items: list[str]) -> dict[str, str]:
     return out
 
 
-def _check(model: T.ThermalModel, log: T.Log) -> dict:
-    """Each of the model's errors that the log measures: its drift before and after the model."""
+def _require_sensors(model: T.ThermalModel, log: T.Log) -> None:
     missing = [s for s in model.sensors if s not in log.temperatures]
     if missing:
         raise ChaincompError(f"the model reads sensor {', '.join(missing)}, not in the log (sensors: "
                              f"{', '.join(log.temperatures)})", log.path)
+
+
+def _check(model: T.ThermalModel, log: T.Log) -> dict:
+    """Each of the model's errors that the log measures: its drift before and after the model."""
+    _require_sensors(model, log)
     out = {}
     for name, em in model.errors.items():
         if name not in log.drift:
@@ -235,9 +239,9 @@ def run_stream(args) -> int:
     machine = load(args.machine)
     model = T.load_model(args.model, machine)
     refs = {}
+    axes = {a.name: a for a in machine.axes if a.unit.kind == "length"}
     for item in args.reference_position:
         name, eq, raw = (x.strip() for x in item.partition("="))
-        axes = {a.name: a for a in machine.axes if a.unit.kind == "length"}
         if not eq or name not in axes:
             raise ChaincompError(f"--reference-position: expected AXIS=VALUE with a linear axis of {machine.name} "
                                  f"({', '.join(axes)}), got {item!r}")
@@ -248,10 +252,7 @@ def run_stream(args) -> int:
         except ValueError as exc:
             raise ChaincompError(f"--reference-position {item}: {exc}") from None
     log = T.read_log(args.log, machine, require_drift=False)
-    missing = [s for s in model.sensors if s not in log.temperatures]
-    if missing:
-        raise ChaincompError(f"the model reads sensor {', '.join(missing)}, not in the log (sensors: "
-                             f"{', '.join(log.temperatures)})", args.log)
+    _require_sensors(model, log)
     lines = T.axis_lines(machine, list(model.errors), refs)
     if not lines:
         raise ChaincompError(f"{machine.name} has no linear axis: nothing for a per-axis compensation", machine.file)
