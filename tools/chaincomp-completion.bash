@@ -128,10 +128,10 @@ _chaincomp() {
           esac;;
         export)
           case "$prev" in
-            --format) words='linuxcnc-comp linuxcnc-matrixkins klipper marlin rrf';;
+            --format) words='linuxcnc-comp linuxcnc-matrixkins klipper marlin rrf isg-volcomp';;
             --comp-file-type) words='0 1';;
             --report) words='text json';;
-            *) words='-h --help --params --set --format -o --output --grid --entries --comp-file-type --joints --reversal --report --json --no-breakdown'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --params --set --format -o --output --grid --entries --iso-axes --comp-file-type --joints --reversal --report --json --no-breakdown'; [[ $cur == -* ]] || return 0;;
           esac;;
         thermal)
           case "$prev" in

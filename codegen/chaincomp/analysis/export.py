@@ -102,6 +102,7 @@ class Export:
     offset: np.ndarray | None = None     # constant tool-point offset left to the work offset, mm
     after_offset: Residual | None = None  # the residual once that offset is touched off
     shares: list[ErrorShare] = field(default_factory=list)
+    isg: object | None = None            # isg_volcomp.IsgFile: the file's axes, chain, names
 
 
 def _errors_only(machine: Machine, values: dict, keep: set[str] | None) -> dict:
@@ -507,6 +508,11 @@ def to_json(e: Export) -> dict:
         doc["matrix"] = e.matrix.tolist()
         doc["offset_um"] = (e.offset * 1e3).tolist()
         doc["after_offset"] = res(e.after_offset)
+    if e.isg is not None:
+        f = e.isg
+        doc["isg"] = {"axes": {c: a.name for c, a in f.letters.items()}, "chain": f.chain,
+                      "workpiece_axes": f.workpiece_axes, "names": f.names, "left_out": f.left_out,
+                      "records": sum(len(b.rows) for b in f.blocks), "represented_only": res(f.represented_only)}
     doc["errors"] = [{"name": s.name, "before": res(s.before), "after": res(s.after),
                       "represented": s.represented} for s in e.shares]
     return doc
@@ -528,6 +534,17 @@ def to_text(e: Export) -> str:
                      f"(x, y, z) is touched off: {um(e.after_offset)}")
         lines.append("  C (joint = C . axis, " + ", ".join(e.linear) + "): "
                      + "; ".join(" ".join(f"{v:.9f}" for v in row) for row in e.matrix))
+    if e.isg is not None:
+        f = e.isg
+        lines.append(f"  axes {', '.join(f'{c}={a.name}' for c, a in f.letters.items())}; chain {f.chain} "
+                     f"(workpiece to tool), workpiece_axes {f.workpiece_axes}; "
+                     f"{sum(len(b.rows) for b in f.blocks)} records")
+        lines.append(f"  with the errors it carries alone: {um(f.represented_only)}")
+        if f.left_out:
+            reasons: dict[str, list[str]] = {}
+            for k, why in f.left_out.items():
+                reasons.setdefault(why, []).append(k)
+            lines.append("  no ISG name for: " + "; ".join(f"{' '.join(ks)} ({why})" for why, ks in reasons.items()))
     if e.shares:
         left = [s for s in e.shares if s.represented != "yes"]
         lines.append("  represented: " + (" ".join(s.name for s in e.shares if s.represented == "yes") or "none"))

@@ -6,12 +6,15 @@ import os
 import sys
 
 from ..analysis import export as X
+from ..analysis import isg_volcomp as ISG
 from ..errors import ChaincompError
 from ..model.params import parse_value
 from .common import (add_machine_argument, add_values_arguments, check_finite, check_output, integer, load,
                      names, refuse_empty, to_json, values_for)
 
 MAX_GRID = 101
+FORMATS = X.FORMATS + (ISG.FORMAT,)
+FOLDERS = ("linuxcnc-comp", ISG.FORMAT)    # formats that write a folder of files
 
 
 def add_parser(sub) -> None:
@@ -23,19 +26,25 @@ def add_parser(sub) -> None:
                                    "leaves of it (an error the format cannot represent is left out). Formats: "
                                    "linuxcnc-comp (one [JOINT_n]COMP_FILE per joint: -o is a folder), "
                                    "linuxcnc-matrixkins (C_xx..C_zz of LinuxCNC's matrixkins: -o is a HAL file), "
-                                   "marlin (M852 I J K), klipper (SET_SKEW), rrf (M556): -o is the G-code line. "
+                                   "marlin (M852 I J K), klipper (SET_SKEW), rrf (M556): -o is the G-code line; "
+                                   "isg-volcomp (the ISO 230-1 errors in an ISG CSV file and its compensation "
+                                   "list, for ISG's and Beckhoff TwinCAT CNC's volumetric compensation: -o is a "
+                                   "folder). "
                                    "Nothing is written when anything is refused.")
     add_machine_argument(p)
     add_values_arguments(p)
-    p.add_argument("--format", dest="target", required=True, choices=X.FORMATS, help="the controller's format")
+    p.add_argument("--format", dest="target", required=True, choices=FORMATS, help="the controller's format")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="what to write (a folder for "
-                   "linuxcnc-comp, a file otherwise)")
+                   "linuxcnc-comp and isg-volcomp, a file otherwise)")
     p.add_argument("--grid", type=integer(2, MAX_GRID), metavar="N",
                    help=f"check points per axis, limits included (default 9, fewer on a chain of more than five "
                         f"axes: at most {X.DEFAULT_GRID_POINTS} in all; at most {X.MAX_POINTS} when given)")
     p.add_argument("--entries", type=integer(2, X.LINUXCNC_MAX_ENTRIES), default=33, metavar="N",
                    help=f"linuxcnc-comp: entries per joint, equally spaced over its limits (default 33, at most "
-                        f"{X.LINUXCNC_MAX_ENTRIES}: LinuxCNC's EMCMOT_COMP_SIZE)")
+                        f"{X.LINUXCNC_MAX_ENTRIES}: LinuxCNC's EMCMOT_COMP_SIZE); isg-volcomp: records of each "
+                        f"error that varies, over its axis' limits (and a linear table's own knots)")
+    p.add_argument("--iso-axes", metavar="X=A1,Y=A2,...", help="isg-volcomp: the ISO 230-1 letter of each axis "
+                   "(default: axes named X, Y, Z, A, B, C, or a rotary axis whose name starts with A, B or C)")
     p.add_argument("--comp-file-type", type=int, choices=(0, 1), default=1,
                    help="linuxcnc-comp: COMP_FILE_TYPE 1 (nominal, forward trim, reverse trim; default) or 0 "
                         "(nominal, position reached forward, reverse)")
@@ -72,8 +81,24 @@ def _reversal(machine, items: list[str]) -> dict[str, float]:
     return out
 
 
-def _outputs(e: X.Export, out: str, file_type: int) -> dict[str, str]:
+def _iso_axes(text: str | None) -> dict[str, str] | None:
+    if text is None:
+        return None
+    out = {}
+    for item in names(text, "--iso-axes"):
+        letter, eq, axis = (p.strip() for p in item.partition("="))
+        if not eq or not letter or not axis:
+            raise ChaincompError(f"--iso-axes {item!r}: expected LETTER=AXIS, e.g. X=X1,A=Ap")
+        if letter in out:
+            raise ChaincompError(f"--iso-axes {letter}: given twice")
+        out[letter] = axis
+    return out
+
+
+def _outputs(e: X.Export, out: str, file_type: int, isg: tuple[str, str] | None) -> dict[str, str]:
     """Every file to write, path -> text."""
+    if isg:
+        return {os.path.join(out, ISG.CSV_FILE): isg[0], os.path.join(out, ISG.LIST_FILE): isg[1]}
     if e.format == "linuxcnc-comp":
         files = _comp_files([t.axis for t in e.tables])
         texts = {os.path.join(out, f): X.linuxcnc_comp_text(t, file_type) for f, t in zip(files, e.tables)}
@@ -88,19 +113,19 @@ def _comp_files(axes) -> list[str]:
     return [f"joint{n}_{a.name}.comp" for n, a in enumerate(axes)]
 
 
-def _check_folder(out: str, files: list[str], inputs) -> None:
-    """The folder linuxcnc-comp writes, and each file in it (before the work: none is an
-    input, a folder, or read-only)."""
+def _check_folder(out: str, files: list[str], inputs, fmt: str) -> None:
+    """The folder a format writes, and each file in it (before the work: none is an input, a
+    folder, or read-only)."""
     refuse_empty(("-o", out), hint="expected a folder name")
     if os.path.exists(out) and not os.path.isdir(out):
-        raise ChaincompError(f"-o {out}: linuxcnc-comp writes a folder of files; {out} is a file")
+        raise ChaincompError(f"-o {out}: {fmt} writes a folder of files; {out} is a file")
     parent = os.path.dirname(os.path.abspath(out))
     if not os.path.isdir(parent):
         raise ChaincompError(f"-o {out}: folder {parent} does not exist")
     if not os.access(out if os.path.isdir(out) else parent, os.W_OK):
         raise ChaincompError(f"-o {out}: not writable")
     if os.path.isdir(out):
-        for f in files + ["compensation.ini"]:
+        for f in files:
             check_output(os.path.join(out, f), *inputs)
 
 
@@ -108,13 +133,19 @@ def run(args) -> int:
     machine = load(args.machine)
     joints = names(args.joints, "--joints") or None
     if args.target == "linuxcnc-comp":
-        _check_folder(args.output, _comp_files(X.axes_of(machine, joints)), [args.machine, args.params])
+        _check_folder(args.output, _comp_files(X.axes_of(machine, joints)) + ["compensation.ini"],
+                      [args.machine, args.params], args.target)
+    elif args.target == ISG.FORMAT:
+        _check_folder(args.output, [ISG.CSV_FILE, ISG.LIST_FILE], [args.machine, args.params], args.target)
     else:
         check_output(args.output, args.machine, args.params)
     for item in args.sets:
         name = item.partition("=")[0].strip()
         if name in [a.name for a in machine.axes]:
             raise ChaincompError(f"--set {item}: {name} is an axis; export checks every axis over its limits")
+    iso_axes = _iso_axes(args.iso_axes)
+    if iso_axes is not None and args.target != ISG.FORMAT:
+        raise ChaincompError(f"--iso-axes: only {ISG.FORMAT} names its axes by ISO letter, not {args.target}")
     reversal = _reversal(machine, args.reversal)
     if reversal and args.target != "linuxcnc-comp":
         raise ChaincompError(f"--reversal: only linuxcnc-comp has a reverse trim, not {args.target}")
@@ -126,12 +157,17 @@ def run(args) -> int:
         print(f"export: {text}", file=sys.stderr, flush=True)
 
     grid = args.grid or X.default_grid(len(machine.axes))
-    e = X.export(machine, values, args.target, joints, grid, args.entries, reversal,
-                 shares=not args.no_breakdown, progress=progress)
-    texts = _outputs(e, args.output, args.comp_file_type)
+    isg = None
+    if args.target == ISG.FORMAT:
+        e, *isg = ISG.export(machine, values, joints, grid, args.entries, iso_axes, shares=not args.no_breakdown,
+                             progress=progress)
+    else:
+        e = X.export(machine, values, args.target, joints, grid, args.entries, reversal,
+                     shares=not args.no_breakdown, progress=progress)
+    texts = _outputs(e, args.output, args.comp_file_type, isg)
     doc = X.to_json(e)
     check_finite(doc)
-    if args.target == "linuxcnc-comp":
+    if args.target in FOLDERS:
         os.makedirs(args.output, exist_ok=True)
     # all or nothing: each file written beside its target, then renamed over it
     written = []

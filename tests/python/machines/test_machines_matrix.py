@@ -477,3 +477,39 @@ def test_simulate_thermal_then_fit(name, tmp_path):
         written = yaml.safe_load(f)["errors"]
     for e in chosen:
         assert written[e]["terms"][0]["gain"] == pytest.approx(doc["errors"][e]["terms"][0]["gain"], rel=1e-5)
+
+
+@machine
+def test_export_isg_volcomp(name, tmp_path):
+    """ISG's volumetric compensation file of every machine with linear axes X, Y, Z, read by
+    the test's reader (isg_csv.py, from ISG's manual): each ISO 230-1 error of the params
+    file (read with plain YAML, converted by hand) under its ISG name in mm or rad; machines
+    without X, Y, Z are refused in one line and nothing is written."""
+    import isg_csv
+
+    out = tmp_path / "isg"
+    linear = {s["name"] for s in raw(name)["symbols"] if s["role"] == "axis" and s["unit"] == "mm"}
+    r = run_cli("export", machine_path(name), "--params", params_file(name), "--format", "isg-volcomp", "-o",
+                str(out), "--grid", "3", "--no-breakdown", "--report", "json", check=False)
+    if not {"X", "Y", "Z"} <= linear:
+        assert r.returncode == 2 and "needs three linear axes X, Y, Z" in r.stderr, r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1 and not out.exists()
+        return
+    with open(params_file(name)) as f:
+        given = yaml.safe_load(f)["values"]
+    if not any(isg_csv.COMPONENT.match(e) or isg_csv.POSITION.match(e[1:]) for e in given):
+        assert r.returncode == 2 and "represents none of the errors given" in r.stderr, r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1 and not out.exists()
+        return
+    assert r.returncode == 0, r.stderr
+    blocks = isg_csv.read((out / "volcomp.csv").read_text())
+    per = {"um": 1e-3, "mm": 1.0, "arcsec": np.pi / 648000, "urad": 1e-6, "mrad": 1e-3, "deg": np.pi / 180}
+    carried = json.loads(r.stdout)["isg"]["names"]
+    for err, text in given.items():
+        iso = err if isg_csv.COMPONENT.match(err) else err[1:] if isg_csv.POSITION.match(err[1:]) else None
+        if iso is None or float(str(text).split()[0]) == 0:
+            assert err not in carried
+            continue
+        number, unit_name = str(text).split()
+        assert carried[err] == iso
+        assert isg_csv.value(blocks, iso) == pytest.approx(float(number) * per[unit_name], abs=1e-12), err

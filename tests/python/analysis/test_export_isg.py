@@ -1,0 +1,185 @@
+"""chaincomp export --format isg-volcomp (ISG's and Beckhoff TwinCAT CNC's volumetric
+compensation) against truth from outside the exporter: a machine the test writes into a
+temp dir with its tool point written out by hand (own_model), the CSV read back by the
+test's own reader written from ISG's manual (isg_csv.py), the controller's correction
+replayed with what that reader holds, and the interpolation error of a parabola between
+records worked out by hand (c h^2 / 4 at the midpoint)."""
+
+import json
+
+import numpy as np
+import pytest
+
+import isg_csv
+from helpers import PARAMS, machine_path, refused_one_line, run_main, write_file
+
+ARCSEC = np.pi / 648000
+
+OWN = """\
+name: own_iso
+description: a gantry of the test's own, three slides with ISO-named errors and one that is not
+length_unit: mm
+rotation_sense: right_hand
+symbols:
+  - {name: X, role: axis, unit: mm, limits: [0, 300], meaning: X}
+  - {name: Y, role: axis, unit: mm, limits: [0, 200], meaning: Y}
+  - {name: Z, role: axis, unit: mm, limits: [-100, 0], meaning: Z}
+  - {name: EXX, role: error, unit: um, meaning: X positioning}
+  - {name: EYY, role: error, unit: um, meaning: Y positioning}
+  - {name: EZZ, role: error, unit: um, meaning: Z positioning}
+  - {name: EC0Y, role: error, unit: arcsec, meaning: Y leaning towards -X}
+  - {name: SXZ, role: error, unit: arcsec, meaning: Z leaning towards +X (no ISO name)}
+chain:
+  - {translate: [X + EXX, 0, 0]}
+  - {translate: [-Y*sin(EC0Y), Y*cos(EC0Y) + EYY, 0]}
+  - {translate: [Z*sin(SXZ), 0, Z + EZZ]}
+tool:
+  point: [0, 0, 0]
+"""
+
+C2 = 4e-4   # um/mm^2: EXX = C2 X^2, 36 um at X = 300
+PARAMS_TEXT = f"""\
+machine: own_iso
+values:
+  EXX: {{axis: X, units: [mm, um], polynomial: [0.0, 0.0, {C2}]}}
+  EYY:
+    axis: Y
+    units: [mm, um]
+    interpolation: linear
+    outside: hold
+    table: [[0, 0.0], [37, 1.5], [80, -2.0], [200, 3.0]]
+  EZZ: 3 um
+  EC0Y: 6 arcsec
+"""
+
+
+def own_model(x, y, z, exx, eyy, ezz, ec0y, sxz=0.0):
+    """The tool point of OWN (mm), written out by hand; exx, eyy: functions (mm -> mm)."""
+    return np.array([x + exx(x) - y * np.sin(ec0y) + z * np.sin(sxz), y * np.cos(ec0y) + eyy(y) + 0 * x,
+                     z + ezz + 0 * x])
+
+
+def export(capsys, tmp_path, params_text=PARAMS_TEXT, *extra):
+    machine = write_file(tmp_path, "own_iso.yaml", OWN)
+    params = write_file(tmp_path, "own.yaml", params_text)
+    out = tmp_path / "isg"
+    code, stdout, err = run_main(capsys, "export", machine, "--params", params, "--format", "isg-volcomp",
+                                 "-o", out, "--report", "json", *extra)
+    assert code == 0, err
+    return json.loads(stdout), out
+
+
+def test_the_file_carries_each_error_under_its_iso_name_in_mm_and_rad(capsys, tmp_path):
+    doc, out = export(capsys, tmp_path, PARAMS_TEXT, "--entries", "5")
+    blocks = isg_csv.read((out / "volcomp.csv").read_text())
+    x = np.linspace(0, 300, 5)
+    ex = next(b for b in blocks if b.arguments == ["X"])
+    assert ex.grid[0] == pytest.approx(x)                       # 5 records over X's limits, in mm
+    assert ex.values["EXX"] == pytest.approx(C2 * x * x * 1e-3, abs=1e-9)   # mm
+    ey = next(b for b in blocks if b.arguments == ["Y"])
+    assert {0, 37, 80, 200} <= set(ey.grid[0])                  # a linear table's knots are records
+    assert isg_csv.value(blocks, "EYY", Y=37) == pytest.approx(1.5e-3, abs=1e-9)
+    assert isg_csv.value(blocks, "C0Y") == pytest.approx(6 * ARCSEC, abs=1e-12)   # EC0Y, in rad
+    assert isg_csv.value(blocks, "EZZ") == pytest.approx(3e-3, abs=1e-12)
+    assert doc["isg"]["chain"] == "XYZ" and doc["isg"]["workpiece_axes"] == 0
+    lis = (out / "volcomp.lis").read_text()
+    assert "file_format[0] ISG_CSV" in lis and "interpolation GRID" in lis and "\nX 1\nY 2\nZ 3\n" in lis
+
+
+def test_the_residual_is_the_controllers_replay_and_a_parabolas_chord(capsys, tmp_path):
+    """The report's residual equals the test's own replay (the reader's values, the
+    correction taken off X, Y, Z, the hand-written model), and for EXX = c X^2 on 5
+    records it is the chord's error at a midpoint, c h^2 / 4 with h = 75 mm."""
+    doc, out = export(capsys, tmp_path, PARAMS_TEXT, "--entries", "5", "--grid", "5")
+    blocks = isg_csv.read((out / "volcomp.csv").read_text())
+    true = dict(exx=lambda x: C2 * x * x * 1e-3, eyy=lambda y: np.interp(y, [0, 37, 80, 200], [0, 1.5e-3, -2e-3, 3e-3]),
+                ezz=3e-3, ec0y=6 * ARCSEC)
+    held = dict(exx=lambda x: isg_csv.value(blocks, "EXX", X=x), eyy=lambda y: isg_csv.value(blocks, "EYY", Y=y),
+                ezz=isg_csv.value(blocks, "EZZ"), ec0y=isg_csv.value(blocks, "C0Y"))
+    # the check points the report promises: 5 per axis, and between every two records of each table
+    g = [np.linspace(0, 300, 5), np.linspace(0, 200, 5), np.linspace(-100, 0, 5)]
+    recs = {"X": next(b for b in blocks if b.arguments == ["X"]).grid[0],
+            "Y": next(b for b in blocks if b.arguments == ["Y"]).grid[0]}
+    sets = [g, [(recs["X"][1:] + recs["X"][:-1]) / 2, g[1], g[2]], [g[0], (recs["Y"][1:] + recs["Y"][:-1]) / 2, g[2]]]
+    worst = []
+    for s in sets:
+        x, y, z = (v.ravel() for v in np.meshgrid(*s, indexing="ij"))
+        nominal = np.array([x, y, z])
+        d = own_model(x, y, z, **held) - nominal
+        driven = nominal - d          # the nominal model's derivative is the identity here
+        worst.append(np.linalg.norm(own_model(*driven, **true) - nominal, axis=0))
+    worst = np.concatenate(worst)
+    assert doc["after"]["max_um"] == pytest.approx(worst.max() * 1e3, abs=1e-5)
+    assert doc["check_points"] == len(worst)
+    chord = C2 * 75.0 ** 2 / 4        # um
+    assert doc["after"]["max_um"] == pytest.approx(chord, rel=0.02)
+    assert doc["isg"]["represented_only"]["max_um"] <= 1.0
+    assert doc["before"]["max_um"] > 30.0
+
+
+def test_more_records_leave_less(capsys, tmp_path):
+    coarse, _ = export(capsys, tmp_path, PARAMS_TEXT, "--entries", "5", "--no-breakdown")
+    fine, _ = export(capsys, tmp_path, PARAMS_TEXT, "--entries", "33", "--no-breakdown")
+    # the chord's error, and the one correction step's remainder EXX'(X) d at X = 300 (um/mm x mm)
+    chord, step = C2 * (300 / 32) ** 2 / 4, 2 * C2 * 300 * (C2 * 300 ** 2 * 1e-3)
+    assert chord < fine["after"]["max_um"] <= (chord + step) * 1.01
+    assert fine["after"]["max_um"] < coarse["after"]["max_um"] / 20
+
+
+def test_an_error_without_an_iso_name_is_left_out_and_its_share_reported(capsys, tmp_path):
+    doc, _ = export(capsys, tmp_path, PARAMS_TEXT + "  SXZ: 10 arcsec\n", "--grid", "3")
+    assert "SXZ" in doc["isg"]["left_out"] and "SXZ" not in doc["isg"]["names"]
+    share = next(e for e in doc["errors"] if e["name"] == "SXZ")
+    assert share["represented"] == "no" and share["after"]["max_um"] == share["before"]["max_um"]
+    assert share["before"]["max_um"] == pytest.approx(100 * np.sin(10 * ARCSEC) * 1e3, rel=1e-6)  # Z = -100
+    assert doc["after"]["max_um"] >= share["before"]["max_um"] * 0.99
+    assert doc["isg"]["represented_only"]["max_um"] <= 1.0
+
+
+@pytest.mark.parametrize("name", ["vmc_xyz", "five_axis_ac"])
+def test_bundled_every_iso_error_is_carried_and_leaves_under_a_micrometre(capsys, tmp_path, name):
+    code, stdout, err = run_main(capsys, "export", machine_path(name), "--params", f"{PARAMS}/{name}-demo.yaml",
+                                 "--format", "isg-volcomp", "-o", tmp_path / "isg", "--grid", "5", "--report", "json")
+    assert code == 0, err
+    doc = json.loads(stdout)
+    iso = [e for e in doc["errors"] if isg_csv.COMPONENT.match(e["name"]) or isg_csv.POSITION.match(e["name"][1:])]
+    assert len(iso) == 21
+    for e in iso:
+        assert e["represented"] == "yes" and e["after"]["max_um"] <= 1.0, e
+    assert doc["isg"]["represented_only"]["max_um"] <= 1.0
+    if name == "vmc_xyz":
+        assert doc["isg"]["chain"] == "XYZ" and doc["isg"]["workpiece_axes"] == 2   # the table carries X and Y
+        assert doc["after"]["max_um"] <= 1.0 < doc["before"]["max_um"]
+    else:   # the head's errors have no ISO 230-1 names: left out, and the residual says so
+        assert doc["isg"]["axes"] == {"X": "X", "Y": "Y", "Z": "Z", "A": "Ap", "C": "Cp"}
+        assert set(doc["isg"]["left_out"]) == {"ThetaAs", "Oas", "ThetaAv", "DY", "Ocx", "Ocy", "ThetaCh", "ThetaCv"}
+        assert doc["after"]["max_um"] > 10
+
+
+def nothing_written(tmp_path, *argv, match):
+    before = sorted(p.name for p in tmp_path.iterdir())
+    refused_one_line(*map(str, argv), match=match)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_refusals_write_nothing(tmp_path):
+    machine = write_file(tmp_path, "own_iso.yaml", OWN)
+    params = write_file(tmp_path, "own.yaml", PARAMS_TEXT)
+    out = tmp_path / "isg"
+    base = ("export", machine, "--params", params, "--format", "isg-volcomp", "-o", out)
+    nothing_written(tmp_path, *base, "--iso-axes", "X=Y,Y=X,Z=Q", match="--iso-axes Z=Q: not an axis of own_iso")
+    nothing_written(tmp_path, *base, "--iso-axes", "X=X,Y=Y,W=Z", match="--iso-axes W=Z: W is not an ISO axis letter")
+    nothing_written(tmp_path, *base, "--iso-axes", "X=X,Y=Y,A=Z", match="A is a rotary axis in ISO 230-1, but Z")
+    nothing_written(tmp_path, *base, "--iso-axes", "X=X,Y=Y", match="needs three linear axes X, Y, Z")
+    nothing_written(tmp_path, *base, "--iso-axes", "X=X,X=Y", match="--iso-axes X: given twice")
+    nothing_written(tmp_path, "export", machine, "--params", params, "--format", "marlin", "-o", tmp_path / "m.g",
+                    "--iso-axes", "X=X,Y=Y,Z=Z", match="--iso-axes: only isg-volcomp")
+    only_sxz = write_file(tmp_path, "sxz.yaml", "machine: own_iso\nvalues:\n  SXZ: 10 arcsec\n")
+    nothing_written(tmp_path, "export", machine, "--params", only_sxz, "--format", "isg-volcomp", "-o", out,
+                    match="isg-volcomp represents none of the errors given for own_iso")
+    (tmp_path / "afile").write_text("x")
+    nothing_written(tmp_path, "export", machine, "--params", params, "--format", "isg-volcomp", "-o",
+                    tmp_path / "afile", match="isg-volcomp writes a folder of files")
+    lathe = machine_path("me220_xz")
+    nothing_written(tmp_path, "export", lathe, "--params", f"{PARAMS}/me220_xz-example.yaml", "--format",
+                    "isg-volcomp", "-o", out, match="needs three linear axes X, Y, Z")
