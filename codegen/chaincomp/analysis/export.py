@@ -99,6 +99,7 @@ class Export:
     tables: list[JointTable] = field(default_factory=list)
     matrix: np.ndarray | None = None     # C (joint = C . axis) on `linear`
     linear: list[str] = field(default_factory=list)
+    joints: list[Symbol] = field(default_factory=list)   # the axes in the controller's joint order
     offset: np.ndarray | None = None     # constant tool-point offset left to the work offset, mm
     after_offset: Residual | None = None  # the residual once that offset is touched off
     shares: list[ErrorShare] = field(default_factory=list)
@@ -360,6 +361,10 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     grid = check_grid(machine, axes, points)
     values = _held_at_the_ends(machine, values)
     lin = linear_axes(machine, axes, fmt) if fmt != "linuxcnc-comp" else []
+    if fmt == "linuxcnc-matrixkins" and axes[:3] != lin:
+        raise ChaincompError(f"--format {fmt}: matrixkins drives joints 0, 1, 2 from X, Y, Z, but the joints of "
+                             f"{machine.name} begin {', '.join(a.name for a in axes[:3])}: put "
+                             f"{', '.join(a.name for a in lin)} first with --joints")
     free = np.ones((3, 3), bool) if fmt == "linuxcnc-matrixkins" else SKEW
     exact = ExactModel(machine)
     sets = [_mesh(axes, grid)]
@@ -393,7 +398,7 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     for a, q in zip(after, sets):
         _check_finite(machine, a, q, f"the tool point with {fmt}'s correction")
     out = Export(fmt, machine, points, n_points, Residual.of(before), Residual.of(after),
-                 tables, c, [a.name for a in lin], offset)
+                 tables, c, [a.name for a in lin], axes, offset)
     # what the format does beyond a touch-off (a matrix leaves the constant to the work offset)
     left, base = out.after, out.before
     if offset is not None:
@@ -484,7 +489,19 @@ def matrixkins_text(e: Export) -> str:
     for i in range(3):
         for k in range(3):
             lines.append(f"setp matrixkins.C_{names[i]}{names[k]} {e.matrix[i, k]:.12g}")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + matrixkins_passthrough(e)) + "\n"
+
+
+def matrixkins_passthrough(e: Export) -> list[str]:
+    """matrixkins hands joints 3.. to the axes A, B, C, U, V, W in that order, whatever the
+    machine's letters (matrixkins.comp kinematicsForward/Inverse): say which axis each joint
+    after the linear ones becomes, so an XYZAC machine sees its C land on B."""
+    others = [a for a in e.joints if a.name not in e.linear]
+    if not others:
+        return []
+    pairs = ", ".join(f"joint {3 + n} ({a.name}) <-> axis {'ABCUVW'[n]}" for n, a in enumerate(others[:6]))
+    return [f"# matrixkins passes the joints after X, Y, Z through in the order A, B, C, U, V, W: {pairs}. "
+            "Give each of them the program letter it gets, or use matrixkins on a three-axis machine."]
 
 
 def skew_factors(e: Export) -> dict[str, float]:
@@ -534,6 +551,8 @@ def to_text(e: Export) -> str:
                      f"(x, y, z) is touched off: {um(e.after_offset)}")
         lines.append("  C (joint = C . axis, " + ", ".join(e.linear) + "): "
                      + "; ".join(" ".join(f"{v:.9f}" for v in row) for row in e.matrix))
+        if e.format == "linuxcnc-matrixkins":
+            lines += ["  " + line.lstrip("# ") for line in matrixkins_passthrough(e)]
     if e.isg is not None:
         f = e.isg
         lines.append(f"  axes {', '.join(f'{c}={a.name}' for c, a in f.letters.items())}; chain {f.chain} "

@@ -330,3 +330,18 @@ values:
     assert left.max() > 1.9e-3
     assert doc["after"]["max_um"] == pytest.approx(left.max() * 1e3, rel=0.02)
     assert doc["after"]["max_um"] > 1.9
+
+
+def test_matrixkins_names_where_its_joints_after_z_go_and_wants_x_y_z_first(capsys, tmp_path):
+    """matrixkins.comp: j[0..2] = C . (x, y, z); j[3], j[4], j[5] = a, b, c, whatever the
+    machine's letters: five_axis_ac's Cp on joint 4 lands on B, and the file says so; linear
+    axes that are not joints 0, 1, 2 are refused."""
+    machine, params = machine_path("five_axis_ac"), os.path.join(PARAMS, "five_axis_ac-demo.yaml")
+    out = tmp_path / "m.hal"
+    code, stdout, err = run_main(capsys, "export", machine, "--params", params, "--format", "linuxcnc-matrixkins",
+                                 "-o", out, "--grid", "3", "--no-breakdown")
+    assert code == 0, err
+    note = [line for line in out.read_text().splitlines() if "passes the joints after X, Y, Z" in line]
+    assert note and "joint 3 (Ap) <-> axis A, joint 4 (Cp) <-> axis B" in note[0]
+    nothing_written(tmp_path, "export", machine, "--params", params, "--format", "linuxcnc-matrixkins", "-o",
+                    tmp_path / "n.hal", "--joints", "Ap,X,Y,Z,Cp", match="matrixkins drives joints 0, 1, 2 from X, Y, Z")
