@@ -2,7 +2,7 @@
 (used by tests/python/runtime/test_linuxcnc.py and tools/linuxcnc-demo).
 
 run() copies a configuration (configs/linuxcnc/NAME/) to a fresh work folder, writes the NML
-file without its TCP socket, picks the route (off | rt | bridge | comp), and runs LinuxCNC once as an
+file without its TCP socket, picks the route (off | rt | bridge | comp | matrixkins), and runs LinuxCNC once as an
 unprivileged user (it refuses root), one instance at a time (a lock: LinuxCNC's shared memory
 keys are fixed). Its driver (drive.py) records every servo period with halsampler: the joint
 commands and the correction the drives actually got (drive - command).
@@ -19,6 +19,7 @@ import glob
 import json
 import os
 import pwd
+import re
 import shutil
 import subprocess
 import tempfile
@@ -31,7 +32,8 @@ ROOT = os.path.abspath(os.path.join(HERE, "..", ".."))
 USER = os.environ.get("CHAINCOMP_LINUXCNC_USER", "chaincomp-cnc")
 LOCK = os.path.join(tempfile.gettempdir(), "chaincomp-linuxcnc.lock")
 NML = "/usr/share/linuxcnc/linuxcnc.nml"
-ROUTES = ("off", "rt", "bridge", "comp")
+ROUTES = ("off", "rt", "bridge", "comp", "matrixkins")
+MODULES = "/usr/lib/linuxcnc/modules"
 # sampler.0 columns after halsampler's tag: 5 commands and 5 observed corrections (drive -
 # command), both in nm and udeg, then the bridge's age-ms or chaincomp_rt's cost-ns, stale, fault
 N_JOINTS = 5
@@ -54,6 +56,29 @@ def unavailable() -> str | None:
     if shutil.which("halsampler") is None:
         return "halsampler is missing (linuxcnc-uspace)"
     return None
+
+
+def matrixkins_unavailable() -> str | None:
+    """Why the matrixkins route cannot run here, or None: the kinematics module came with
+    LinuxCNC 2.10 (src/hal/components/matrixkins.comp); Debian's 2.9 has none."""
+    if not os.path.exists(os.path.join(MODULES, "matrixkins.so")):
+        return f"this LinuxCNC has no matrixkins ({MODULES}/matrixkins.so: it came with LinuxCNC 2.10, Debian has 2.9)"
+    return None
+
+
+def without_c_moves(program: str) -> str:
+    """The program with C held at 0: matrixkins passes joint 4 through as B, not C, so on this
+    XYZAC configuration only a program that leaves C at 0 means the same thing."""
+    return re.sub(r"\bC-?\d+(\.\d*)?", "C0", program)
+
+
+def program_points(program: str, letters: str = "XYZAC") -> np.ndarray:
+    """The points a program's G0/G1 moves go to, one row per move (mm, deg): where its dwells are."""
+    rows = []
+    for line in program.splitlines():
+        if re.match(r"\s*G[01]\b", line):
+            rows.append([float(re.search(rf"\b{c}(-?\d+(\.\d*)?)", line).group(1)) for c in letters])
+    return np.array(rows, float)
 
 
 @dataclass
@@ -98,18 +123,31 @@ class Run:
 
 def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeout: float = 120.0,
         work: str | None = None, params: str | None = None, stale_ms: float = 50.0,
-        program: str | None = None, comp: dict[int, str] | None = None) -> Run:
+        program: str | None = None, comp: dict[int, str] | None = None, matrixkins: str | None = None) -> Run:
     """One run of the configuration's program. `env`: the driver's settings (drive.py);
     `params`: the bridge's chaincompd params (default the machine's demo params); `stale_ms`:
     the bridge's stale age; `program`: G-code text in place of the configuration's program.ngc;
-    `comp` (route comp): joint number -> its COMP_FILE (type 1, chaincomp export's)."""
+    `comp` (route comp): joint number -> its COMP_FILE (type 1, chaincomp export's);
+    `matrixkins` (route matrixkins): chaincomp export's HAL file of C_xx..C_zz, sourced after
+    route-off.hal, with KINEMATICS = matrixkins in place of trivkins."""
     if route not in ROUTES:
         raise ValueError(f"route {route!r}: expected one of {', '.join(ROUTES)}")
     src = os.path.join(HERE, config)
     work = work or tempfile.mkdtemp(prefix=f"chaincomp-cnc-{config}-{route}-")
     for f in glob.glob(os.path.join(src, "*")) + [os.path.join(HERE, "drive.py")]:
         shutil.copy(f, work)
-    shutil.copy(os.path.join(src, f"route-{route}.hal"), os.path.join(work, "route.hal"))
+    shutil.copy(os.path.join(src, f"route-{'off' if route == 'matrixkins' else route}.hal"),
+                os.path.join(work, "route.hal"))
+    if (route == "matrixkins") != bool(matrixkins):
+        raise ValueError("the matrixkins route takes the exporter's HAL file (matrixkins=path), and only it")
+    if matrixkins:
+        with open(matrixkins) as f, open(os.path.join(work, "route.hal"), "a") as out:
+            out.write("\n" + f.read())
+        ini = os.path.join(work, f"{config}.ini")
+        with open(ini) as f:
+            text = f.read()
+        with open(ini, "w") as f:
+            f.write(re.sub(r"(?m)^KINEMATICS = .*$", "KINEMATICS = matrixkins", text))
     if program is not None:
         with open(os.path.join(work, "program.ngc"), "w") as f:
             f.write(program)

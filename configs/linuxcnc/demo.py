@@ -1,6 +1,7 @@
 """tools/linuxcnc-demo: the five_axis_ac program under LinuxCNC with compensation off, through
 chaincomp-lcm-bridge (chaincompd), through chaincomp_rt, and with LinuxCNC's own per-joint
-compensation files written by `chaincomp export` (no daemon), and the tool-point error the
+compensation files and matrixkins' matrix written by `chaincomp export` (no daemon; matrixkins
+where this LinuxCNC has it), and the tool-point error the
 simulated true machine makes along the path: max and RMS at the dwells and in motion, the
 bridge's lag, the realtime component's cost, the comp files' measured error against the
 exporter's prediction, and a plot."""
@@ -22,7 +23,8 @@ import cnc
 MACHINE = os.path.join(cnc.ROOT, "configs", "machines", "five_axis_ac.yaml")
 PARAMS = os.path.join(cnc.ROOT, "configs", "params", "five_axis_ac-demo.yaml")
 LABELS = {"off": "compensation off", "bridge": "chaincomp-lcm-bridge + chaincompd", "rt": "chaincomp_rt",
-          "comp": "COMP_FILE tables (chaincomp export)"}
+          "comp": "COMP_FILE tables (chaincomp export)", "matrixkins": "matrixkins (chaincomp export), C at 0"}
+PROGRAM = os.path.join(cnc.HERE, "five_axis_ac", "program.ngc")
 CHAINCOMP = os.path.join(cnc.ROOT, ".venv", "bin", "chaincomp")
 
 
@@ -60,6 +62,43 @@ def predicted_at_dwells(run, machine, params, files: dict[int, str]) -> np.ndarr
     return np.array(out)
 
 
+def export_matrixkins(folder: str) -> tuple[str, np.ndarray]:
+    """The demo params as matrixkins' C_xx..C_zz, through the CLI: the HAL file and C."""
+    say("writing matrixkins parameters: chaincomp export --format linuxcnc-matrixkins")
+    path = os.path.join(folder, "matrixkins.hal")
+    report = subprocess.run([CHAINCOMP, "export", MACHINE, "--params", PARAMS, "--format", "linuxcnc-matrixkins",
+                             "-o", path, "--no-breakdown", "--json"], stdout=subprocess.PIPE, text=True, check=True)
+    return path, np.array(json.loads(report.stdout)["matrix"])
+
+
+def matrixkins_programmed(run, c: np.ndarray) -> np.ndarray:
+    """The programmed axes along a matrixkins run: its forward kinematics, C^-1 . joints on X,
+    Y, Z (the rest passed through)."""
+    out = run.pos_commands.copy()
+    out[:, :3] = np.linalg.solve(c, out[:, :3].T).T
+    return out
+
+
+def matrixkins_at_dwells(run, machine, params, c: np.ndarray, program: str) -> np.ndarray:
+    """Measured minus predicted tool error at each dwell: the G-code's own points (not read back
+    from LinuxCNC), the drives LinuxCNC computed, and chaincomp's replay of C on the exact model."""
+    from chaincomp.analysis import export as X
+    from chaincomp.cli.common import values_for
+
+    values, _ = values_for(machine, PARAMS, [])
+    exact = X.ExactModel(machine)
+    lin = machine.axes[:3]
+    points = cnc.program_points(program)
+    out = []
+    for s, point in zip(cnc.dwells(run.pos_commands)[-len(points):], points):
+        programmed = np.broadcast_to(point, run.drives[s].shape)
+        measured, _ = cnc.tool_errors(machine, params, programmed, run.drives[s])
+        q = cnc.to_internal(machine, programmed)
+        predicted = X.tool_error(exact, values, q, X.apply_matrix(lin, c, q)).T
+        out.append(np.abs(measured - predicted).max())
+    return np.array(out)
+
+
 def install_rt() -> None:
     say("building chaincomp_rt for five_axis_ac with the demo params")
     out = subprocess.run([CHAINCOMP, "build", "--linuxcnc", MACHINE, "--params", PARAMS],
@@ -76,13 +115,14 @@ def stats(values: np.ndarray) -> dict:
     return {"max": float(values.max()), "rms": float(np.sqrt(np.mean(values ** 2)))} if len(values) else {}
 
 
-def summarize(run, machine, params) -> dict:
+def summarize(run, machine, params, programmed=None) -> dict:
     # the program's joint commands (joint.N.pos-cmd): on the comp route LinuxCNC's trims
-    # come after them, in motor-pos-cmd; on the others the two are equal
+    # come after them, in motor-pos-cmd; on the others the two are equal (matrixkins: the
+    # programmed axes are its forward kinematics of them, `programmed`)
     found = cnc.dwells(run.pos_commands)
     if run.returncode != 0 or len(found) < 2:
         raise SystemExit(f"linuxcnc-demo: the run in {run.work} failed:\n{run.log[-2000:]}")
-    point, _ = cnc.tool_errors(machine, params, run.pos_commands, run.drives)
+    point, _ = cnc.tool_errors(machine, params, run.pos_commands if programmed is None else programmed, run.drives)
     err_um = np.linalg.norm(point, axis=1) * 1e3
     program = np.zeros(len(err_um), bool)
     # from the first dwell on: the move there leaves A = 0 at home, a singular pose (the tool
@@ -103,17 +143,25 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="tools/linuxcnc-demo", description=__doc__)
     p.add_argument("--plot", default=os.path.join(cnc.ROOT, "out", "linuxcnc-demo.png"), metavar="OUT.png",
                    help="where the plot goes (default out/linuxcnc-demo.png)")
-    p.add_argument("--routes", default="off,bridge,rt,comp",
-                   help="comma list of off, bridge, rt, comp (default all four)")
+    p.add_argument("--routes", help="comma list of off, bridge, rt, comp, matrixkins (default all; matrixkins "
+                                    "only where this LinuxCNC has it: 2.10 and later)")
     p.add_argument("--format", choices=("text", "json"), default="text", help="output format (default text)")
     args = p.parse_args(argv)
-    routes = args.routes.split(",")
-    for r in routes:
-        if r not in cnc.ROUTES:
-            p.error(f"--routes: unknown route {r!r} (expected off, bridge, rt, comp)")
     reason = cnc.unavailable()
     if reason:
         raise SystemExit(f"linuxcnc-demo: {reason}")
+    no_matrixkins = cnc.matrixkins_unavailable()
+    if args.routes is None:
+        routes = [r for r in cnc.ROUTES if r != "matrixkins" or not no_matrixkins]
+        if no_matrixkins:
+            say(f"no matrixkins route: {no_matrixkins}")
+    else:
+        routes = args.routes.split(",")
+    for r in routes:
+        if r not in cnc.ROUTES:
+            p.error(f"--routes: unknown route {r!r} (expected {', '.join(cnc.ROUTES)})")
+    if "matrixkins" in routes and no_matrixkins:
+        p.error(f"--routes matrixkins: {no_matrixkins}")
     from chaincomp import load_machine, load_params
 
     machine, params = load_machine(MACHINE), None
@@ -124,8 +172,17 @@ def main(argv=None) -> int:
     for r in routes:
         say(f"running the program: {LABELS[r]}")
         comp = export_tables(tempfile.mkdtemp(prefix="chaincomp-demo-comp-")) if r == "comp" else None
-        run = cnc.run(r, comp=comp)
-        summary, extra = summarize(run, machine, params)
+        if r == "matrixkins":
+            hal, c = export_matrixkins(tempfile.mkdtemp(prefix="chaincomp-demo-matrixkins-"))
+            with open(PROGRAM) as f:
+                program = cnc.without_c_moves(f.read())
+            run = cnc.run(r, matrixkins=hal, program=program)
+            summary, extra = summarize(run, machine, params, matrixkins_programmed(run, c))
+            summary["measured_minus_predicted_um"] = float(matrixkins_at_dwells(run, machine, params, c, program).max()
+                                                           * 1e3)
+        else:
+            run = cnc.run(r, comp=comp)
+            summary, extra = summarize(run, machine, params)
         if comp:
             summary["measured_minus_predicted_um"] = float(predicted_at_dwells(run, machine, params, comp).max() * 1e3)
         if r == "bridge":
@@ -150,7 +207,7 @@ def main(argv=None) -> int:
         print(json.dumps({"hardware": hardware, "routes": {r: {k: v for k, v in s.items() if k not in ("t", "error_um")}
                                                            for r, s in results.items()}}))
     else:
-        print(f"five_axis_ac under LinuxCNC (trivkins, 1 ms servo period, POSIX non-realtime); {hardware}")
+        print(f"five_axis_ac under LinuxCNC (trivkins; matrixkins on its route; 1 ms servo period, POSIX non-realtime); {hardware}")
         print("tool-point error of the simulated true machine (exact model, demo params), um, from the first "
               "dwell on (the move there leaves the singular pose A = 0):")
         print(f"  {'route':36s} {'dwells max':>11s} {'RMS':>9s} {'motion max':>11s} {'RMS':>9s}")
@@ -164,6 +221,9 @@ def main(argv=None) -> int:
         if "comp" in results:
             print(f"COMP_FILE tables: measured minus chaincomp export's prediction at the dwells, largest "
                   f"{results['comp']['measured_minus_predicted_um']:.6f} um")
+        if "matrixkins" in results:
+            print(f"matrixkins: measured minus chaincomp export's prediction at the dwells, largest "
+                  f"{results['matrixkins']['measured_minus_predicted_um']:.6f} um (its program holds C at 0)")
         if "rt" in results:
             c = results["rt"]["cost_ns"]
             print(f"chaincomp_rt cost per servo period: p50 {c['p50']:.0f} ns, p99 {c['p99']:.0f} ns, "

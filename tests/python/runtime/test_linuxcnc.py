@@ -440,6 +440,44 @@ def test_comp_files_leave_the_residual_the_exporter_predicts(comp_run, comp_expo
     assert min(sizes) > 1e-3   # the trims were applied: tens of um on the slides
 
 
+@pytest.mark.skipif(cnc.matrixkins_unavailable() is not None, reason=str(cnc.matrixkins_unavailable()))
+def test_matrixkins_drives_c_times_the_program_and_leaves_the_predicted_residual(machine, params, tmp_path):
+    """LinuxCNC's matrixkins (2.10 and later; Debian has 2.9, so this runs where LinuxCNC has
+    it) with chaincomp export's HAL file, no daemon: at every dwell the joints are C times the
+    G-code's own point, and the tool error of the true machine there is the residual the
+    exporter's C predicts, within 0.1 um. The program holds C at 0 (matrixkins passes joint 4
+    through as B)."""
+    from chaincomp.analysis import export as X
+    from chaincomp.cli.common import values_for
+
+    values, _ = values_for(machine, PARAMS, [])
+    e = X.export(machine, values, "linuxcnc-matrixkins", None, 5, 2, shares=False)
+    hal = tmp_path / "matrixkins.hal"
+    hal.write_text(X.matrixkins_text(e))
+    with open(os.path.join(cnc.HERE, "five_axis_ac", "program.ngc")) as f:
+        program = cnc.without_c_moves(f.read())
+    points = cnc.program_points(program)
+    assert len(points) == PROGRAM_DWELLS and np.all(points[:, 4] == 0)
+    run = cnc.run("matrixkins", matrixkins=str(hal), program=program)
+    try:
+        completed(run)
+        exact, lin = X.ExactModel(machine), machine.axes[:3]
+        worst = 0.0
+        for s, point in zip(cnc.dwells(run.pos_commands)[-PROGRAM_DWELLS:], points):
+            joints = run.drives[s]
+            assert np.abs(joints[:, :3] - e.matrix @ point[:3]).max() < 1e-6      # mm: the sampler's nm
+            assert np.abs(joints[:, 3:] - point[3:]).max() < 1e-6
+            programmed = np.broadcast_to(point, joints.shape)
+            measured, _ = cnc.tool_errors(machine, params, programmed, joints)
+            q = cnc.to_internal(machine, programmed)
+            predicted = X.tool_error(exact, values, q, X.apply_matrix(lin, e.matrix, q)).T
+            worst = max(worst, float(np.abs(measured - predicted).max()))
+        assert worst < 1e-4, worst * 1e3
+    finally:
+        if not os.environ.get("CHAINCOMP_KEEP_RUNS"):
+            shutil.rmtree(run.work, ignore_errors=True)
+
+
 UPDATE_SCRIPT = HAL_HEAD.replace("CFG", "fffffsss") + """net version chaincomp-rt.params-version => sampler.0.pin.5
 net refused chaincomp-rt.params-refused => sampler.0.pin.6
 net reason chaincomp-rt.params-reason => sampler.0.pin.7
