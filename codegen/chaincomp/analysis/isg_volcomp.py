@@ -151,11 +151,12 @@ def chain_order(machine: Machine, letters: dict[str, Symbol]) -> tuple[str, int]
 
 def _rows_of(axis: Symbol, entries: int, varying: list[Varying]) -> np.ndarray:
     """Argument values (declared unit) of a block: ``entries`` equally spaced over the axis'
-    limits, and the knots of its linear tables inside them (GRID is then exact on them)."""
+    limits, and the knots of its tables inside them (GRID is then exact on a linear table, and
+    a monotone cubic's records are its own knots and the points between)."""
     lo, hi = sorted(axis.limits)
     pts = list(np.linspace(lo, hi, entries))
     for v in varying:
-        if isinstance(v, Table) and v.interpolation == "linear":
+        if isinstance(v, Table):
             pts += [axis.from_internal(float(x)) for x in v.x if lo < axis.from_internal(float(x)) < hi]
     return np.unique(np.round(np.array(pts, float), ARGUMENT_DECIMALS))
 

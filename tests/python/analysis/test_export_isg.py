@@ -117,6 +117,19 @@ def test_the_residual_is_the_controllers_replay_and_a_parabolas_chord(capsys, tm
     assert doc["before"]["max_um"] > 30.0
 
 
+def test_bundled_laser_tables_their_knots_are_records_and_leave_under_a_micrometre(capsys, tmp_path):
+    """five_axis_ac-laser.yaml: 18 component errors as monotone cubic tables of 101 knots."""
+    code, stdout, err = run_main(capsys, "export", machine_path("five_axis_ac"), "--params",
+                                 f"{PARAMS}/five_axis_ac-laser.yaml", "--format", "isg-volcomp", "-o",
+                                 tmp_path / "isg", "--grid", "3", "--no-breakdown", "--report", "json")
+    assert code == 0, err
+    doc = json.loads(stdout)
+    blocks = isg_csv.read((tmp_path / "isg" / "volcomp.csv").read_text())
+    ex = next(b for b in blocks if b.arguments == ["X"])
+    assert set(np.round(np.linspace(-400, 400, 101), 6)) <= set(ex.grid[0])
+    assert doc["isg"]["represented_only"]["max_um"] <= 1.0
+
+
 def test_more_records_leave_less(capsys, tmp_path):
     coarse, _ = export(capsys, tmp_path, PARAMS_TEXT, "--entries", "5", "--no-breakdown")
     fine, _ = export(capsys, tmp_path, PARAMS_TEXT, "--entries", "33", "--no-breakdown")
