@@ -63,10 +63,14 @@ class ErrorShare:
     name: str
     before: Residual
     after: Residual
+    carried: bool | None = None   # False: the format has no place for it at all (isg-volcomp)
 
     @property
     def represented(self) -> str:
-        """"yes" (at most 1 % of it, or under 0.1 um, is left), "no" (more than 90 %), else "partly"."""
+        """"yes" (at most 1 % of it, or under 0.1 um, is left), "no" (more than 90 %, or not
+        carried at all), else "partly"."""
+        if self.carried is False:
+            return "no"
         if self.after.max <= max(0.01 * self.before.max, 1e-4):
             return "yes"
         return "no" if self.after.max > 0.9 * self.before.max else "partly"

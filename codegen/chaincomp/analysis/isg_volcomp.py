@@ -46,6 +46,7 @@ LINEAR, ROTARY = "XYZ", "ABC"
 COMPONENT = re.compile(r"E([XYZABC])([XYZABC])$")    # EXX .. ECC: error d of axis a
 LOCATION = re.compile(r"E([XYZABC])0([XYZABC])$")    # EX0A .. EC0C: location error d of axis a
 MAX_ROWS = 100_000          # records in one file (the controller's max_records bounds it too)
+MAX_VALUE = 1e3             # mm or rad: a larger "error" is a mistake, and plain decimals lose digits beyond it
 CSV_FILE, LIST_FILE = "volcomp.csv", "volcomp.lis"
 DECIMALS = {"length": 9, "angle": 12}   # mm to the pm, rad to the prad: plain decimals, no exponent
 ARGUMENT_DECIMALS = 6
@@ -144,26 +145,62 @@ def chain_order(machine: Machine, letters: dict[str, Symbol]) -> tuple[str, int]
                     seen.append(by_name[n])
         return seen
 
+    both = set(order(machine.workpiece_chain)) & set(order(machine.tool_chain))
+    if both:
+        raise ChaincompError(f"--format {FORMAT}: {', '.join(letters[c].name for c in sorted(both))} of "
+                             f"{machine.name} moves both the tool and the workpiece side: not the serial chain "
+                             f"ISG's volumetric compensation describes")
     return "".join(order(machine.chain)), len(order(machine.workpiece_chain))
+
+
+def check_directions(machine: Machine, values: dict, letters: dict[str, Symbol]) -> None:
+    """X, Y and Z must move the tool along x, y and z (ISO 841): at the middle of the limits,
+    each one's direction of motion relative to the workpiece lies within 45 degrees of its own
+    coordinate axis, or the file's EXX would be another axis' error."""
+    exact = X.ExactModel(machine)
+    q = {a.name: np.asarray(a.to_internal(sum(a.limits) / 2), float) for a in machine.axes}
+    for k, c in enumerate(LINEAR):
+        a = letters[c]
+        d = X._jacobian_column(exact, values, q, a.name).reshape(3)
+        n = float(np.linalg.norm(d))
+        if not n or abs(d[k]) < 0.7071 * n:
+            raise ChaincompError(f"--format {FORMAT}: {c} must move the tool along {c.lower()} (ISO 841), but "
+                                 f"{a.name} of {machine.name} moves it along ({d[0] / n:.3f}, {d[1] / n:.3f}, "
+                                 f"{d[2] / n:.3f}) at the middle of its limits" if n else
+                                 f"--format {FORMAT}: {a.name} of {machine.name} does not move the tool")
 
 
 # ----------------------------------------------------------------------------- the file
 
-def _rows_of(axis: Symbol, entries: int, varying: list[Varying]) -> np.ndarray:
-    """Argument values (declared unit) of a block: ``entries`` equally spaced over the axis'
-    limits, and the knots of its tables inside them (GRID is then exact on a linear table, and
-    a monotone cubic's records are its own knots and the points between)."""
-    lo, hi = sorted(axis.limits)
-    pts = list(np.linspace(lo, hi, entries))
-    for v in varying:
-        if isinstance(v, Table):
-            pts += [axis.from_internal(float(x)) for x in v.x if lo < axis.from_internal(float(x)) < hi]
-    return np.unique(np.round(np.array(pts, float), ARGUMENT_DECIMALS))
-
-
-def _argument_unit(axis: Symbol):
-    """Arguments in mm or degrees (296426379): from the axis' declared unit to that."""
+def written_argument(axis: Symbol) -> float:
+    """Internal units (mm, rad) to the file's arguments: mm, or degrees (296426379)."""
     return 1.0 if axis.unit.kind == "length" else 180.0 / np.pi
+
+
+def _records(machine: Machine, axis: Symbol, entries: int, varying: dict[str, Varying]) -> np.ndarray:
+    """The arguments of a block as written (mm or deg, rounded to 1e-6): ``entries`` equally
+    spaced over the axis' limits, and the knots of its tables inside them (GRID is then exact
+    on a linear table; a monotone cubic gets its own knots and the points between). Knots the
+    rounding would merge are refused: the file could not tell them apart."""
+    k = written_argument(axis)
+    unit = "mm" if axis.unit.kind == "length" else "deg"
+    lo, hi = sorted(axis.to_internal(v) * k for v in axis.limits)
+    pts = [np.linspace(lo, hi, entries)]
+    for name, v in varying.items():
+        if isinstance(v, Table):
+            knots = np.asarray(v.x, float) * k
+            knots = knots[(knots > lo) & (knots < hi)]
+            if len(np.unique(np.round(knots, ARGUMENT_DECIMALS))) < len(knots):
+                raise ChaincompError(f"{name}: knots of its table closer than 1e-{ARGUMENT_DECIMALS} {unit} cannot "
+                                     f"be told apart in an ISG CSV file (arguments to 1e-{ARGUMENT_DECIMALS} {unit})",
+                                     v.file, v.line, v.key)
+            pts.append(knots)
+    out = np.unique(np.round(np.concatenate(pts), ARGUMENT_DECIMALS))
+    if len(out) < min(entries, 2):
+        raise ChaincompError(f"axis {axis.name}: its limits [{axis.limits[0]:g}, {axis.limits[1]:g}] "
+                             f"{axis.unit.name} are too close for {entries} records 1e-{ARGUMENT_DECIMALS} {unit} "
+                             f"apart: nothing written")
+    return out + 0.0
 
 
 def build(machine: Machine, values: dict, letters: dict[str, Symbol], entries: int) -> IsgFile:
@@ -192,11 +229,20 @@ def build(machine: Machine, values: dict, letters: dict[str, Symbol], entries: i
         if not errs:
             continue
         axis = machine.symbol(axis_name)
-        pos = _rows_of(axis, entries, [values[e] for e in errs])
-        t = axis.to_internal(pos)
+        args = _records(machine, axis, entries, {e: values[e] for e in errs})
+        t = args / written_argument(axis)          # the errors at the arguments as written
         cols = [np.broadcast_to(np.asarray(values[e](t), float), t.shape) for e in errs]
-        f.blocks.append(Block(letter_of[axis_name], [names[e] for e in errs],
-                              np.column_stack([pos * _argument_unit(axis)] + cols)))
+        f.blocks.append(Block(letter_of[axis_name], [names[e] for e in errs], np.column_stack([args] + cols)))
+    for b in f.blocks:
+        for k, n in enumerate(b.names):
+            col = b.rows[:, k + (b.argument is not None)]
+            e = next(e for e, m in names.items() if m == n)
+            big = np.abs(col) >= MAX_VALUE
+            if big.any() or not np.all(np.isfinite(col)):
+                raise ChaincompError(f"{e}: {float(col[np.argmax(big | ~np.isfinite(col))]):g} "
+                                     f"{'mm' if machine.symbol(e).unit.kind == 'length' else 'rad'} somewhere on its "
+                                     f"axis: an ISG CSV file carries errors below {MAX_VALUE:g} (plain decimals to "
+                                     f"1e-9 mm): nothing written")
     rows = sum(len(b.rows) for b in f.blocks)
     if rows > MAX_ROWS:
         raise ChaincompError(f"--entries {entries}: the file would hold {rows} records (at most {MAX_ROWS}): "
@@ -223,7 +269,7 @@ def csv_text(machine: Machine, f: IsgFile) -> str:
             if b.argument:
                 cells.append(f"{row[0]:.{ARGUMENT_DECIMALS}f}")
                 row = row[1:]
-            cells += [f"{v:.{DECIMALS[kind[n]]}f}" for n, v in zip(b.names, row)]
+            cells += [f"{round(v, DECIMALS[kind[n]]) + 0.0:.{DECIMALS[kind[n]]}f}" for n, v in zip(b.names, row)]
             lines.append(" ".join(cells))
     return "\n".join(lines) + "\n"
 
@@ -270,7 +316,7 @@ def controller_values(machine: Machine, f: IsgFile, text: str, values: dict) -> 
     for header, rows in read_csv(text):
         if header[0] in arg_letters:
             axis = arg_letters[header[0]]
-            t = axis.to_internal(rows[:, 0] / _argument_unit(axis))
+            t = rows[:, 0] / written_argument(axis)
             for k, n in enumerate(header[1:]):
                 e = by_isg[n]
                 out[e] = _linear_table(e, axis, t, rows[:, k + 1])
@@ -306,15 +352,18 @@ def corrected(exact, held: dict, q: dict, linear: list[Symbol]) -> dict:
 
 
 def between_records(axes: list[Symbol], grid: list[np.ndarray], f: IsgFile) -> list[dict]:
-    """Per block with an argument, its records' midpoints along that axis x the check grid of
-    the other axes: where GRID's straight line is furthest from the error."""
+    """Per block with an argument, its records' midpoints along that axis x the other axes at
+    their limits and middle: where GRID's straight line is furthest from the error (a chord's
+    error moves the tool most at the ends of the lever arms, which the limits hold)."""
     sets = []
     for b in f.blocks:
         if b.argument is None:
             continue
         j = [a.name for a in axes].index(f.letters[b.argument].name)
-        pos = b.rows[:, 0] / _argument_unit(axes[j])
-        sets.append(X._mesh(axes, [(pos[1:] + pos[:-1]) / 2 if k == j else grid[k] for k in range(len(axes))]))
+        pos = axes[j].from_internal(b.rows[:, 0] / written_argument(axes[j]))
+        sets.append(X._mesh(axes, [(pos[1:] + pos[:-1]) / 2 if k == j else
+                                   (grid[k] if len(grid[k]) <= 3 else np.linspace(grid[k][0], grid[k][-1], 3))
+                                   for k in range(len(axes))]))
     return sets
 
 
@@ -326,6 +375,7 @@ def export(machine: Machine, values: dict, joints: list[str] | None, points: int
     letters = letters_of(machine, iso_axes)
     values = X._held_at_the_ends(machine, values)
     grid = X.check_grid(machine, axes, points)
+    check_directions(machine, values, letters)
     f = build(machine, values, letters, entries)
     if not f.names:
         raise ChaincompError(f"--format {FORMAT} represents none of the errors given for {machine.name} (none has "
@@ -338,6 +388,10 @@ def export(machine: Machine, values: dict, joints: list[str] | None, points: int
     linear = [letters[c] for c in LINEAR]
     sets = [X._mesh(axes, grid)] + between_records(axes, grid, f)
     n_points = sum(int(np.prod(X._shape(q))) for q in sets)
+    if n_points > X.MAX_POINTS:
+        raise ChaincompError(f"the check would take {n_points} points (the grid, and between every two of the "
+                             f"{sum(len(b.rows) for b in f.blocks)} records; at most {X.MAX_POINTS}): lower "
+                             f"--grid or --entries")
     names = [s.name for s in machine.errors if X._nonzero(values.get(s.name, 0.0))]
     if shares and len(names) * n_points > X.MAX_BREAKDOWN // 4:
         raise ChaincompError(f"the breakdown would check each of {len(names)} errors alone on {n_points} points "
@@ -364,5 +418,5 @@ def export(machine: Machine, values: dict, joints: list[str] | None, points: int
             alone = X._errors_only(machine, values, {name})
             belief = X._errors_only(machine, held, {name} & keep)
             b, a = residuals(alone, belief)
-            out.shares.append(X.ErrorShare(name, X.Residual.of(b), X.Residual.of(a)))
+            out.shares.append(X.ErrorShare(name, X.Residual.of(b), X.Residual.of(a), carried=name in keep))
     return out, text, list_text(machine, f, axes)

@@ -85,7 +85,10 @@ def _iso_axes(text: str | None) -> dict[str, str] | None:
     if text is None:
         return None
     out = {}
-    for item in names(text, "--iso-axes"):
+    items = names(text, "--iso-axes")
+    if not items:
+        raise ChaincompError("--iso-axes: empty (expected LETTER=AXIS,..., e.g. X=X1,Y=Y1,Z=Z1)")
+    for item in items:
         letter, eq, axis = (p.strip() for p in item.partition("="))
         if not eq or not letter or not axis:
             raise ChaincompError(f"--iso-axes {item!r}: expected LETTER=AXIS, e.g. X=X1,A=Ap")

@@ -96,11 +96,13 @@ def test_the_residual_is_the_controllers_replay_and_a_parabolas_chord(capsys, tm
                 ezz=3e-3, ec0y=6 * ARCSEC)
     held = dict(exx=lambda x: isg_csv.value(blocks, "EXX", X=x), eyy=lambda y: isg_csv.value(blocks, "EYY", Y=y),
                 ezz=isg_csv.value(blocks, "EZZ"), ec0y=isg_csv.value(blocks, "C0Y"))
-    # the check points the report promises: 5 per axis, and between every two records of each table
+    # the check points the report promises: 5 per axis, and between every two records of each
+    # table with the other axes at their limits and middle
     g = [np.linspace(0, 300, 5), np.linspace(0, 200, 5), np.linspace(-100, 0, 5)]
+    g3 = [np.linspace(0, 300, 3), np.linspace(0, 200, 3), np.linspace(-100, 0, 3)]
     recs = {"X": next(b for b in blocks if b.arguments == ["X"]).grid[0],
             "Y": next(b for b in blocks if b.arguments == ["Y"]).grid[0]}
-    sets = [g, [(recs["X"][1:] + recs["X"][:-1]) / 2, g[1], g[2]], [g[0], (recs["Y"][1:] + recs["Y"][:-1]) / 2, g[2]]]
+    sets = [g, [(recs["X"][1:] + recs["X"][:-1]) / 2, g3[1], g3[2]], [g3[0], (recs["Y"][1:] + recs["Y"][:-1]) / 2, g3[2]]]
     worst = []
     for s in sets:
         x, y, z = (v.ravel() for v in np.meshgrid(*s, indexing="ij"))
@@ -196,3 +198,72 @@ def test_refusals_write_nothing(tmp_path):
     lathe = machine_path("me220_xz")
     nothing_written(tmp_path, "export", lathe, "--params", f"{PARAMS}/me220_xz-example.yaml", "--format",
                     "isg-volcomp", "-o", out, match="needs three linear axes X, Y, Z")
+
+
+# ----------------------------------------------------------------------------- found by a bad-input hunt
+
+def test_rotary_arguments_are_degrees_and_linear_ones_mm_whatever_the_declared_unit(capsys, tmp_path):
+    """296426379: arguments in mm (X, Y, Z) and degrees (A, B, C). A C axis in deg and an X
+    axis declared in inches: the records span the limits in deg and in mm, and the values
+    sit where the arguments say."""
+    params = write_file(tmp_path, "tr.yaml", "machine: trunnion_ac\nvalues:\n  EC0C: 5 arcsec\n"
+                        "  EX0C: {axis: C, units: [deg, um], polynomial: [0, 0.05]}\n")
+    code, _, err = run_main(capsys, "export", machine_path("trunnion_ac"), "--params", params, "--format",
+                            "isg-volcomp", "-o", tmp_path / "tr", "--entries", "5", "--grid", "3", "--no-breakdown")
+    assert code == 0, err
+    c = next(b for b in isg_csv.read((tmp_path / "tr" / "volcomp.csv").read_text()) if b.arguments == ["C"])
+    assert c.grid[0] == pytest.approx([-360.0, -180.0, 0.0, 180.0, 360.0])    # trunnion_ac's C limits, deg
+    assert c.at("X0C", C=90.0) == pytest.approx(0.05 * 90 * 1e-3, abs=1e-9)
+    inches = OWN.replace("{name: X, role: axis, unit: mm, limits: [0, 300]", "{name: X, role: axis, unit: in, "
+                         "limits: [0, 10]").replace("[X + EXX, 0, 0]", "[X*25.4 + EXX, 0, 0]")
+    machine = write_file(tmp_path, "own_in.yaml", inches)
+    params = write_file(tmp_path, "in.yaml", "machine: own_iso\nvalues:\n  EXX: {axis: X, units: [in, um], "
+                        "polynomial: [0, 1]}\n")
+    code, _, err = run_main(capsys, "export", machine, "--params", params, "--format", "isg-volcomp", "-o",
+                            tmp_path / "in", "--entries", "3", "--grid", "3", "--no-breakdown")
+    assert code == 0, err
+    x = next(b for b in isg_csv.read((tmp_path / "in" / "volcomp.csv").read_text()) if b.arguments == ["X"])
+    assert x.grid[0] == pytest.approx([0.0, 127.0, 254.0])            # mm
+    assert x.at("EXX", X=254.0) == pytest.approx(10 * 1e-3, abs=1e-9)  # 1 um per inch, 10 in
+
+
+def test_an_error_it_cannot_carry_is_never_called_represented(capsys, tmp_path):
+    ppm = OWN.replace("{name: EXX, role: error, unit: um", "{name: EXX, role: error, unit: ppm").replace(
+        "[X + EXX, 0, 0]", "[X + EXX*X, 0, 0]")
+    machine = write_file(tmp_path, "own_ppm.yaml", ppm)
+    params = write_file(tmp_path, "ppm.yaml", "machine: own_iso\nvalues:\n  EXX: 0.2 ppm\n  EYY: 3 um\n")
+    code, stdout, err = run_main(capsys, "export", machine, "--params", params, "--format", "isg-volcomp", "-o",
+                                 tmp_path / "isg", "--grid", "3", "--report", "json")
+    assert code == 0, err
+    doc = json.loads(stdout)
+    assert "EXX" in doc["isg"]["left_out"]
+    assert next(e for e in doc["errors"] if e["name"] == "EXX")["represented"] == "no"   # 0.06 um, under the floor
+
+
+def test_more_refusals_write_nothing(tmp_path):
+    machine = write_file(tmp_path, "own_iso.yaml", OWN)
+    out = tmp_path / "isg"
+
+    def refused(params_text, *extra, match, machine=machine):
+        params = write_file(tmp_path, "p.yaml", params_text)
+        nothing_written(tmp_path, "export", machine, "--params", params, "--format", "isg-volcomp", "-o", out,
+                        *extra, match=match)
+
+    refused("machine: own_iso\nvalues:\n  EXX: {axis: X, units: [mm, um], interpolation: linear, outside: hold, "
+            "table: [[0, 0], [100.0000001, 0], [100.0000002, 5], [100.0000003, 0], [300, 0]]}\n",
+            match="EXX: knots of its table closer than 1e-6 mm")
+    refused("machine: own_iso\nvalues:\n  EXX: {axis: X, units: [mm, um], polynomial: [0, 0, 1.0e+12]}\n",
+            match="an ISG CSV file carries errors below 1000")
+    refused("machine: own_iso\nvalues:\n  EXX: 3 um\n", "--iso-axes", "X=Y,Y=X,Z=Z",
+            match="X must move the tool along x")
+    refused("machine: own_iso\nvalues:\n  EXX: 3 um\n", "--iso-axes", "", match="--iso-axes: empty")
+    tiny = OWN.replace("limits: [0, 300]", "limits: [0, 0.0000001]")
+    refused("machine: own_iso\nvalues:\n  EXX: {axis: X, units: [mm, um], polynomial: [1, 0.001]}\n",
+            machine=write_file(tmp_path, "tiny.yaml", tiny), match="are too close for 33 records")
+    both = OWN.replace("name: own_iso", "name: own_both").replace("chain:\n", "loop:\n  tool:\n").replace(
+        "  - {translate: [X + EXX, 0, 0]}\n  - {translate: [-Y*sin(EC0Y), Y*cos(EC0Y) + EYY, 0]}\n"
+        "  - {translate: [Z*sin(SXZ), 0, Z + EZZ]}\n",
+        "    - {translate: [X + EXX, 0, 0]}\n    - {translate: [-Y*sin(EC0Y), Y*cos(EC0Y) + EYY, 0]}\n"
+        "    - {translate: [Z*sin(SXZ), 0, Z + EZZ]}\n  workpiece:\n    - {translate: [0, 0, X/1000]}\n")
+    refused("machine: own_both\nvalues:\n  EXX: 3 um\n", machine=write_file(tmp_path, "both.yaml", both),
+            match="moves both the tool and the workpiece side")
