@@ -291,6 +291,20 @@ def names(text: str | None, option: str = "list") -> list[str]:
     return out
 
 
+def assignments(items: list[str], option: str, form: str) -> dict[str, str]:
+    """KEY=VALUE items of an option (``form`` names them, e.g. "AXIS=VALUE"), stripped, each
+    key once, in order."""
+    out: dict[str, str] = {}
+    for item in items:
+        key, eq, value = (x.strip() for x in item.partition("="))
+        if not eq or not key or not value:
+            raise ChaincompError(f"{option}: expected {form}, got {item!r}")
+        if key in out:
+            raise ChaincompError(f"{option}: {key} given twice")
+        out[key] = value
+    return out
+
+
 def length(machine, option: str, raw: str, positive: bool = False) -> float:
     """'1um', '0.001 mm' or a bare number in the machine's length unit -> mm, finite and >= 0
     (> 0 if ``positive``)."""

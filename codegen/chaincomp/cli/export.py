@@ -9,8 +9,8 @@ from ..analysis import export as X
 from ..analysis import isg_volcomp as ISG
 from ..errors import ChaincompError
 from ..model.params import parse_value
-from .common import (add_machine_argument, add_values_arguments, check_finite, check_output, integer, load,
-                     names, refuse_empty, to_json, values_for)
+from .common import (add_machine_argument, add_values_arguments, assignments, check_finite, check_output,
+                     integer, load, names, refuse_empty, to_json, values_for)
 
 MAX_GRID = 101
 FORMATS = X.FORMATS + (ISG.FORMAT,)
@@ -63,13 +63,7 @@ def add_parser(sub) -> None:
 
 def _reversal(machine, items: list[str]) -> dict[str, float]:
     out = {}
-    for item in items:
-        name, eq, raw = item.partition("=")
-        name = name.strip()
-        if not eq or not name:
-            raise ChaincompError(f"--reversal {item!r}: expected AXIS=VALUE, e.g. X=4um")
-        if name in out:
-            raise ChaincompError(f"--reversal {name}: given twice")
+    for name, raw in assignments(items, "--reversal", "AXIS=VALUE, e.g. X=4um").items():
         if name not in [a.name for a in machine.axes]:
             raise ChaincompError(f"--reversal {name}: not an axis of {machine.name} "
                                  f"({', '.join(a.name for a in machine.axes)})")
@@ -77,25 +71,17 @@ def _reversal(machine, items: list[str]) -> dict[str, float]:
         try:
             out[name] = axis.from_internal(parse_value(axis, raw))
         except ValueError as exc:
-            raise ChaincompError(f"--reversal {item}: {exc}") from None
+            raise ChaincompError(f"--reversal {name}={raw}: {exc}") from None
     return out
 
 
 def _iso_axes(text: str | None) -> dict[str, str] | None:
     if text is None:
         return None
-    out = {}
     items = names(text, "--iso-axes")
     if not items:
         raise ChaincompError("--iso-axes: empty (expected LETTER=AXIS,..., e.g. X=X1,Y=Y1,Z=Z1)")
-    for item in items:
-        letter, eq, axis = (p.strip() for p in item.partition("="))
-        if not eq or not letter or not axis:
-            raise ChaincompError(f"--iso-axes {item!r}: expected LETTER=AXIS, e.g. X=X1,A=Ap")
-        if letter in out:
-            raise ChaincompError(f"--iso-axes {letter}: given twice")
-        out[letter] = axis
-    return out
+    return assignments(items, "--iso-axes", "LETTER=AXIS, e.g. X=X1,A=Ap")
 
 
 def _outputs(e: X.Export, out: str, file_type: int, isg: tuple[str, str] | None) -> dict[str, str]:

@@ -12,8 +12,8 @@ import numpy as np
 from ..errors import ChaincompError
 from ..measure import thermal as T
 from ..model.yamlsource import write_checked
-from .common import (add_format_argument, add_machine_argument, check_finite, check_output, integer, load, names,
-                     number, parse_number, to_json)
+from .common import (add_format_argument, add_machine_argument, assignments, check_finite, check_output, integer,
+                     load, names, number, parse_number, to_json)
 
 LOG_HELP = ("a CSV log: 'time [s]', temperature columns 'NAME [degC]' and drift columns named by the errors they "
             "measure, e.g. 'EZZ [um]'")
@@ -86,15 +86,7 @@ def add_parser(sub) -> None:
 
 
 def _renames(items: list[str]) -> dict[str, str]:
-    out = {}
-    for item in items:
-        column, eq, error = (s.strip() for s in item.partition("="))
-        if not eq or not column or not error:
-            raise ChaincompError(f"--drift: expected COLUMN=ERROR, got {item!r}")
-        if column in out:
-            raise ChaincompError(f"--drift: column {column} given twice")
-        out[column] = error
-    return out
+    return assignments(items, "--drift", "COLUMN=ERROR")
 
 
 def _require_sensors(model: T.ThermalModel, log: T.Log) -> None:
@@ -240,17 +232,14 @@ def run_stream(args) -> int:
     model = T.load_model(args.model, machine)
     refs = {}
     axes = {a.name: a for a in machine.axes if a.unit.kind == "length"}
-    for item in args.reference_position:
-        name, eq, raw = (x.strip() for x in item.partition("="))
-        if not eq or name not in axes:
+    for name, raw in assignments(args.reference_position, "--reference-position", "AXIS=VALUE").items():
+        if name not in axes:
             raise ChaincompError(f"--reference-position: expected AXIS=VALUE with a linear axis of {machine.name} "
-                                 f"({', '.join(axes)}), got {item!r}")
-        if name in refs:
-            raise ChaincompError(f"--reference-position: {name} given twice")
+                                 f"({', '.join(axes)}), got {name}={raw}")
         try:
             refs[name] = axes[name].to_internal(float(parse_number(raw)))
         except ValueError as exc:
-            raise ChaincompError(f"--reference-position {item}: {exc}") from None
+            raise ChaincompError(f"--reference-position {name}={raw}: {exc}") from None
     log = T.read_log(args.log, machine, require_drift=False)
     _require_sensors(model, log)
     lines = T.axis_lines(machine, list(model.errors), refs)

@@ -253,7 +253,7 @@ def test_refusals_write_nothing(tmp_path):
                     os.path.join(PARAMS, "trunnion_ac-demo.yaml"), "--format", "linuxcnc-comp", "-o", out,
                     "--grid", "3", "--entries", "9", match="leaves more tool error than no compensation for trunnion_ac")
     nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "linuxcnc-comp", "-o", out,
-                    "--reversal", "X=1um", "--reversal", "X=2um", match="--reversal X: given twice")
+                    "--reversal", "X=1um", "--reversal", "X=2um", match="--reversal: X given twice")
     nothing_written(tmp_path, "export", vmc, "--params", params, "--set", "X=100", "--format", "linuxcnc-comp",
                     "-o", out, match="--set X=100: X is an axis")
     nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "linuxcnc-comp", "-o", "",

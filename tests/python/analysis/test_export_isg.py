@@ -186,7 +186,7 @@ def test_refusals_write_nothing(tmp_path):
     nothing_written(tmp_path, *base, "--iso-axes", "X=X,Y=Y,W=Z", match="--iso-axes W=Z: W is not an ISO axis letter")
     nothing_written(tmp_path, *base, "--iso-axes", "X=X,Y=Y,A=Z", match="A is a rotary axis in ISO 230-1, but Z")
     nothing_written(tmp_path, *base, "--iso-axes", "X=X,Y=Y", match="needs three linear axes X, Y, Z")
-    nothing_written(tmp_path, *base, "--iso-axes", "X=X,X=Y", match="--iso-axes X: given twice")
+    nothing_written(tmp_path, *base, "--iso-axes", "X=X,X=Y", match="--iso-axes: X given twice")
     nothing_written(tmp_path, "export", machine, "--params", params, "--format", "marlin", "-o", tmp_path / "m.g",
                     "--iso-axes", "X=X,Y=Y,Z=Z", match="--iso-axes: only isg-volcomp")
     only_sxz = write_file(tmp_path, "sxz.yaml", "machine: own_iso\nvalues:\n  SXZ: 10 arcsec\n")
