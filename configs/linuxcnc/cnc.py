@@ -66,19 +66,46 @@ def matrixkins_unavailable() -> str | None:
     return None
 
 
+WORD = r"\s*([+-]?\s*(?:\d+\.?\d*|\.\d+))"   # an RS274NGC word's number (spaces allowed)
+
+
 def without_c_moves(program: str) -> str:
     """The program with C held at 0: matrixkins passes joint 4 through as B, not C, so on this
     XYZAC configuration only a program that leaves C at 0 means the same thing."""
-    return re.sub(r"\bC-?\d+(\.\d*)?", "C0", program)
+    def code(line: str) -> str:   # the words before a comment
+        head, paren, rest = line.partition("(")
+        return re.sub(r"(?i)C" + WORD, "C0", head) + paren + rest
+    return "\n".join(code(line) for line in program.split("\n"))
 
 
 def program_points(program: str, letters: str = "XYZAC") -> np.ndarray:
     """The points a program's G0/G1 moves go to, one row per move (mm, deg): where its dwells are."""
     rows = []
     for line in program.splitlines():
-        if re.match(r"\s*G[01]\b", line):
-            rows.append([float(re.search(rf"\b{c}(-?\d+(\.\d*)?)", line).group(1)) for c in letters])
+        if re.match(r"(?i)\s*G\s*0?[01](?!\d)", line):
+            rows.append([float(re.search(rf"(?i){c}" + WORD, line).group(1).replace(" ", "")) for c in letters])
     return np.array(rows, float)
+
+
+def matrixkins_at_dwells(run, machine, params, values, c, program: str) -> tuple[float, float]:
+    """A matrixkins run against chaincomp's replay of its C, at each of the program's dwells:
+    the largest |joints - C . point| (mm; the G-code's own points, not read back from
+    LinuxCNC) and |measured - predicted| tool error (mm: the true machine at the drives,
+    against the exact model at C . point)."""
+    from chaincomp.analysis import export as X
+
+    exact, lin, points = X.ExactModel(machine), machine.axes[:3], program_points(program)
+    joints_off = tool_off = 0.0
+    for s, point in zip(dwells(run.pos_commands)[-len(points):], points):
+        joints = run.drives[s]
+        joints_off = max(joints_off, float(np.abs(joints[:, :3] - c @ point[:3]).max()),
+                         float(np.abs(joints[:, 3:] - point[3:]).max()))
+        programmed = np.broadcast_to(point, joints.shape)
+        measured, _ = tool_errors(machine, params, programmed, joints)
+        q = to_internal(machine, programmed)
+        predicted = X.tool_error(exact, values, q, X.apply_matrix(lin, c, q)).T
+        tool_off = max(tool_off, float(np.abs(measured - predicted).max()))
+    return joints_off, tool_off
 
 
 @dataclass
@@ -132,28 +159,31 @@ def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeo
     route-off.hal, with KINEMATICS = matrixkins in place of trivkins."""
     if route not in ROUTES:
         raise ValueError(f"route {route!r}: expected one of {', '.join(ROUTES)}")
+    if (route == "comp") != bool(comp):
+        raise ValueError("the comp route takes comp files (comp={joint: file}), and only it")
+    if (route == "matrixkins") != bool(matrixkins):
+        raise ValueError("the matrixkins route takes the exporter's HAL file (matrixkins=path), and only it")
     src = os.path.join(HERE, config)
     work = work or tempfile.mkdtemp(prefix=f"chaincomp-cnc-{config}-{route}-")
     for f in glob.glob(os.path.join(src, "*")) + [os.path.join(HERE, "drive.py")]:
         shutil.copy(f, work)
     shutil.copy(os.path.join(src, f"route-{'off' if route == 'matrixkins' else route}.hal"),
                 os.path.join(work, "route.hal"))
-    if (route == "matrixkins") != bool(matrixkins):
-        raise ValueError("the matrixkins route takes the exporter's HAL file (matrixkins=path), and only it")
     if matrixkins:
         with open(matrixkins) as f, open(os.path.join(work, "route.hal"), "a") as out:
             out.write("\n" + f.read())
         ini = os.path.join(work, f"{config}.ini")
         with open(ini) as f:
             text = f.read()
+        text, n = re.subn(r"(?m)^KINEMATICS = .*$", "KINEMATICS = matrixkins", text)
+        if n != 1:
+            raise ValueError(f"{ini}: expected one KINEMATICS line, found {n}")
         with open(ini, "w") as f:
-            f.write(re.sub(r"(?m)^KINEMATICS = .*$", "KINEMATICS = matrixkins", text))
+            f.write(text)
     if program is not None:
         with open(os.path.join(work, "program.ngc"), "w") as f:
             f.write(program)
     params = os.path.abspath(params or os.path.join(ROOT, "configs", "params", f"{config}-demo.yaml"))
-    if (route == "comp") != bool(comp):
-        raise ValueError("the comp route takes comp files (comp={joint: file}), and only it")
     if comp:
         _add_comp_files(os.path.join(work, f"{config}.ini"), comp, work)
     with open(os.path.join(work, f"{config}.ini"), "a") as f:  # what the HAL files read as [CHAINCOMP]KEY

@@ -533,7 +533,8 @@ def to_json(e: Export) -> dict:
         f = e.isg
         doc["isg"] = {"axes": {c: a.name for c, a in f.letters.items()}, "chain": f.chain,
                       "workpiece_axes": f.workpiece_axes, "names": f.names, "left_out": f.left_out,
-                      "records": sum(len(b.rows) for b in f.blocks), "represented_only": res(f.represented_only)}
+                      "workpiece_side": f.workpiece_side, "records": f.records, "notes": f.notes,
+                      "represented_only": res(f.represented_only)}
     doc["errors"] = [{"name": s.name, "before": res(s.before), "after": res(s.after),
                       "represented": s.represented} for s in e.shares]
     return doc
@@ -542,11 +543,14 @@ def to_json(e: Export) -> dict:
 def to_text(e: Export) -> str:
     def um(r: Residual) -> str:
         return f"max {r.max * 1e3:.3f} um, RMS {r.rms * 1e3:.3f} um"
-    between = ", and between every two entries of each joint" if e.tables else ""
+    between = (", and between every two entries of each joint" if e.tables else
+               ", and between every two records of each table" if e.isg is not None and e.isg.records > 1 else "")
+    rule = ("the file as ISG holds it, composed as ISO 230-1 on this model" if e.isg is not None else
+            "the controller's own rule")
     lines = [f"export {e.format} for {e.machine.name}: checked on {e.grid_points} points "
              f"({e.grid} per axis over the limits{between})",
              f"  tool-point error without compensation: {um(e.before)}",
-             f"  with it (the controller's own rule):    {um(e.after)}"]
+             f"  with it ({rule}): {um(e.after)}"]
     if e.tables:
         lines.append("  " + "; ".join(f"{t.axis.name}: {len(t.nominal)} entries, largest trim "
                                        f"{np.max(np.abs(t.forward)):.6g} {t.axis.unit.name}" for t in e.tables))
@@ -560,8 +564,9 @@ def to_text(e: Export) -> str:
     if e.isg is not None:
         f = e.isg
         lines.append(f"  axes {', '.join(f'{c}={a.name}' for c, a in f.letters.items())}; chain {f.chain} "
-                     f"(workpiece to tool), workpiece_axes {f.workpiece_axes}; "
-                     f"{sum(len(b.rows) for b in f.blocks)} records")
+                     f"(workpiece to tool), workpiece_axes {f.workpiece_axes}; {f.records} "
+                     f"record{'s' if f.records != 1 else ''}")
+        lines += [f"  note: {n}" for n in f.notes]
         lines.append(f"  with the errors it carries alone: {um(f.represented_only)}")
         if f.left_out:
             reasons: dict[str, list[str]] = {}

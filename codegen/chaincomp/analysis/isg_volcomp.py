@@ -68,7 +68,13 @@ class IsgFile:
     names: dict[str, str]               # the machine's error -> ISG name (the represented ones)
     left_out: dict[str, str]            # the machine's error -> why the format cannot carry it
     blocks: list[Block] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)   # what the user must set in the controller
     represented_only: X.Residual | None = None  # the residual with the represented errors alone
+    workpiece_side: int = 0             # axes the machine file's loop puts on the workpiece side
+
+    @property
+    def records(self) -> int:
+        return sum(len(b.rows) for b in self.blocks)
 
 
 # ----------------------------------------------------------------------------- axes and names
@@ -153,27 +159,76 @@ def chain_order(machine: Machine, letters: dict[str, Symbol]) -> tuple[str, int]
     return "".join(order(machine.chain)), len(order(machine.workpiece_chain))
 
 
-def check_directions(machine: Machine, values: dict, letters: dict[str, Symbol]) -> None:
-    """X, Y and Z must move the tool along x, y and z (ISO 841): at the middle of the limits,
-    each one's direction of motion relative to the workpiece lies within 45 degrees of its own
-    coordinate axis, or the file's EXX would be another axis' error."""
+def _home(machine: Machine) -> dict:
+    """The pose ISO 841 names the axes at: linear axes mid-travel, rotary axes at 0 (kept
+    inside their limits), every constant nominal and every error zero."""
+    q = machine.nominal_values()
+    for a in machine.axes:
+        lo, hi = sorted(a.to_internal(v) for v in a.limits)
+        q[a.name] = float(np.clip(0.0, lo, hi)) if a.unit.kind == "angle" else (lo + hi) / 2
+    return q
+
+
+def check_directions(machine: Machine, letters: dict[str, Symbol], f: IsgFile) -> None:
+    """X, Y and Z must move the tool along +x, +y and +z relative to the workpiece, and A, B, C
+    turn about x, y and z (ISO 841), within 45 degrees at _home: else the file's EXX would be
+    another axis' error, or its sign the opposite. A rotary axis the file names no error of
+    (an inclined head's) only gets a note: ISG describes it by VXA.. (296423819)."""
+    used = {n[-1] for n in f.names.values()} | {b.argument for b in f.blocks if b.argument}
+    q = _home(machine)
     exact = X.ExactModel(machine)
-    q = {a.name: np.asarray(a.to_internal(sum(a.limits) / 2), float) for a in machine.axes}
     for k, c in enumerate(LINEAR):
         a = letters[c]
-        d = X._jacobian_column(exact, values, q, a.name).reshape(3)
+        d = X._jacobian_column(exact, q, {n: np.asarray(v, float) for n, v in q.items() if machine.symbol(n).role ==
+                                           "axis"}, a.name).reshape(3)
         n = float(np.linalg.norm(d))
-        if not n or abs(d[k]) < 0.7071 * n:
-            raise ChaincompError(f"--format {FORMAT}: {c} must move the tool along {c.lower()} (ISO 841), but "
-                                 f"{a.name} of {machine.name} moves it along ({d[0] / n:.3f}, {d[1] / n:.3f}, "
-                                 f"{d[2] / n:.3f}) at the middle of its limits" if n else
+        if not n or d[k] < 0.7071 * n:
+            raise ChaincompError(f"--format {FORMAT}: {c} must move the tool along +{c.lower()} relative to the "
+                                 f"workpiece (ISO 841), but {a.name} of {machine.name} moves it along "
+                                 f"({d[0] / n:+.3f}, {d[1] / n:+.3f}, {d[2] / n:+.3f})" if n else
                                  f"--format {FORMAT}: {a.name} of {machine.name} does not move the tool")
+    for c, a in letters.items():
+        if c in ROTARY:
+            w = rotation_axis(machine, a.name, q)
+            c_axis = "xyz"[ROTARY.index(c)]
+            if abs(w["xyz".index(c_axis)]) >= 0.7071:
+                continue
+            if c not in used:
+                f.notes.append(f"{a.name} turns about ({w[0]:+.3f}, {w[1]:+.3f}, {w[2]:+.3f}), not about {c_axis}: "
+                               f"no error of it is in the file; ISG describes such an axis by V{'XYZ'[0]}{c}, "
+                               f"V{'XYZ'[1]}{c}, V{'XYZ'[2]}{c} (its modified orientation, 296423819)")
+                continue
+            raise ChaincompError(f"--format {FORMAT}: {c} must turn about {c_axis} (ISO 841), but {a.name} of "
+                                 f"{machine.name} turns about ({w[0]:+.3f}, {w[1]:+.3f}, {w[2]:+.3f}): name "
+                                 f"the rotary axes with --iso-axes")
+
+
+def rotation_axis(machine: Machine, axis: str, q: dict) -> np.ndarray:
+    """The unit direction a rotary axis turns about, in the workpiece frame at ``q``: the first
+    rotation of the chain (workpiece to tool) whose angle uses the axis, its coordinate axis
+    carried through the rotations before it."""
+    r = np.eye(3)
+    for e in machine.chain:
+        if not isinstance(e, Rotation):
+            continue
+        k = "xyz".index(e.axis)
+        if axis in e.expr.names:
+            return r[:, k]
+        angle = e.expr.value(q)
+        c, s_ = np.cos(angle), np.sin(angle)
+        i, j = [m for m in range(3) if m != k]
+        step = np.eye(3)
+        step[i, i], step[i, j], step[j, i], step[j, j] = c, -s_, s_, c
+        if k == 1:   # about y: z -> x is the positive sense
+            step[i, j], step[j, i] = s_, -s_
+        r = r @ step
+    raise ChaincompError(f"--format {FORMAT}: rotary axis {axis} of {machine.name} turns no rotation of the chain")
 
 
 # ----------------------------------------------------------------------------- the file
 
-def written_argument(axis: Symbol) -> float:
-    """Internal units (mm, rad) to the file's arguments: mm, or degrees (296426379)."""
+def argument_scale(axis: Symbol) -> float:
+    """The factor from internal units (mm, rad) to the file's arguments: mm, or degrees (296426379)."""
     return 1.0 if axis.unit.kind == "length" else 180.0 / np.pi
 
 
@@ -182,7 +237,7 @@ def _records(machine: Machine, axis: Symbol, entries: int, varying: dict[str, Va
     spaced over the axis' limits, and the knots of its tables inside them (GRID is then exact
     on a linear table; a monotone cubic gets its own knots and the points between). Knots the
     rounding would merge are refused: the file could not tell them apart."""
-    k = written_argument(axis)
+    k = argument_scale(axis)
     unit = "mm" if axis.unit.kind == "length" else "deg"
     lo, hi = sorted(axis.to_internal(v) * k for v in axis.limits)
     pts = [np.linspace(lo, hi, entries)]
@@ -196,15 +251,18 @@ def _records(machine: Machine, axis: Symbol, entries: int, varying: dict[str, Va
                                      v.file, v.line, v.key)
             pts.append(knots)
     out = np.unique(np.round(np.concatenate(pts), ARGUMENT_DECIMALS))
-    if len(out) < min(entries, 2):
+    if len(np.unique(np.round(pts[0], ARGUMENT_DECIMALS))) < entries:
         raise ChaincompError(f"axis {axis.name}: its limits [{axis.limits[0]:g}, {axis.limits[1]:g}] "
                              f"{axis.unit.name} are too close for {entries} records 1e-{ARGUMENT_DECIMALS} {unit} "
                              f"apart: nothing written")
     return out + 0.0
 
 
-def build(machine: Machine, values: dict, letters: dict[str, Symbol], entries: int) -> IsgFile:
+def build(machine: Machine, values: dict, letters: dict[str, Symbol], entries: int, workpiece_axes: int = 0) -> IsgFile:
     chain, work = chain_order(machine, letters)
+    if not 0 <= workpiece_axes < len(chain):
+        raise ChaincompError(f"--workpiece-axes {workpiece_axes}: expected 0 to {len(chain) - 1} (P-VOLC-00008: "
+                             f"fewer than the {len(chain)} axes of the chain)")
     names, left = {}, {}
     for e in machine.errors:
         v = values.get(e.name, 0.0)
@@ -215,7 +273,7 @@ def build(machine: Machine, values: dict, letters: dict[str, Symbol], entries: i
             left[e.name] = why
         else:
             names[e.name] = name
-    f = IsgFile(letters, chain, work, names, left)
+    f = IsgFile(letters, chain, workpiece_axes, names, left, workpiece_side=work)
     constants = [e for e in names if not isinstance(values[e], Varying)]
     if constants:
         f.blocks.append(Block(None, [names[e] for e in constants], np.array([[values[e] for e in constants]])))
@@ -230,23 +288,23 @@ def build(machine: Machine, values: dict, letters: dict[str, Symbol], entries: i
             continue
         axis = machine.symbol(axis_name)
         args = _records(machine, axis, entries, {e: values[e] for e in errs})
-        t = args / written_argument(axis)          # the errors at the arguments as written
+        t = args / argument_scale(axis)          # the errors at the arguments as written
         cols = [np.broadcast_to(np.asarray(values[e](t), float), t.shape) for e in errs]
         f.blocks.append(Block(letter_of[axis_name], [names[e] for e in errs], np.column_stack([args] + cols)))
+    by_isg = {n: e for e, n in names.items()}
     for b in f.blocks:
         for k, n in enumerate(b.names):
             col = b.rows[:, k + (b.argument is not None)]
-            e = next(e for e, m in names.items() if m == n)
+            e = by_isg[n]
             big = np.abs(col) >= MAX_VALUE
             if big.any() or not np.all(np.isfinite(col)):
                 raise ChaincompError(f"{e}: {float(col[np.argmax(big | ~np.isfinite(col))]):g} "
                                      f"{'mm' if machine.symbol(e).unit.kind == 'length' else 'rad'} somewhere on its "
                                      f"axis: an ISG CSV file carries errors below {MAX_VALUE:g} (plain decimals to "
                                      f"1e-9 mm): nothing written")
-    rows = sum(len(b.rows) for b in f.blocks)
-    if rows > MAX_ROWS:
-        raise ChaincompError(f"--entries {entries}: the file would hold {rows} records (at most {MAX_ROWS}): "
-                             f"lower --entries")
+    if f.records > MAX_ROWS:
+        raise ChaincompError(f"the file would hold {f.records} records (--entries {entries} per varying error, and "
+                             f"its table's knots; at most {MAX_ROWS}): lower --entries or thin the tables")
     return f
 
 
@@ -275,15 +333,20 @@ def csv_text(machine: Machine, f: IsgFile) -> str:
 
 
 def list_text(machine: Machine, f: IsgFile, joints: list[Symbol]) -> str:
-    rows = sum(len(b.rows) for b in f.blocks)
     number = {a.name: n + 1 for n, a in enumerate(joints)}
     lines = [f"# chaincomp export {FORMAT} for {machine.name}: the compensation list of ISG's volumetric",
-             "# compensation. Logical axis numbers in the joint order (--joints); check them against the",
-             f"# channel's. In the start-up list (hochlauf.lis): vol_comp[0].max_records  {max(rows, 1)}"]
+             "# compensation, to check before use: the logical axis numbers below are the joint order",
+             "# (--joints), not read from your channel's configuration; file[0] is relative, put the",
+             "# controller's path there. In the start-up list (hochlauf.lis):",
+             f"#   vol_comp[0].max_records  {max(f.records, 1)}"]
     lines += [f"{c} {number[a.name]}" for c, a in f.letters.items()]
-    lines += ["# the axes from the workpiece to the tool, and how many lie on the workpiece side",
-              f"chain {f.chain}", f"workpiece_axes {f.workpiece_axes}",
+    lines += ["# the axes from the workpiece to the tool (as the machine file's chain meets them)", f"chain {f.chain}",
+              "# how many of them lie on the workpiece side for the measurement (P-VOLC-00008): the errors are",
+              "# ISO 230-1's, the tool's relative to the workpiece, so 0 unless your measurement treated table",
+              f"# axes otherwise (296411019); the machine file's loop puts {f.workpiece_side} on the workpiece side",
+              f"workpiece_axes {f.workpiece_axes}",
               "interpolation GRID", f"file[0] {CSV_FILE}", "file_format[0] ISG_CSV"]
+    lines += [f"# {n}" for n in f.notes]
     return "\n".join(lines) + "\n"
 
 
@@ -312,34 +375,34 @@ def controller_values(machine: Machine, f: IsgFile, text: str, values: dict) -> 
     linear between records, held beyond them (GRID); errors it has no name for are zero."""
     out = {k: v for k, v in values.items() if machine.symbol(k).role != "error"}
     by_isg = {n: e for e, n in f.names.items()}
-    arg_letters = {c: a for c, a in f.letters.items()}
     for header, rows in read_csv(text):
-        if header[0] in arg_letters:
-            axis = arg_letters[header[0]]
-            t = rows[:, 0] / written_argument(axis)
+        if header[0] in f.letters:
+            axis = f.letters[header[0]]
+            t = rows[:, 0] / argument_scale(axis)
             for k, n in enumerate(header[1:]):
                 e = by_isg[n]
-                out[e] = _linear_table(e, axis, t, rows[:, k + 1])
+                out[e] = _linear_table(machine.symbol(e), axis, t, rows[:, k + 1])
         else:
             for k, n in enumerate(header):
                 out[by_isg[n]] = float(rows[0, k])
     return out
 
 
-def _linear_table(error: str, axis: Symbol, x: np.ndarray, y: np.ndarray) -> Table:
+def _linear_table(error: Symbol, axis: Symbol, x: np.ndarray, y: np.ndarray) -> Table:
     slope = np.diff(y) / np.diff(x)
     d = np.concatenate([slope[:1], (slope[1:] + slope[:-1]) / 2, slope[-1:]])
     zero = np.zeros_like(slope)
-    return Table(error, axis.name, (axis.unit, axis.unit), "hold", float(x[0]), float(x[-1]),
+    return Table(error.name, axis.name, (axis.unit, error.unit), "hold", float(x[0]), float(x[-1]),
                  interpolation="linear", x=x, y=y, d=d, b=slope, c=zero, e=zero)
 
 
 # ----------------------------------------------------------------------------- the check
 
 def corrected(exact, held: dict, q: dict, linear: list[Symbol]) -> dict:
-    """The setpoints the controller drives to: the deviation its values predict at the
-    commanded position, taken off the linear axes through the nominal model's derivative
-    (one step, as a controller does per cycle; the second-order remainder is in the residual)."""
+    """The setpoints the controller is taken to drive to: the deviation its values predict at
+    the commanded position, taken off the linear axes through the nominal model's derivative,
+    once (ISG's pages do not say how it solves; one step leaves a second-order remainder, which
+    is in the residual, where an iteration would not)."""
     d = X.tool_error(exact, held, q, q)
     jac = np.stack([X._jacobian_column(exact, held, q, a.name) for a in linear], axis=1)   # (3, 3, ...)
     shape = d.shape[1:]
@@ -353,14 +416,15 @@ def corrected(exact, held: dict, q: dict, linear: list[Symbol]) -> dict:
 
 def between_records(axes: list[Symbol], grid: list[np.ndarray], f: IsgFile) -> list[dict]:
     """Per block with an argument, its records' midpoints along that axis x the other axes at
-    their limits and middle: where GRID's straight line is furthest from the error (a chord's
-    error moves the tool most at the ends of the lever arms, which the limits hold)."""
+    their limits and middle: between records is where GRID's straight line departs from the
+    error (the largest departure of a parabola's chord is at the midpoint; of other curves near
+    it), and the limits hold the longest lever arms."""
     sets = []
     for b in f.blocks:
         if b.argument is None:
             continue
         j = [a.name for a in axes].index(f.letters[b.argument].name)
-        pos = axes[j].from_internal(b.rows[:, 0] / written_argument(axes[j]))
+        pos = axes[j].from_internal(b.rows[:, 0] / argument_scale(axes[j]))
         sets.append(X._mesh(axes, [(pos[1:] + pos[:-1]) / 2 if k == j else
                                    (grid[k] if len(grid[k]) <= 3 else np.linspace(grid[k][0], grid[k][-1], 3))
                                    for k in range(len(axes))]))
@@ -368,20 +432,21 @@ def between_records(axes: list[Symbol], grid: list[np.ndarray], f: IsgFile) -> l
 
 
 def export(machine: Machine, values: dict, joints: list[str] | None, points: int, entries: int,
-           iso_axes: dict[str, str] | None = None, shares: bool = True, progress=None) -> tuple[X.Export, str, str]:
+           iso_axes: dict[str, str] | None = None, workpiece_axes: int = 0, shares: bool = True,
+           progress=None) -> tuple[X.Export, str, str]:
     """The file and its list for ``values`` (internal units), and what they leave on the exact
     model over the check grid and between every two records of each table."""
     axes = X.axes_of(machine, joints)
     letters = letters_of(machine, iso_axes)
     values = X._held_at_the_ends(machine, values)
     grid = X.check_grid(machine, axes, points)
-    check_directions(machine, values, letters)
-    f = build(machine, values, letters, entries)
+    f = build(machine, values, letters, entries, workpiece_axes)
     if not f.names:
         raise ChaincompError(f"--format {FORMAT} represents none of the errors given for {machine.name} (none has "
                              f"an ISO 230-1 name of its axes: " + ", ".join(f"{e}: {w}" for e, w in
                                                                              list(f.left_out.items())[:3]) +
                              "): nothing written")
+    check_directions(machine, letters, f)
     text = csv_text(machine, f)
     held = controller_values(machine, f, text, values)
     exact = X.ExactModel(machine)
@@ -390,7 +455,7 @@ def export(machine: Machine, values: dict, joints: list[str] | None, points: int
     n_points = sum(int(np.prod(X._shape(q))) for q in sets)
     if n_points > X.MAX_POINTS:
         raise ChaincompError(f"the check would take {n_points} points (the grid, and between every two of the "
-                             f"{sum(len(b.rows) for b in f.blocks)} records; at most {X.MAX_POINTS}): lower "
+                             f"{f.records} records; at most {X.MAX_POINTS}): lower "
                              f"--grid or --entries")
     names = [s.name for s in machine.errors if X._nonzero(values.get(s.name, 0.0))]
     if shares and len(names) * n_points > X.MAX_BREAKDOWN // 4:

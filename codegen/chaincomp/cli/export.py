@@ -43,6 +43,9 @@ def add_parser(sub) -> None:
                    help=f"linuxcnc-comp: entries per joint, equally spaced over its limits (default 33, at most "
                         f"{X.LINUXCNC_MAX_ENTRIES}: LinuxCNC's EMCMOT_COMP_SIZE); isg-volcomp: records of each "
                         f"error that varies, over its axis' limits (and a linear table's own knots)")
+    p.add_argument("--workpiece-axes", type=integer(0, 5), default=0, metavar="N",
+                   help="isg-volcomp: workpiece_axes of the compensation list (P-VOLC-00008; default 0: the errors "
+                        "are ISO 230-1's, the tool's relative to the workpiece)")
     p.add_argument("--iso-axes", metavar="X=A1,Y=A2,...", help="isg-volcomp: the ISO 230-1 letter of each axis "
                    "(default: axes named X, Y, Z, A, B, C, or a rotary axis whose name starts with A, B or C)")
     p.add_argument("--comp-file-type", type=int, choices=(0, 1), default=1,
@@ -135,6 +138,8 @@ def run(args) -> int:
     iso_axes = _iso_axes(args.iso_axes)
     if iso_axes is not None and args.target != ISG.FORMAT:
         raise ChaincompError(f"--iso-axes: only {ISG.FORMAT} names its axes by ISO letter, not {args.target}")
+    if args.workpiece_axes and args.target != ISG.FORMAT:
+        raise ChaincompError(f"--workpiece-axes: only {ISG.FORMAT} has it, not {args.target}")
     reversal = _reversal(machine, args.reversal)
     if reversal and args.target != "linuxcnc-comp":
         raise ChaincompError(f"--reversal: only linuxcnc-comp has a reverse trim, not {args.target}")
@@ -148,8 +153,8 @@ def run(args) -> int:
     grid = args.grid or X.default_grid(len(machine.axes))
     isg = None
     if args.target == ISG.FORMAT:
-        e, *isg = ISG.export(machine, values, joints, grid, args.entries, iso_axes, shares=not args.no_breakdown,
-                             progress=progress)
+        e, *isg = ISG.export(machine, values, joints, grid, args.entries, iso_axes, args.workpiece_axes,
+                             shares=not args.no_breakdown, progress=progress)
     else:
         e = X.export(machine, values, args.target, joints, grid, args.entries, reversal,
                      shares=not args.no_breakdown, progress=progress)

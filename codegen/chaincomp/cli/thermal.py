@@ -232,7 +232,8 @@ def run_stream(args) -> int:
     model = T.load_model(args.model, machine)
     refs = {}
     axes = {a.name: a for a in machine.axes if a.unit.kind == "length"}
-    for name, raw in assignments(args.reference_position, "--reference-position", "AXIS=VALUE").items():
+    for name, raw in assignments(args.reference_position, "--reference-position",
+                                 f"AXIS=VALUE with a linear axis of {machine.name} ({', '.join(axes)})").items():
         if name not in axes:
             raise ChaincompError(f"--reference-position: expected AXIS=VALUE with a linear axis of {machine.name} "
                                  f"({', '.join(axes)}), got {name}={raw}")

@@ -163,10 +163,16 @@ def test_bundled_every_iso_error_is_carried_and_leaves_under_a_micrometre(capsys
         assert e["represented"] == "yes" and e["after"]["max_um"] <= 1.0, e
     assert doc["isg"]["represented_only"]["max_um"] <= 1.0
     if name == "vmc_xyz":
-        assert doc["isg"]["chain"] == "XYZ" and doc["isg"]["workpiece_axes"] == 2   # the table carries X and Y
+        # the table carries X on Y (walking from the workpiece: X, Y, then the column's Z);
+        # workpiece_axes stays ISG's default 0: the errors are the tool's relative to the workpiece
+        assert doc["isg"]["chain"] == "XYZ" and doc["isg"]["workpiece_side"] == 2
+        assert doc["isg"]["workpiece_axes"] == 0
         assert doc["after"]["max_um"] <= 1.0 < doc["before"]["max_um"]
     else:   # the head's errors have no ISO 230-1 names: left out, and the residual says so
         assert doc["isg"]["axes"] == {"X": "X", "Y": "Y", "Z": "Z", "A": "Ap", "C": "Cp"}
+        assert doc["isg"]["chain"] == "XYZCA" and doc["isg"]["workpiece_side"] == 0   # slides carry C, C carries A
+        # the head's A is inclined (50 deg from C): named in a note, as no error of it is written
+        assert any("Ap turns about (+0.000, +0.766, +0.643)" in n for n in doc["isg"]["notes"])
         assert set(doc["isg"]["left_out"]) == {"ThetaAs", "Oas", "ThetaAv", "DY", "Ocx", "Ocy", "ThetaCh", "ThetaCv"}
         assert doc["after"]["max_um"] > 10
 
@@ -255,7 +261,7 @@ def test_more_refusals_write_nothing(tmp_path):
     refused("machine: own_iso\nvalues:\n  EXX: {axis: X, units: [mm, um], polynomial: [0, 0, 1.0e+12]}\n",
             match="an ISG CSV file carries errors below 1000")
     refused("machine: own_iso\nvalues:\n  EXX: 3 um\n", "--iso-axes", "X=Y,Y=X,Z=Z",
-            match="X must move the tool along x")
+            match="X must move the tool along +x")
     refused("machine: own_iso\nvalues:\n  EXX: 3 um\n", "--iso-axes", "", match="--iso-axes: empty")
     tiny = OWN.replace("limits: [0, 300]", "limits: [0, 0.0000001]")
     refused("machine: own_iso\nvalues:\n  EXX: {axis: X, units: [mm, um], polynomial: [1, 0.001]}\n",
@@ -267,3 +273,27 @@ def test_more_refusals_write_nothing(tmp_path):
         "    - {translate: [Z*sin(SXZ), 0, Z + EZZ]}\n  workpiece:\n    - {translate: [0, 0, X/1000]}\n")
     refused("machine: own_both\nvalues:\n  EXX: 3 um\n", machine=write_file(tmp_path, "both.yaml", both),
             match="moves both the tool and the workpiece side")
+
+
+def test_trunnion_chain_letters_and_directions(capsys, tmp_path):
+    """trunnion_ac: C on A on the table, X Y Z the tool's: chain CAXYZ, two axes on the
+    workpiece side; --workpiece-axes is written as given; swapped rotary letters, a linear
+    axis moving along -x and a --workpiece-axes past the chain are refused."""
+    params = f"{PARAMS}/trunnion_ac-demo.yaml"
+    code, stdout, err = run_main(capsys, "export", machine_path("trunnion_ac"), "--params", params, "--format",
+                                 "isg-volcomp", "-o", tmp_path / "t", "--grid", "3", "--no-breakdown",
+                                 "--workpiece-axes", "2", "--report", "json")
+    assert code == 0, err
+    doc = json.loads(stdout)
+    assert doc["isg"]["chain"] == "CAXYZ" and doc["isg"]["workpiece_side"] == 2 and doc["isg"]["workpiece_axes"] == 2
+    assert "\nworkpiece_axes 2\n" in (tmp_path / "t" / "volcomp.lis").read_text()
+    base = ("export", machine_path("trunnion_ac"), "--params", params, "--format", "isg-volcomp", "-o", tmp_path / "u")
+    nothing_written(tmp_path, *base, "--iso-axes", "X=X,Y=Y,Z=Z,A=C,C=A",
+                    match="A must turn about x (ISO 841), but C of trunnion_ac turns about (+0.000, +0.000, +1.000)")
+    nothing_written(tmp_path, *base, "--workpiece-axes", "5", match="--workpiece-axes 5: expected 0 to 4")
+    minus = OWN.replace("[X + EXX, 0, 0]", "[-X - EXX, 0, 0]")
+    machine = write_file(tmp_path, "minus.yaml", minus)
+    p = write_file(tmp_path, "m.yaml", "machine: own_iso\nvalues:\n  EXX: 3 um\n")
+    nothing_written(tmp_path, "export", machine, "--params", p, "--format", "isg-volcomp", "-o", tmp_path / "v",
+                    match="X must move the tool along +x relative to the workpiece (ISO 841), but X of own_iso "
+                          "moves it along (-1.000, +0.000, +0.000)")
