@@ -297,3 +297,22 @@ def test_trunnion_chain_letters_and_directions(capsys, tmp_path):
     nothing_written(tmp_path, "export", machine, "--params", p, "--format", "isg-volcomp", "-o", tmp_path / "v",
                     match="X must move the tool along +x relative to the workpiece (ISO 841), but X of own_iso "
                           "moves it along (-1.000, +0.000, +0.000)")
+
+
+def test_the_readers_grid_on_the_manuals_two_argument_example():
+    """The test's reader on 296429067's own example of a block over Z and X (sag): GRID is
+    linear in each argument, so halfway in both is the mean of the four records."""
+    text = """// The argument "Z" now crops up in the header.
+Z X EXX EYX EZX EAX EBX ECX
+// In the first block Z is always = 0.
+0.0 0.0 0.02 0.01 0.07 0.00 0.0042 0.003
+0.0 10.0 0.00 -0.1 0.01 0.00 0.0011 0.002
+// In the second block Z is always = 100.
+100.0 0.0 0.01 0.02 0.03 0.07 0.0040 0.003
+100.0 10.0 0.03 -0.09 0.03 0.06 0.0015 0.000
+"""
+    (b,) = isg_csv.read(text)
+    assert b.arguments == ["Z", "X"]
+    assert b.at("EXX", Z=50.0, X=5.0) == pytest.approx((0.02 + 0.00 + 0.01 + 0.03) / 4)
+    assert b.at("EYX", Z=100.0, X=10.0) == pytest.approx(-0.09)
+    assert b.at("EZX", Z=0.0, X=2.5) == pytest.approx(0.07 + 0.25 * (0.01 - 0.07))
