@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ChaincompError
-from ..model.machine import Machine, Rotation, Symbol
+from ..model.machine import ROT_PLANE, Machine, Rotation, Symbol
 from ..model.varying import Table, Varying
 from . import export as X
 
@@ -211,16 +211,13 @@ def rotation_axis(machine: Machine, axis: str, q: dict) -> np.ndarray:
     for e in machine.chain:
         if not isinstance(e, Rotation):
             continue
-        k = "xyz".index(e.axis)
         if axis in e.expr.names:
-            return r[:, k]
+            return r[:, "xyz".index(e.axis)]
         angle = e.expr.value(q)
         c, s_ = np.cos(angle), np.sin(angle)
-        i, j = [m for m in range(3) if m != k]
+        i, j = ROT_PLANE[e.axis]     # the plane it turns, in its positive sense (as the models do)
         step = np.eye(3)
         step[i, i], step[i, j], step[j, i], step[j, j] = c, -s_, s_, c
-        if k == 1:   # about y: z -> x is the positive sense
-            step[i, j], step[j, i] = s_, -s_
         r = r @ step
     raise ChaincompError(f"--format {FORMAT}: rotary axis {axis} of {machine.name} turns no rotation of the chain")
 
@@ -232,7 +229,7 @@ def argument_scale(axis: Symbol) -> float:
     return 1.0 if axis.unit.kind == "length" else 180.0 / np.pi
 
 
-def _records(machine: Machine, axis: Symbol, entries: int, varying: dict[str, Varying]) -> np.ndarray:
+def _records(axis: Symbol, entries: int, varying: dict[str, Varying]) -> np.ndarray:
     """The arguments of a block as written (mm or deg, rounded to 1e-6): ``entries`` equally
     spaced over the axis' limits, and the knots of its tables inside them (GRID is then exact
     on a linear table; a monotone cubic gets its own knots and the points between). Knots the
@@ -287,7 +284,7 @@ def build(machine: Machine, values: dict, letters: dict[str, Symbol], entries: i
         if not errs:
             continue
         axis = machine.symbol(axis_name)
-        args = _records(machine, axis, entries, {e: values[e] for e in errs})
+        args = _records(axis, entries, {e: values[e] for e in errs})
         t = args / argument_scale(axis)          # the errors at the arguments as written
         cols = [np.broadcast_to(np.asarray(values[e](t), float), t.shape) for e in errs]
         f.blocks.append(Block(letter_of[axis_name], [names[e] for e in errs], np.column_stack([args] + cols)))
@@ -462,26 +459,27 @@ def export(machine: Machine, values: dict, joints: list[str] | None, points: int
         raise ChaincompError(f"the breakdown would check each of {len(names)} errors alone on {n_points} points "
                              f"(at most {X.MAX_BREAKDOWN // 4} in all): lower --grid or add --no-breakdown")
 
-    def residuals(true: dict, belief: dict) -> tuple[list, list]:
-        before = [X.tool_error(exact, true, q, q) for q in sets]
-        after = [X.tool_error(exact, true, q, corrected(exact, belief, q, linear)) for q in sets]
-        return before, after
+    def uncompensated(true: dict) -> list:
+        return [X.tool_error(exact, true, q, q) for q in sets]
 
-    before, after = residuals(values, held)
+    def compensated(true: dict, belief: dict) -> list:
+        return [X.tool_error(exact, true, q, corrected(exact, belief, q, linear)) for q in sets]
+
+    before, after = uncompensated(values), compensated(values, held)
     for b, a, q in zip(before, after, sets):
         X._check_finite(machine, b, q, "the tool point with the errors given")
         X._check_finite(machine, a, q, f"the tool point with {FORMAT}'s correction")
     out = X.Export(FORMAT, machine, points, n_points, X.Residual.of(before), X.Residual.of(after))
     out.isg = f
     keep = set(f.names)
-    _, only = residuals(X._errors_only(machine, values, keep), X._errors_only(machine, held, keep))
-    f.represented_only = X.Residual.of(only)
+    f.represented_only = X.Residual.of(compensated(X._errors_only(machine, values, keep),
+                                                   X._errors_only(machine, held, keep)))
     if shares:
         if progress:
             progress(f"{FORMAT} checked on {n_points} points; now each of the {len(names)} errors alone")
         for name in names:
             alone = X._errors_only(machine, values, {name})
             belief = X._errors_only(machine, held, {name} & keep)
-            b, a = residuals(alone, belief)
-            out.shares.append(X.ErrorShare(name, X.Residual.of(b), X.Residual.of(a), carried=name in keep))
+            out.shares.append(X.ErrorShare(name, X.Residual.of(uncompensated(alone)),
+                                           X.Residual.of(compensated(alone, belief)), carried=name in keep))
     return out, text, list_text(machine, f, axes)
