@@ -64,7 +64,9 @@ def add_parser(sub) -> None:
                                      "controller's per-axis temperature compensation takes: for each linear axis an "
                                      "offset at a reference position and a slope (the tool's error along the axis' "
                                      "travel over its range, the other axes at their default positions, fitted by a "
-                                     "line), negated: the correction to add to the axis. --format siemens: SD43900 "
+                                     "line): the error line itself, as both manuals define it, which the "
+                                     "controller takes out (it moves the axis by minus the line). --format "
+                                     "siemens: SD43900 "
                                      "$SA_TEMP_COMP_ABS_VALUE (mm), SD43910 $SA_TEMP_COMP_SLOPE (tan beta) and "
                                      "SD43920 $SA_TEMP_COMP_REF_POSITION (mm), K = SD43900 + SD43910 (P - SD43920); "
                                      "isg: P-AXIS-00273 temp_comp_offset_0 (0.1 um), P-AXIS-00274 "
@@ -253,8 +255,12 @@ def run_stream(args) -> int:
     table = [log.t]
     report = {}
     for ln in lines:
-        offset = -sum(values[e] * ln.offset[e] for e in values)      # the correction, mm at the reference
-        slope = -sum(values[e] * ln.slope[e] for e in values)        # mm/mm
+        # The error line, not negated: SINUMERIK K3 (SD43900/SD43910) defines "the gradient of
+        # the approximated error line", Delta K = K0 + tan(beta) (P - P0), which the controller
+        # compensates (a positive value moves the axis negative); ISG's temperature offset is "the
+        # deviation". A negated line would double the drift (docs/guide/thermal.md, The sign).
+        offset = sum(values[e] * ln.offset[e] for e in values)       # the error along the axis, mm at P0
+        slope = sum(values[e] * ln.slope[e] for e in values)         # mm/mm
         departure = sum(np.abs(values[e]) * ln.departure[e] for e in values)
         for (_, _, scale, whole), series in zip(cols, (offset, slope, np.full(len(log.t), ln.reference))):
             table.append(np.rint(series * scale) if whole else series * scale)

@@ -16,7 +16,7 @@ from chaincomp.measure import thermal as T
 from chaincomp.measure.thermal import lag
 from chaincomp.model import units as U
 from chaincomp.model.machine import load_machine
-from helpers import cli, machine_path, one_error_line, run_cli, run_in_process
+from helpers import ROOT, cli, machine_path, one_error_line, run_cli, run_in_process
 
 LATHE = """\
 name: lathe_zx
@@ -387,15 +387,17 @@ errors:
 
 
 def _stream(path):
+    """A CSV's columns by header (comment lines skipped)."""
     with open(path) as f:
-        header = f.readline().strip().split(",")
-    data = np.loadtxt(path, delimiter=",", skiprows=1)
-    return {h: data[:, k] for k, h in enumerate(header)}
+        rows = [line.strip().split(",") for line in f if not line.startswith("#")]
+    data = np.array(rows[1:], float)
+    return {h: data[:, k] for k, h in enumerate(rows[0])}
 
 
-def test_streams_are_the_negated_errors_along_each_axis(tmp_path):
+def test_streams_are_the_error_lines_along_each_axis(tmp_path):
     """A scale error of the cross slide (ppm, the steel's expansion) is X's slope; the headstock's
-    growth along z is Z's offset: both against the simulated truth (the log's drift columns)."""
+    growth along z is Z's offset: both against the simulated truth (the log's drift columns), with
+    the manuals' sign: the error line itself (the controller takes it out)."""
     (tmp_path / "m.yaml").write_text(SCALED_LATHE)
     (tmp_path / "true.yaml").write_text(SCALED_TRUE)
     m, true, log = tmp_path / "m.yaml", tmp_path / "true.yaml", tmp_path / "log.csv"
@@ -406,12 +408,12 @@ def test_streams_are_the_negated_errors_along_each_axis(tmp_path):
     doc = json.loads(cli("thermal", "stream", m, true, log, "--format", "siemens", "-o", tmp_path / "s.csv",
                          "--reference-position", "X=50", "--json").stdout)
     s = _stream(tmp_path / "s.csv")
-    # X moves the tool by X (1 + SXS): the correction along X is -SXS X = -SXS 50 - SXS (X - 50)
-    assert s["X SD43910 $SA_TEMP_COMP_SLOPE [1]"] == pytest.approx(-sxs, rel=1e-3, abs=1e-11)
-    assert s["X SD43900 $SA_TEMP_COMP_ABS_VALUE [mm]"] == pytest.approx(-sxs * 50, rel=1e-3, abs=1e-9)
+    # X moves the tool by X (1 + SXS): the error along X is SXS X = SXS 50 + SXS (X - 50)
+    assert s["X SD43910 $SA_TEMP_COMP_SLOPE [1]"] == pytest.approx(sxs, rel=1e-3, abs=1e-11)
+    assert s["X SD43900 $SA_TEMP_COMP_ABS_VALUE [mm]"] == pytest.approx(sxs * 50, rel=1e-3, abs=1e-9)
     assert np.all(s["X SD43920 $SA_TEMP_COMP_REF_POSITION [mm]"] == 50)
     # the headstock (workpiece side) grows by EZS towards the tool: the tool relative to the workpiece moves -EZS in z
-    assert s["Z SD43900 $SA_TEMP_COMP_ABS_VALUE [mm]"] == pytest.approx(ezs, rel=1e-3, abs=1e-7)   # (readings 10 s apart)
+    assert s["Z SD43900 $SA_TEMP_COMP_ABS_VALUE [mm]"] == pytest.approx(-ezs, rel=1e-3, abs=1e-7)   # (readings 10 s apart)
     assert np.max(np.abs(s["Z SD43910 $SA_TEMP_COMP_SLOPE [1]"])) < 1e-12   # (rounding: 0.01 nm over 1 m)
     assert doc["axes"]["X"]["line_departure_max_um"] < 1e-6   # a scale is a line
     cli("thermal", "stream", m, true, log, "--format", "isg", "-o", tmp_path / "i.csv", "--reference-position", "X=50")
@@ -419,8 +421,44 @@ def test_streams_are_the_negated_errors_along_each_axis(tmp_path):
     assert np.array_equal(i["X P-AXIS-00274 temp_comp_coefficient [um/m]"],
                           np.rint(s["X SD43910 $SA_TEMP_COMP_SLOPE [1]"] * 1e6))   # the same values, rounded
     assert np.array_equal(i["Z P-AXIS-00273 temp_comp_offset_0 [0.1um]"], np.rint(s["Z SD43900 $SA_TEMP_COMP_ABS_VALUE [mm]"] * 1e4))
-    assert np.max(np.abs(i["X P-AXIS-00274 temp_comp_coefficient [um/m]"] + sxs * 1e6)) <= 0.5 + 1e-3
+    assert np.max(np.abs(i["X P-AXIS-00274 temp_comp_coefficient [um/m]"] - sxs * 1e6)) <= 0.5 + 1e-3
     assert np.all(i["X P-AXIS-00272 temp_comp_position_0 [0.1um]"] == 500000)
+
+
+def _controller_line(stream, axis, fmt, p):
+    """The compensation value at axis position ``p`` (mm), read from the stream as each manual
+    defines its parameters: SINUMERIK Extended Functions K3, 'Temperature compensation':
+    Delta K = SD43900 + SD43910 * (P - SD43920), the approximated error line; ISG: the
+    temperature offset P-AXIS-00273 (0.1 um) at the basic position P-AXIS-00272 (0.1 um) plus
+    the pitch P-AXIS-00274 (um/m)."""
+    col = {k.split(" ", 2)[1]: v for k, v in stream.items() if k.startswith(axis + " ")}
+    if fmt == "siemens":
+        return col["SD43900"] + col["SD43910"] * (p - col["SD43920"])
+    return col["P-AXIS-00273"] * 1e-4 + col["P-AXIS-00274"] * 1e-6 * (p - col["P-AXIS-00272"] * 1e-4)
+
+
+@pytest.mark.parametrize("fmt", ["siemens", "isg"])
+def test_the_controller_applying_the_stream_as_its_manual_says_removes_the_bundled_warm_up_drift(tmp_path, fmt):
+    """vmc_xyz warmed up by the bundled model: the axis' actual position is the command plus the
+    error, and the controller takes its compensation value as that error and moves the axis by
+    minus it (K3: a positive compensation value moves the axis negative). On vmc_xyz EZZ and EYZ
+    are tool-side offsets (dz, dy), the head moves the tool by +Z and the saddle by +Y
+    relative to the workpiece (configs/machines/vmc_xyz.yaml): the error along Z is EZZ and along
+    Y is EYZ, at every position. What is left must be a small part of the drift, not double it."""
+    m, true, log = machine_path("vmc_xyz"), f"{ROOT}/configs/thermal/vmc_xyz-true.yaml", tmp_path / "log.csv"
+    cli("simulate-thermal", m, "--model", true, "-o", log, "--drift-noise", "0", "--temperature-noise", "0",
+        "--rate", "0.1")
+    drift = _stream(log)
+    cli("thermal", "stream", m, true, log, "--format", fmt, "-o", tmp_path / "s.csv")
+    s = _stream(tmp_path / "s.csv")
+    for axis, error, (lo, hi) in (("Z", "EZZ", (-400, 0)), ("Y", "EYZ", (-250, 250))):
+        e = drift[f"{error} [um]"] * 1e-3   # mm: the axis' actual position minus its command, uncompensated
+        before = np.max(np.abs(e))
+        assert before > (0.015 if axis == "Z" else 0.0005)   # a warm-up worth compensating
+        for p in (lo, (lo + hi) / 2, hi):
+            left = e - _controller_line(s, axis, fmt, p)     # the axis commanded to p - Delta K
+            assert np.max(np.abs(left)) < 0.02 * before + 0.1e-3, (axis, p, np.max(np.abs(left)), before)
+    assert np.all(_controller_line(s, "X", fmt, 400.0) == 0)   # neither error moves the tool along x
 
 
 def test_stream_bad_options(lathe):
