@@ -33,6 +33,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ChaincompError
+from ..escape import one_line
 from ..model.display import display_unit
 from ..model.machine import Machine, Symbol
 from ..model.units import UNITS
@@ -672,7 +673,7 @@ def to_text(b: Budget, top: int = 5, units: str = "people") -> str:
     m, tol = b.machine, b.tolerances
     order = {"1": "first-order gains", "2": "second-order model (gradient at the centre + a bound of "
              "its quadratic terms)", "exact": "exact model (secant gains across each tolerance)"}[b.order]
-    lines = [f"BUDGET {m.name} ({m.file}), {order}"]
+    lines = [f"BUDGET {m.name} ({one_line(m.file)}), {order}"]
     n_u = sum(t.distribution == "uniform" for t in tol.items)
     n_n = len(tol.items) - n_u
     if tol.source == "params":

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import sympy as sp
 
+from .. import escape
 from ..model.machine import Machine, Rotation
 from ..symbolic.derive import COMPONENTS, Derivation, Progress
 
@@ -139,11 +140,11 @@ def markdown(d: Derivation, protocol: str | None = None, progress: bool = False)
     m = d.machine
     prog = Progress(f"report {m.name}", progress)   # high orders: a minute of grouping terms
     small, axes = d.small, {s.sym for s in m.axes}
-    out = [f"# {m.name}: geometric error model", "", m.description, "",
-           f"Derived by chaincomp from `{m.file}` to order {d.order} in the errors. Every symbol enters "
+    out = [f"# {escape.markdown(m.name)}: geometric error model", "", escape.markdown(m.description), "",
+           f"Derived by chaincomp from {escape.markdown(m.file)} to order {d.order} in the errors. Every symbol enters "
            "the formulas in internal units (mm, rad).", "", "## Symbols", "",
            "| Variable | Size | Sign | Unit | Definition |", "|---|---|---|---|---|"]
-    out += [f"| {n} | {size} | {sign} | {unit} | {meaning} |" for n, size, sign, unit, meaning in symbol_rows(m)]
+    out += ["| " + " | ".join(map(escape.markdown, row)) + " |" for row in symbol_rows(m)]
     out += ["", _SENSE_NOTE, "", "## Chain", ""]
     if m.workpiece_chain:
         out += ["The tool relative to the workpiece: inv(reference→workpiece) · (reference→tool).", ""]
@@ -170,17 +171,8 @@ def markdown(d: Derivation, protocol: str | None = None, progress: bool = False)
         out.append(f"| {name} | " + " | ".join(cells) + " |")
     prog.done()
     if protocol:
-        out += ["", "## Measurement protocol", "", "```", protocol.rstrip(), "```"]
+        out += ["", "## Measurement protocol", ""] + escape.markdown_code_block(protocol.rstrip())
     return "\n".join(out) + "\n"
-
-
-_TEX = {"\\": r"\textbackslash{}", "_": r"\_", "&": r"\&", "%": r"\%", "#": r"\#", "$": r"\$",
-        "{": r"\{", "}": r"\}", "^": r"\textasciicircum{}", "~": r"\textasciitilde{}", "−": "$-$",
-        "±": r"$\pm$", "µ": r"$\mu$"}
-
-
-def _tex_escape(s: str) -> str:
-    return "".join(_TEX.get(ch, ch) for ch in s)
 
 
 def latex(d: Derivation, protocol: str | None = None, progress: bool = False) -> str:
@@ -201,15 +193,15 @@ def latex(d: Derivation, protocol: str | None = None, progress: bool = False) ->
 
     out = [r"\documentclass{article}", r"\usepackage{amsmath}", r"\usepackage[margin=2cm]{geometry}",
            r"\allowdisplaybreaks", r"\begin{document}",
-           rf"\section*{{{_tex_escape(m.name)}: geometric error model}}", _tex_escape(m.description), "",
-           rf"Derived by chaincomp from \texttt{{{_tex_escape(m.file)}}} to order {d.order} in the errors. "
+           rf"\section*{{{escape.latex(m.name)}: geometric error model}}", escape.latex(m.description), "",
+           rf"Derived by chaincomp from \texttt{{{escape.latex(m.file)}}} to order {d.order} in the errors. "
            "Every symbol enters the formulas in internal units (mm, rad).",
            r"\subsection*{Symbols}", r"\begin{tabular}{lllll}", r"Variable & Size & Sign & Unit & Definition \\",
            r"\hline"]
     for n, size, sign, unit, meaning in symbol_rows(m):
-        out.append(rf"${names[m.symbol(n).sym]}$ & {size} & {_tex_escape(sign)} & {_tex_escape(unit)} & "
-                   rf"{_tex_escape(meaning)} \\")
-    out += [r"\end{tabular}", "", _tex_escape(_SENSE_NOTE), r"\subsection*{Chain}"]
+        out.append(rf"${names[m.symbol(n).sym]}$ & {size} & {escape.latex(sign)} & {escape.latex(unit)} & "
+                   rf"{escape.latex(meaning)} \\")
+    out += [r"\end{tabular}", "", escape.latex(_SENSE_NOTE), r"\subsection*{Chain}"]
     if m.workpiece_chain:
         out.append(r"The tool relative to the workpiece: inv(reference$\to$workpiece)$\cdot$(reference$\to$tool).")
     factors = [rf"\mathbf{{{k[0]}}}{('_' + k[1]) if len(k) > 1 else ''}\left({', '.join(tex(a) for a in args)}\right)"
@@ -237,6 +229,6 @@ def latex(d: Derivation, protocol: str | None = None, progress: bool = False) ->
     out.append(r"\end{align*}")
     prog.done()
     if protocol:
-        out += [r"\subsection*{Measurement protocol}", r"\begin{verbatim}", protocol.rstrip(), r"\end{verbatim}"]
+        out += [r"\subsection*{Measurement protocol}", r"\begin{verbatim}", escape.latex_verbatim(protocol.rstrip()), r"\end{verbatim}"]
     out.append(r"\end{document}")
     return "\n".join(out) + "\n"

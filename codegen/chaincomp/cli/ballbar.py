@@ -16,7 +16,8 @@ from ..measure.calibration import _write_loadable
 from ..measure.protocol import check_errors
 from ..model.display import fixed, plus_minus
 from ..model.expressions import MAX_LITERAL
-from ..model.params_merge import merge, one_line
+from ..escape import one_line
+from ..model.params_merge import merge
 from ..model.varying import Varying
 from ..symbolic.jets import JetModel
 from ..symbolic.numeric import ExactModel
@@ -289,7 +290,7 @@ def params_text(machine, fit: bb.Fit, start: dict, source: str, merge_from: str 
             return head + [f'{indent}{name}: "{_fmt(s.from_internal(coeffs[0]))} {s.unit.name}"']
         a = machine.symbol(e["axis"])
         poly = [coeffs.get(k, 0.0) / s.unit.to_internal * a.unit.to_internal ** k for k in range(max(coeffs) + 1)]
-        return head + [f"{indent}{name}:   # {s.meaning}" if s.meaning else f"{indent}{name}:",
+        return head + [f"{indent}{name}:   # {one_line(s.meaning)}" if s.meaning else f"{indent}{name}:",
                        f"{indent}  axis: {e['axis']}",
                        f"{indent}  units: [{a.unit.name}, {s.unit.name}]",
                        f"{indent}  polynomial: [{', '.join(_fmt(c) for c in poly)}]"]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ..analysis.check import Result, check, load_formulas
+from ..escape import one_line
 from .common import add_format_argument, add_machine_argument, add_order_argument, load, to_json
 
 
@@ -41,7 +42,7 @@ def as_json(machine, ff, order: int, results: list[Result]) -> dict:
 
 
 def as_text(machine, ff, order: int, results: list[Result]) -> str:
-    lines = [f"{ff.path} against {machine.name} ({machine.file}), order {order}, chain {ff.chain}"]
+    lines = [f"{one_line(ff.path)} against {machine.name} ({one_line(machine.file)}), order {order}, chain {ff.chain}"]
     for r in results:
         lines.append(f"  {r.formula.name} (line {r.formula.line}): {'equal' if r.equal else 'DIFFERENT'}")
         for f in r.findings:

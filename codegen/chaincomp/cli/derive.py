@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sympy as sp
 
+from ..escape import one_line
 from ..model.machine import Rotation
 from ..symbolic.derive import COMPONENTS, EXPANDED_TERMS_LIMIT, Derivation, Progress, derive
 from ..symbolic.orientation import ROWS as ORIENTATION_ROWS
@@ -210,7 +211,7 @@ _ERROR_TITLES = {"error": "Tool point error", "direction_error": "Tool direction
 
 
 def _text(machine, d: Derivation, rep: dict) -> str:
-    lines = [f"Machine {machine.name} ({machine.file}): {len(machine.axes)} axes, "
+    lines = [f"Machine {machine.name} ({one_line(machine.file)}): {len(machine.axes)} axes, "
              f"{len(machine.constants)} constants, {len(machine.errors)} errors; order {d.order}",
              "Formulas take every symbol in internal units (mm, rad).", "",
              "Chain (rotations right-handed, senses applied):", "  X = " + chain_text(machine) + " · X0", ""]
@@ -231,7 +232,7 @@ def _text(machine, d: Derivation, rep: dict) -> str:
 
 
 def _latex(machine, rep: dict) -> str:
-    out = [f"% chaincomp derive {machine.file}", r"\begin{align*}"]
+    out = [f"% chaincomp derive {one_line(machine.file)}", r"\begin{align*}"]
     for key, value in rep.items():
         for comp, v in value.items():
             if isinstance(v, dict):

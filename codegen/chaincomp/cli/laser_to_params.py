@@ -12,7 +12,8 @@ from ..errors import ChaincompError
 from ..measure import iso230_2 as iso
 from ..measure.calibration import _write_loadable, varying_axis
 from ..model.machine import ROT_PLANE, Machine, Rotation
-from ..model.params_merge import merge, one_line
+from ..escape import one_line
+from ..model.params_merge import merge
 from ..model.varying import INTERPOLATIONS, MAX_TABLE_KNOTS, OUTSIDE
 from ..symbolic.numeric import ExactModel
 from .common import add_machine_argument, check_output, load, resolve_machine
@@ -135,7 +136,7 @@ def entry_lines(machine: Machine, error: str, axis: str, targets, values, unit: 
                 outside: str, indent: str, comment: str) -> list[str]:
     sym = machine.symbol(error)
     return [f"{indent}# {one_line(comment)}",
-            f"{indent}{error}:   # {sym.meaning}" if sym.meaning else f"{indent}{error}:",
+            f"{indent}{error}:   # {one_line(sym.meaning)}" if sym.meaning else f"{indent}{error}:",
             f"{indent}  axis: {axis}",
             f"{indent}  units: [{machine.symbol(axis).unit.name}, {unit}]",
             f"{indent}  interpolation: {interpolation}",

@@ -12,6 +12,7 @@ import numpy as np
 
 from .. import __version__
 from ..errors import ChaincompError
+from ..escape import one_line
 # Each verb's module, in the order of the top-level help. A command imports only its own verb's
 # module (every module pulls in its own libraries: all of them together cost ~0.4 s per run).
 VERB_MODULES = {
@@ -80,10 +81,6 @@ def _join_signed_values(argv: list[str]) -> list[str]:
     return out
 
 
-def _one_line(text: str) -> str:
-    return " ".join(str(text).split())
-
-
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv[0] if argv and argv[0] in VERB_MODULES else None)
@@ -100,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
         with np.errstate(all="ignore"):
             return args.run(args) or 0
     except ChaincompError as exc:
-        print(f"chaincomp {args.verb}: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"chaincomp {args.verb}: error: {one_line(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"chaincomp {args.verb}: interrupted", file=sys.stderr)
@@ -117,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:   # a bug: one line, not a stack, for the user; the stack for developers
         if debug:
             raise
-        print(f"chaincomp {args.verb}: internal error: {type(exc).__name__}: {_one_line(exc)} "
+        print(f"chaincomp {args.verb}: internal error: {type(exc).__name__}: {one_line(exc)} "
               "(please report this with the command line; CHAINCOMP_DEBUG=1 shows the traceback)",
               file=sys.stderr)
         return 3

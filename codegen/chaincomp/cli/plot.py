@@ -14,9 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ChaincompError
+from ..escape import html_text
 from ..model.display import add_units_argument, display_unit
 from ..model.expressions import MAX_LITERAL
 from ..model.units import UNITS
+from ..output import write_file
 from ..symbolic.jets import JetModel
 from ..symbolic.numeric import ExactModel
 from ..symbolic.orientation import angle_between
@@ -400,10 +402,11 @@ def write_html(args) -> None:
     m = map_data(args, None if volume else args.over, DEFAULT_GRID["map"] if volume else args.grid)
     v = volume_data(args, args.over if volume else None, args.grid if volume else DEFAULT_GRID["volume"])
     fig = make_subplots(rows=1, cols=2, specs=[[{"type": "scene"}, {"type": "scene"}]],
-                        subplot_titles=(m.title.replace("\n", "<br>"), v.title.replace("\n", "<br>")),
+                        subplot_titles=tuple("<br>".join(map(html_text, d.title.split("\n"))) for d in (m, v)),
                         horizontal_spacing=0.08)
-    fig.add_trace(go.Surface(x=m.g1, y=m.g2, z=m.z.T, colorscale="Viridis", name=m.label,
-                             colorbar={"title": {"text": m.label}, "x": 0.42, "len": 0.8}), 1, 1)
+    label = html_text(m.label)   # plotly reads its texts as a subset of HTML
+    fig.add_trace(go.Surface(x=m.g1, y=m.g2, z=m.z.T, colorscale="Viridis", name=label,
+                             colorbar={"title": {"text": label}, "x": 0.42, "len": 0.8}), 1, 1)
     tips = v.point + v.error * v.scale
     xs, ys, zs = (np.column_stack([v.point[:, k], tips[:, k], np.full(len(tips), np.nan)]).ravel()
                   for k in range(3))
@@ -419,12 +422,12 @@ def write_html(args) -> None:
     fig.add_trace(go.Scatter3d(x=[x0, x0 + v.key * v.scale], y=[y0, y0], z=[z0, z0],
                                mode="lines+text", line={"color": "red", "width": 6}, text=["", f"{v.key:g} {v.unit}"],
                                name=f"key: {v.key:g} {v.unit}"), 1, 2)
-    fig.update_scenes(xaxis_title=F.axis_label(m.a1), yaxis_title=F.axis_label(m.a2), zaxis_title=m.label,
+    fig.update_scenes(xaxis_title=F.axis_label(m.a1), yaxis_title=F.axis_label(m.a2), zaxis_title=label,
                       row=1, col=1)
     fig.update_scenes(**{f"{c}axis_title": F.label(f"tool point {c}", v.length_unit) for c in "xyz"}, row=1, col=2)
     fig.update_layout(width=1500, height=750, showlegend=True, legend={"x": 0.55, "y": 0.0},
                       margin={"t": 110})
-    F.write_file(args.html, fig.to_html(include_plotlyjs=True, full_html=True))
+    write_file(args.html, fig.to_html(include_plotlyjs=True, full_html=True))
 
 
 def _replay_figure(args):

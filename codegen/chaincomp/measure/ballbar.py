@@ -40,12 +40,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ChaincompError
+from ..escape import one_line
 from ..model import units as U
 from ..model.expressions import MAX_LITERAL
 from ..model.machine import Machine
 from ..model.params import parse_value
 from ..model.varying import Varying
-from ..model.yamlsource import read_text, write_checked
+from ..model.yamlsource import read_text
+from ..output import write_file
 from ..symbolic.jets import JetModel
 from ..symbolic.numeric import ExactModel
 from .calibration import find_slides
@@ -340,14 +342,11 @@ def header_lines(machine: Machine, setup: Setup) -> list[str]:
 
 
 def write_trace(path: str, machine: Machine, trace: Trace, comments=()) -> None:
-    lines = header_lines(machine, trace.setup) + [f"# {c}" for c in comments]
+    lines = header_lines(machine, trace.setup) + [f"# {one_line(c)}" for c in comments]
     lines.append("angle [deg],direction,deviation [um]")
     lines += [f"{_num(math.degrees(a))},{d},{v / UM:.6f}" for a, d, v in
               zip(trace.angle, trace.direction, trace.deviation)]
-    try:
-        write_checked(path, "\n".join(lines) + "\n")
-    except OSError as exc:
-        raise ChaincompError(f"cannot write: {exc.strerror}", path) from None
+    write_file(path, "\n".join(lines) + "\n")
 
 
 _META = re.compile(r"#\s*(machine|plane|axes|radius|centre|center|held|feed)\s*:\s*(.*?)\s*$", re.IGNORECASE)

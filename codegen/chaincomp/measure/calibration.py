@@ -28,6 +28,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ChaincompError
+from ..escape import one_line
 from ..model.machine import Machine, Rotation, Translation
 from ..model.varying import MAX_TABLE_KNOTS, MAX_VARYING_ERRORS, Varying
 
@@ -216,7 +217,7 @@ def _num(v: float) -> str:
 def write(path: str, machine: Machine, tables: dict, constants: dict, header: list[str],
           interpolation: str, outside: str) -> None:
     """A params file: the tables, then every other error as a constant in its declared unit."""
-    lines = [f"# {h}" if h else "#" for h in header]
+    lines = [f"# {one_line(h)}" if h else "#" for h in header]
     lines += [f"machine: {machine.name}", "description: synthetic laser calibration (chaincomp "
               "simulate-calibration); not measured on any machine", "values:"]
     for s in machine.errors:
@@ -224,7 +225,7 @@ def write(path: str, machine: Machine, tables: dict, constants: dict, header: li
             axis, pos, vals = tables[s.name]
             a = machine.symbol(axis)
             unit = VALUE_UNIT[s.unit.kind]
-            lines += [f"  {s.name}:   # {s.meaning}",
+            lines += [f"  {s.name}:   # {one_line(s.meaning)}",
                       f"    axis: {axis}",
                       f"    units: [{a.unit.name}, {unit}]",
                       f"    interpolation: {interpolation}",
@@ -236,7 +237,7 @@ def write(path: str, machine: Machine, tables: dict, constants: dict, header: li
             if isinstance(v, Varying):
                 raise ChaincompError(f"--base gives {s.name} as a table or polynomial: give constants for the "
                                      "errors that are not tabulated")
-            lines.append(f"  {s.name}: {s.from_internal(v):.10g} {s.unit.name}   # {s.meaning}")
+            lines.append(f"  {s.name}: {s.from_internal(v):.10g} {s.unit.name}   # {one_line(s.meaning)}")
     _write_loadable(path, "\n".join(lines) + "\n", machine)
 
 
@@ -244,7 +245,7 @@ def _write_loadable(path: str, text: str, machine: Machine) -> None:
     """Write text to path only once the product's own loader reads it back: written beside
     it first, loaded, then renamed over it (an old file at path stays whole until then)."""
     from ..model.params import load_params
-    from ..model.yamlsource import write_checked
+    from ..output import write_file
 
     def check(tmp: str) -> None:
         try:
@@ -252,7 +253,4 @@ def _write_loadable(path: str, text: str, machine: Machine) -> None:
         except ChaincompError as exc:
             raise ChaincompError(f"refusing to write a file that would not load back: {exc.message}", path,
                                  exc.line, exc.field) from None
-    try:
-        write_checked(path, text, check)
-    except OSError as exc:
-        raise ChaincompError(f"cannot write: {exc.strerror}", path) from None
+    write_file(path, text, check)

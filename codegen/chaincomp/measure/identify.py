@@ -33,12 +33,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ChaincompError
+from ..escape import one_line
 from ..model.display import DEFAULT_UNITS, display_unit, plus_minus, quantity
 from ..model.expressions import MAX_LITERAL
 from ..model.machine import Machine
 from ..model.units import INTERNAL, UNITS
 from ..model.varying import MAX_POLYNOMIAL_COEFFICIENTS, MAX_TABLE_KNOTS, MAX_VARYING_ERRORS
-from ..model.yamlsource import read_text, write_checked
+from ..model.yamlsource import read_text
+from ..output import write_file
 from ..symbolic.derive import COMPONENTS
 from ..symbolic.numeric import ExactModel
 from ..symbolic.orientation import ROWS as ROTATION, cross, rotation_vector
@@ -315,7 +317,7 @@ def write_table(path: str, machine: Machine, axes: dict[str, np.ndarray], coords
     length = UNITS[machine.length_unit].to_internal
     names = [s.name for s in machine.axes]
     idx = [COMPONENTS.index(c) for c in measure]
-    out = [f"# {c}\n" for c in comments]
+    out = [f"# {one_line(c)}\n" for c in comments]
     out.append(",".join(names + list(measure) + (list(QUATERNION) if quaternions is not None else [])) + "\n")
     for r in range(coords.shape[0]):
         cells = [f"{machine.symbol(a).from_internal(axes[a][r]):.15g}" for a in names]
@@ -323,7 +325,7 @@ def write_table(path: str, machine: Machine, axes: dict[str, np.ndarray], coords
         cells += [f"{v:.17g}" for v in (quaternions[r] if quaternions is not None else ())]
         out.append(",".join(cells) + "\n")
     # beside it, then renamed: a full disk leaves no short file that identify would read as whole
-    write_checked(path, "".join(out))
+    write_file(path, "".join(out))
 
 
 def pose_points(machine: Machine, model: ExactModel, axes: dict[str, np.ndarray], errors: dict) -> np.ndarray:
@@ -1068,7 +1070,7 @@ def params_yaml(fit: Fit, source: str) -> str:
     """A params file (machine + values as 'VALUE UNIT', tables and polynomials in the params
     format) that load_params and chaincompd read."""
     m = fit.machine
-    out = [f"# Error values identified by chaincomp identify from {source}:",
+    out = [f"# Error values identified by chaincomp identify from {one_line(source)}:",
            f"# {fit.observations} coordinates at {fit.setups} set-ups, {_residuals(fit, 'internal')}, "
            f"condition number {fit.condition:.4g}."]
     if fit.minimal:

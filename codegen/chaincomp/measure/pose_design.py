@@ -28,8 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ChaincompError
+from ..escape import one_line
 from ..model.machine import Machine
-from ..model.yamlsource import write_checked
+from ..output import write_file
 from ..symbolic.derive import COMPONENTS
 from ..symbolic.numeric import ExactModel
 from .identify import numeric_rank, pose_points, step_derivatives
@@ -265,7 +266,7 @@ def write_poses(path: str, design: Design, command: str) -> None:
     for i in range(len(design)):
         cells = [f"{m.symbol(a).from_internal(design.poses[a][i]):.15g}" for a in names]
         out.append(",".join(cells + [""] * len(design.measure)) + "\n")
-    write_checked(path, "".join(out))   # beside it, then renamed: never a short file
+    write_file(path, "".join(out))   # beside it, then renamed: never a short file
 
 
 def design_json(design: Design, output: str | None) -> dict:
@@ -290,7 +291,7 @@ def _redundant(design: Design) -> str:
 
 def design_text(design: Design, output: str | None) -> str:
     m = design.machine
-    lines = [f"POSE DESIGN for {m.name} ({m.file}): {len(design)} poses within the axis limits, "
+    lines = [f"POSE DESIGN for {m.name} ({one_line(m.file)}): {len(design)} poses within the axis limits, "
              f"seed {design.seed}, from {design.pool} random candidates",
              f"Measured: {', '.join(c.upper() for c in design.measure)} of the tool point; "
              f"{len(design.errors)} errors, of which the pool identifies {design.rank} independent combinations"

@@ -23,6 +23,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ChaincompError
+from ..escape import one_line
 from ..model.machine import Machine, Symbol
 from ..symbolic.derive import COMPONENTS, derive
 
@@ -395,7 +396,7 @@ def to_json(proto: Protocol) -> dict:
 def to_text(proto: Protocol) -> str:
     m = proto.machine
     units = {m.symbol(a).unit.name for a in proto.grid_axes}
-    lines = [f"PROTOCOL EQUATIONS for {m.name} ({m.file}), first order",
+    lines = [f"PROTOCOL EQUATIONS for {m.name} ({one_line(m.file)}), first order",
              f"Set-ups ({', '.join(proto.grid_axes)}) over "
              + "; ".join(f"{a} in {{{', '.join(f'{v:g}' for v in vals)}}}" for a, vals in proto.grid.items())
              + f" {'/'.join(sorted(units))}: {len(proto.setups)} set-ups"]

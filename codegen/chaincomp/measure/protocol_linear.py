@@ -32,6 +32,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ChaincompError
+from ..escape import one_line
 from ..model.machine import Machine
 from ..symbolic.derive import COMPONENTS
 from ..symbolic.numeric import ExactModel
@@ -436,7 +437,7 @@ def to_json(proto: LinearProtocol) -> dict:
 
 def to_text(proto: LinearProtocol) -> str:
     m = proto.machine
-    lines = [f"PROTOCOL for {m.name} ({m.file}): {len(m.axes)} linear axes, first order",
+    lines = [f"PROTOCOL for {m.name} ({one_line(m.file)}): {len(m.axes)} linear axes, first order",
              "Errors of a slide are functions of its position (offset, slope along the travel, shape); "
              "the others constants.",
              "Laser runs hold the other axes at " + ", ".join(f"{k} = {v:g} {m.symbol(k).unit.name}"

@@ -12,12 +12,6 @@ from .params import load_params
 from .yamlsource import load_yaml, read_text
 
 
-def one_line(text: str) -> str:
-    """text for a comment line: a file name's line breaks (YAML also breaks at U+0085, U+2028,
-    U+2029) and other control characters escaped, so that a name cannot write a value."""
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
-
-
 def merge(path: str, machine: Machine, error: str, make_entry) -> str:
     """The text of params file ``path`` with ``error``'s entry replaced (or added at the end of
     ``values``) by ``make_entry(indent)``: every other line stays as it was."""
