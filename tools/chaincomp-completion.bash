@@ -131,7 +131,7 @@ _chaincomp() {
             --format) words='linuxcnc-comp linuxcnc-matrixkins klipper marlin rrf isg-volcomp';;
             --comp-file-type) words='0 1';;
             --report) words='text json';;
-            *) words='-h --help --params --set --format -o --output --grid --entries --workpiece-axes --iso-axes --comp-file-type --joints --reversal --report --json --no-breakdown'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --params --set --format -o --output --grid --entries --workpiece-axes --iso-axes --comp-file-type --joints --mean-reversal --reversal --report --json --no-breakdown'; [[ $cur == -* ]] || return 0;;
           esac;;
         thermal)
           case "$prev" in

@@ -84,6 +84,7 @@ class JointTable:
     nominal: np.ndarray
     forward: np.ndarray
     reverse: np.ndarray
+    mean_reversal: float = 0.0   # B̄ (ISO 230-2, declared unit) the trims take out: with_reversal
 
     def trim(self, position: np.ndarray) -> np.ndarray:
         """LinuxCNC's trim at ``position`` (declared unit) moving forward: linear between
@@ -254,11 +255,13 @@ def fit_tables(machine: Machine, values: dict, axes: list[Symbol], entries: int,
 
 
 def with_reversal(tables: list[JointTable], reversal: dict[str, float]) -> None:
-    """ISO 230-2 reversal value B per axis (declared unit: position approached forward minus
-    reverse): the forward trim takes -B/2 more, the reverse trim +B/2."""
+    """The signed mean reversal B̄ per axis (ISO 230-2:2014: B̄ = (1/m) sum B_i, B_i = x̄_i↑ -
+    x̄_i↓, the mean deviations approached forward minus in reverse; declared unit): the forward
+    trim takes -B̄/2 more, the reverse trim +B̄/2, so both directions land on their mean. Not
+    B = max |B_i|: that is >= 0, and ordinary lost motion has B_i < 0."""
     for t in tables:
         b = reversal.get(t.axis.name, 0.0)
-        t.forward, t.reverse = t.forward - b / 2, t.forward + b / 2
+        t.forward, t.reverse, t.mean_reversal = t.forward - b / 2, t.forward + b / 2, b
 
 
 # ----------------------------------------------------------------------------- matrix on the linear axes
@@ -361,7 +364,7 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
                              f"{LINUXCNC_MAX_ENTRIES} entries (motion.h EMCMOT_COMP_SIZE)")
     unknown = sorted(set(reversal or {}) - {a.name for a in axes})
     if unknown:
-        raise ChaincompError(f"--reversal {unknown[0]}: not an axis of {machine.name}")
+        raise ChaincompError(f"--mean-reversal {unknown[0]}: not an axis of {machine.name}")
     grid = check_grid(machine, axes, points)
     values = _held_at_the_ends(machine, values)
     lin = linear_axes(machine, axes, fmt) if fmt != "linuxcnc-comp" else []
@@ -474,13 +477,22 @@ def linuxcnc_comp_text(table: JointTable, file_type: int) -> str:
     return "\n".join(lines) + "\n"
 
 
+# LinuxCNC src/emc/motion/control.c compute_screw_comp: a joint with comp entries takes its
+# forward/reverse trims from them and [JOINT_n]BACKLASH is applied only to a joint without
+BACKLASH_NOTE = ("LinuxCNC ignores [JOINT_n]BACKLASH once a COMP_FILE is loaded (control.c): remove BACKLASH "
+                 "and put the reversal into the table with --mean-reversal AXIS=VALUE, ISO 230-2's signed mean "
+                 "reversal as 'chaincomp iso230-2' prints it (measured with BACKLASH = b in effect: that value "
+                 "minus b)")
+
+
 def linuxcnc_ini_text(e: Export, file_type: int, files: list[str]) -> str:
     lines = [f"# chaincomp export {e.format}: compensation tables for {e.machine.name}, joints in this order:",
              f"# {', '.join(t.axis.name for t in e.tables)}; values in the axes' units "
              f"({', '.join(f'{t.axis.name} {t.axis.unit.name}' for t in e.tables)}). Paste each block into "
-             "the [JOINT_n] section of the INI file."]
+             "the [JOINT_n] section of the INI file.", f"# {BACKLASH_NOTE}."]
     for n, (t, f) in enumerate(zip(e.tables, files)):
-        lines += [f"[JOINT_{n}]", f"COMP_FILE = {f}", f"COMP_FILE_TYPE = {file_type}"]
+        lines += [f"[JOINT_{n}]", f"COMP_FILE = {f}", f"COMP_FILE_TYPE = {file_type}",
+                  f"# the table's mean reversal: {t.mean_reversal:.6g} {t.axis.unit.name}; no BACKLASH line"]
     return "\n".join(lines) + "\n"
 
 
@@ -523,7 +535,9 @@ def to_json(e: Export) -> dict:
            "before": res(e.before), "after": res(e.after)}
     if e.tables:
         doc["joints"] = [{"axis": t.axis.name, "unit": t.axis.unit.name, "entries": len(t.nominal),
-                          "largest_trim": float(np.max(np.abs(t.forward)))} for t in e.tables]
+                          "largest_trim": float(np.max(np.abs(t.forward))), "mean_reversal": t.mean_reversal}
+                         for t in e.tables]
+        doc["backlash"] = BACKLASH_NOTE
     if e.matrix is not None:
         doc["linear_axes"] = e.linear
         doc["matrix"] = e.matrix.tolist()
@@ -554,6 +568,9 @@ def to_text(e: Export) -> str:
     if e.tables:
         lines.append("  " + "; ".join(f"{t.axis.name}: {len(t.nominal)} entries, largest trim "
                                        f"{np.max(np.abs(t.forward)):.6g} {t.axis.unit.name}" for t in e.tables))
+        lines.append("  mean reversal B̄ in the tables: " + ", ".join(f"{t.axis.name} {t.mean_reversal:.6g} "
+                                                                     f"{t.axis.unit.name}" for t in e.tables))
+        lines.append(f"  {BACKLASH_NOTE}")
     if e.matrix is not None:
         lines.append(f"  once the constant offset {', '.join(f'{v * 1e3:+.3f}' for v in e.offset)} um "
                      f"(x, y, z) is touched off: {um(e.after_offset)}")

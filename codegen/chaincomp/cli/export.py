@@ -54,9 +54,14 @@ def add_parser(sub) -> None:
     p.add_argument("--joints", metavar="A1,A2,...", help="the machine's axes in the controller's joint order "
                    "(default the machine file's order); matrixkins and the printers take the first three linear "
                    "ones as X, Y, Z")
+    p.add_argument("--mean-reversal", action="append", default=[], metavar="AXIS=VALUE",
+                   help="linuxcnc-comp: the signed mean reversal B̄ of an axis (ISO 230-2, mean of B_i = x̄_i↑ - "
+                        "x̄_i↓, as 'chaincomp iso230-2' prints it to pass; negative for ordinary lost motion, e.g. "
+                        "X=-8um; repeatable): the forward trim takes -B̄/2, the reverse +B̄/2 (the model itself has "
+                        "no reversal). LinuxCNC ignores [JOINT_n]BACKLASH once a COMP_FILE is loaded: the reversal "
+                        "belongs here")
     p.add_argument("--reversal", action="append", default=[], metavar="AXIS=VALUE",
-                   help="linuxcnc-comp: ISO 230-2 reversal value B of an axis (e.g. X=4um; repeatable): the "
-                        "forward trim takes -B/2, the reverse +B/2 (the model itself has no reversal)")
+                   help="deprecated: the same as --mean-reversal (the signed mean B̄, not B = max |B_i|)")
     p.add_argument("--report", choices=("text", "json"), default="text",
                    help="the report's format (default text; --format names the controller's)")
     p.add_argument("--json", dest="report", action="store_const", const="json", help="the same as --report json")
@@ -64,17 +69,21 @@ def add_parser(sub) -> None:
     p.set_defaults(run=run)
 
 
-def _reversal(machine, items: list[str]) -> dict[str, float]:
+def _reversal(machine, mean: list[str], deprecated: list[str]) -> dict[str, float]:
+    """The signed mean reversal B̄ per axis, in the axis' unit, from --mean-reversal and its
+    deprecated alias --reversal (which once asked for B = max |B_i| >= 0: copied from
+    iso230-2, that positive value doubled an ordinary lost motion instead of removing it)."""
+    option = "--mean-reversal" if mean or not deprecated else "--reversal"
     out = {}
-    for name, raw in assignments(items, "--reversal", "AXIS=VALUE, e.g. X=4um").items():
+    for name, raw in assignments(mean + deprecated, option, "AXIS=VALUE, e.g. X=-8um").items():
         if name not in [a.name for a in machine.axes]:
-            raise ChaincompError(f"--reversal {name}: not an axis of {machine.name} "
+            raise ChaincompError(f"{option} {name}: not an axis of {machine.name} "
                                  f"({', '.join(a.name for a in machine.axes)})")
         axis = machine.symbol(name)
         try:
             out[name] = axis.from_internal(parse_value(axis, raw))
         except ValueError as exc:
-            raise ChaincompError(f"--reversal {name}={raw}: {exc}") from None
+            raise ChaincompError(f"{option} {name}={raw}: {exc}") from None
     return out
 
 
@@ -140,9 +149,14 @@ def run(args) -> int:
         raise ChaincompError(f"--iso-axes: only {ISG.FORMAT} names its axes by ISO letter, not {args.target}")
     if args.workpiece_axes and args.target != ISG.FORMAT:
         raise ChaincompError(f"--workpiece-axes: only {ISG.FORMAT} has it, not {args.target}")
-    reversal = _reversal(machine, args.reversal)
+    reversal = _reversal(machine, args.mean_reversal, args.reversal)
     if reversal and args.target != "linuxcnc-comp":
-        raise ChaincompError(f"--reversal: only linuxcnc-comp has a reverse trim, not {args.target}")
+        raise ChaincompError(f"{'--mean-reversal' if args.mean_reversal else '--reversal'}: only linuxcnc-comp has "
+                             f"a reverse trim, not {args.target}")
+    if args.reversal:
+        print("chaincomp export: warning: --reversal is deprecated: it takes the signed mean reversal B̄ (ISO "
+              "230-2, mean of B_i; negative for ordinary lost motion), not B = max |B_i|; use --mean-reversal "
+              "with the value 'chaincomp iso230-2' prints", file=sys.stderr)
     values, has_errors = values_for(machine, args.params, args.sets)
     if not has_errors:
         raise ChaincompError("nothing to compensate: give error values (--params P.yaml or --set E=V)")

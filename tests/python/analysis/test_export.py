@@ -147,10 +147,10 @@ def test_linuxcnc_tables_leave_out_squareness_and_say_so(capsys, tmp_path):
 
 def test_reversal_splits_forward_and_reverse(capsys, tmp_path):
     _, out = export(capsys, tmp_path, POSITIONING, "linuxcnc-comp", "--grid", "3", "--entries", "5",
-                    "--no-breakdown", "--reversal", "X=4um")
+                    "--no-breakdown", "--mean-reversal", "X=4um")
     t = linuxcnc_comp.read((out / "joint0_X.comp").read_text(), 1)
-    assert np.allclose(t[:, 2] - t[:, 1], 0.004, atol=1e-9)     # reverse - forward = B
-    assert np.allclose(t[:, 1] + 0.002, -exx(t[:, 0]), atol=2e-7)  # forward = -(error + B/2)
+    assert np.allclose(t[:, 2] - t[:, 1], 0.004, atol=1e-9)     # reverse - forward = B̄
+    assert np.allclose(t[:, 1] + 0.002, -exx(t[:, 0]), atol=2e-7)  # forward = -(error + B̄/2)
 
 
 def matrixkins(text: str) -> np.ndarray:
@@ -246,14 +246,14 @@ def test_refusals_write_nothing(tmp_path):
     nothing_written(tmp_path, "export", vmc, "--set", "EXX=3um", "--format", "marlin", "-o", out,
                     match="--format marlin represents none of the errors given for vmc_xyz")
     nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "linuxcnc-comp", "-o", out,
-                    "--reversal", "Q=1um", match="--reversal Q: not an axis")
+                    "--mean-reversal", "Q=1um", match="--mean-reversal Q: not an axis")
     nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "marlin", "-o", out,
-                    "--reversal", "X=1um", match="only linuxcnc-comp")
+                    "--mean-reversal", "X=1um", match="--mean-reversal: only linuxcnc-comp")
     nothing_written(tmp_path, "export", machine_path("trunnion_ac"), "--params",
                     os.path.join(PARAMS, "trunnion_ac-demo.yaml"), "--format", "linuxcnc-comp", "-o", out,
                     "--grid", "3", "--entries", "9", match="leaves more tool error than no compensation for trunnion_ac")
     nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "linuxcnc-comp", "-o", out,
-                    "--reversal", "X=1um", "--reversal", "X=2um", match="--reversal: X given twice")
+                    "--mean-reversal", "X=1um", "--reversal", "X=2um", match="--mean-reversal: X given twice")
     nothing_written(tmp_path, "export", vmc, "--params", params, "--set", "X=100", "--format", "linuxcnc-comp",
                     "-o", out, match="--set X=100: X is an axis")
     nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "linuxcnc-comp", "-o", "",
