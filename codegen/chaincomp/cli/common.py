@@ -155,7 +155,12 @@ def check_output(output: str | None, *inputs: str | None, option: str = "-o") ->
         raise ChaincompError(f"{option} {output}: folder {folder} does not exist")
     if os.path.isdir(output):
         raise ChaincompError(f"{option} {output}: is a folder, expected a file name")
-    if not os.access(folder, os.W_OK) or (os.path.exists(output) and not os.access(output, os.W_OK)):
+    if os.path.exists(output) and not os.access(output, os.W_OK):
+        raise ChaincompError(f"{option} {output}: not writable")
+    # a regular file is replaced from a temporary file beside it (beside the file a link names); a
+    # pipe or device is written into (chaincomp.output)
+    special = os.path.exists(output) and not os.path.isfile(output)
+    if not special and not os.access(os.path.dirname(os.path.realpath(output)), os.W_OK):
         raise ChaincompError(f"{option} {output}: not writable")
 
 

@@ -9,6 +9,7 @@ from ..analysis import export as X
 from ..analysis import isg_volcomp as ISG
 from ..errors import ChaincompError
 from ..model.params import parse_value
+from ..output import write_files
 from .common import (add_machine_argument, add_values_arguments, assignments, check_finite, check_output,
                      integer, load, names, refuse_empty, to_json, values_for)
 
@@ -175,23 +176,8 @@ def run(args) -> int:
     texts = _outputs(e, args.output, args.comp_file_type, isg)
     doc = X.to_json(e)
     check_finite(doc)
-    if args.target in FOLDERS:
-        os.makedirs(args.output, exist_ok=True)
-    # all or nothing: each file written beside its target, then renamed over it
-    written = []
-    try:
-        for path, text in texts.items():
-            tmp = os.path.join(os.path.dirname(os.path.abspath(path)), f".{os.path.basename(path)}.{os.getpid()}~")
-            written.append((tmp, path))
-            with open(tmp, "w") as f:
-                f.write(text)
-        for tmp, path in written:
-            os.replace(tmp, path)
-            print(f"export: wrote {path}", file=sys.stderr)
-    except OSError as exc:
-        for tmp, _ in written:
-            if os.path.exists(tmp):
-                os.remove(tmp)
-        raise ChaincompError(f"-o {args.output}: {exc.strerror or exc}: nothing written") from None
+    write_files(texts, folder=args.output if args.target in FOLDERS else None)   # all complete, then in place
+    for path in texts:
+        print(f"export: wrote {path}", file=sys.stderr)
     print(to_json(doc) if args.report == "json" else X.to_text(e))
     return 0

@@ -8,10 +8,9 @@ import io
 import os
 import sys
 
-from ..errors import ChaincompError
 from ..model.display import DEFAULT_UNITS, display_unit
 from ..model.units import UNITS
-from ..model.yamlsource import write_checked
+from ..output import write_file
 
 ORDER_TEXT = {"1": "first-order", "2": "second-order", "exact": "exact",
               "first": "first-order", "second": "second-order"}
@@ -83,14 +82,6 @@ def save(fig, path: str, **options) -> None:
     buffer = io.BytesIO()
     fig.savefig(buffer, format=kind, **options)
     write_file(path, buffer.getvalue())
-
-
-def write_file(path: str, data: bytes | str) -> None:
-    """Write data to path; an OSError (also on close: a full disk) becomes a ChaincompError."""
-    try:
-        write_checked(path, data)   # beside it, then renamed: a full disk leaves no short image
-    except OSError as exc:
-        raise ChaincompError(f"cannot write: {exc.strerror or exc}", path) from None
 
 
 def warn(message: str) -> None:

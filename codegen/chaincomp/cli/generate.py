@@ -8,7 +8,7 @@ import time
 
 from ..emit.cpp import generate, registry, solver_shape, solvers
 from ..errors import ChaincompError
-from ..model.yamlsource import write_checked
+from ..output import write_files
 from .common import add_order_argument, check_output, load
 
 
@@ -46,24 +46,15 @@ def run(args) -> int:
         path = os.path.join(args.output, fname)
         if os.path.exists(path):
             check_output(path, *args.machines)
-    try:
-        os.makedirs(args.output, exist_ok=True)
-    except OSError as exc:
-        raise ChaincompError(f"cannot create output folder {args.output!r}: {exc.strerror}") from None
+    texts = {}
     for m in ([] if args.registry_only else machines):
         start = time.monotonic()
         files = generate(m, order)
-        for fname, text in files.items():
-            _write(os.path.join(args.output, fname), text)
+        texts.update(files)
         print(f"generate: {m.name}: {', '.join(files)} ({time.monotonic() - start:.1f} s)", file=sys.stderr)
     if args.registry or args.registry_only:
-        _write(os.path.join(args.output, "registry.cpp"), registry(names))
-        _write(os.path.join(args.output, "solvers.cpp"), solvers(solver_shape(m) for m in machines))
+        texts["registry.cpp"] = registry(names)
+        texts["solvers.cpp"] = solvers(solver_shape(m) for m in machines)
+    # all or nothing: a full disk leaves no short header, nor a header without its source
+    write_files({os.path.join(args.output, f): text for f, text in texts.items()}, folder=args.output)
     return 0
-
-
-def _write(path: str, text: str) -> None:
-    try:
-        write_checked(path, text)  # whole or not at all: a full disk leaves no short header
-    except OSError as exc:
-        raise ChaincompError(f"cannot write {path!r}: {exc.strerror}") from None

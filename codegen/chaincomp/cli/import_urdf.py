@@ -11,7 +11,7 @@ from ..analysis.lint import lint
 from ..errors import ChaincompError
 from ..model.machine import load_machine
 from ..model.urdf import ERROR_MODES, machine_text
-from ..model.yamlsource import write_checked
+from ..output import write_file
 from .common import add_format_argument, check_output, number_list
 
 
@@ -87,10 +87,7 @@ def run(args) -> int:
             loaded.append(load_machine(tmp))
         except ChaincompError as exc:
             raise RuntimeError(f"the machine file written does not load: {exc}") from None
-    try:
-        write_checked(args.output, text, check)
-    except OSError as exc:
-        raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
+    write_file(args.output, text, check)
     machine = loaded[0]
     findings = lint(machine)
     for f in findings:

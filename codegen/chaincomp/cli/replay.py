@@ -7,7 +7,8 @@ import subprocess
 
 from ..emit.buildtree import binary
 from ..errors import ChaincompError
-from .common import add_format_argument, add_machine_argument, check_output, load, resolve_machine
+from ..output import staged
+from .common import _same_file, add_format_argument, add_machine_argument, check_output, load, resolve_machine
 
 
 def add_parser(sub) -> None:
@@ -45,12 +46,19 @@ def run(args) -> int:
     inputs = (args.input, args.machine, args.params, args.config, args.model, args.thermal)
     check_output(args.output, *inputs, option="-o")
     check_output(args.csv, *inputs, option="--csv")
-    if args.csv and args.output and os.path.abspath(args.csv) == os.path.abspath(args.output):
+    if args.csv and args.output and (os.path.abspath(args.csv) == os.path.abspath(args.output)
+                                     or _same_file(args.csv, args.output)):
         raise ChaincompError(f"--csv {args.csv}: is also the -o output")
-    cmd = [binary("chaincomp_replay"), "--machine", args.machine, "--params", args.params, "--in", args.input,
-           "--channel", args.channel]
-    for flag, value in (("--config", args.config), ("--out", args.output), ("--csv", args.csv),
-                        ("--model", args.model), ("--format", args.format), ("--thermal", args.thermal)):
-        if value:
-            cmd += [flag, value]
-    return subprocess.run(cmd).returncode
+    outputs = {flag: path for flag, path in (("--out", args.output), ("--csv", args.csv)) if path}
+    # the binary writes temporary files; they are put in place only when it succeeds
+    with staged(*outputs.values()) as tmps:
+        cmd = [binary("chaincomp_replay"), "--machine", args.machine, "--params", args.params, "--in", args.input,
+               "--channel", args.channel]
+        for flag, value in (("--config", args.config), *zip(outputs, tmps), ("--model", args.model),
+                            ("--format", args.format), ("--thermal", args.thermal)):
+            if value:
+                cmd += [flag, value]
+        code = subprocess.run(cmd).returncode
+        if code != 0:   # the binary said why; leaving by an exception puts nothing in place
+            raise SystemExit(code)
+    return 0

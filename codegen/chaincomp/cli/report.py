@@ -6,7 +6,7 @@ import sys
 
 from ..analysis import report
 from ..errors import ChaincompError
-from ..model.yamlsource import write_checked
+from ..output import write_file
 from ..symbolic.derive import derive
 from .common import (DEFAULT_SEED, add_assume_zero_argument, add_format_argument, add_machine_argument,
                      add_order_argument, check_output, load, names)
@@ -43,9 +43,6 @@ def run(args) -> int:
     if not args.output:
         sys.stdout.write(text)
         return 0
-    try:
-        write_checked(args.output, text)
-    except OSError as exc:
-        raise ChaincompError(f"cannot write the report: {exc.strerror}", args.output) from None
+    write_file(args.output, text)
     print(f"wrote {args.output} ({fmt}, {machine.name}, order {d.order})", file=sys.stderr)
     return 0

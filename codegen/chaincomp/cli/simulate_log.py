@@ -4,16 +4,14 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
-import stat
 import sys
-import tempfile
 
 import lcm
 
 from ..emit.buildtree import import_lcmtypes
 from ..errors import ChaincompError
 from ..measure.toolpath import MAX_SAMPLES, toolpath
+from ..output import staged
 from .common import add_machine_argument, check_output, integer, load, number
 
 
@@ -57,18 +55,8 @@ def run(args) -> int:
                              machine.file)
     types = import_lcmtypes()
     path = toolpath(machine, args.rate, args.seconds)
-    # liblcm's writer ignores a failed write (a full disk, /dev/full): count the bytes instead. Written
-    # beside the output and renamed over it once whole (a device or pipe is copied into instead: a
-    # rename would replace the node)
-    special = os.path.exists(args.output) and not stat.S_ISREG(os.stat(args.output).st_mode)
-    final = args.output if special else os.path.realpath(args.output)
-    fd, target = tempfile.mkstemp(suffix=".lcm", dir=None if special else os.path.dirname(final),
-                                  prefix="." + os.path.basename(final) + "-")
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(target, 0o666 & ~umask)   # as open() would create it
-    try:
+    # liblcm's writer ignores a failed write (a full disk, /dev/full): count the bytes instead
+    with staged(args.output) as (target,):
         try:
             log = lcm.EventLog(target, "w", overwrite=True)
         except (IOError, OSError) as exc:
@@ -96,17 +84,6 @@ def run(args) -> int:
         if written != expected:   # never a short log that replay would read as the whole run
             raise ChaincompError(f"cannot write: {written} of {expected} bytes written (is the disk full?)",
                                  args.output)
-        try:
-            if special:
-                with open(target, "rb") as src, open(final, "wb") as dst:
-                    shutil.copyfileobj(src, dst)
-            else:
-                os.replace(target, final)
-        except OSError as exc:
-            raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
-    finally:
-        if os.path.exists(target):
-            os.remove(target)
     print(f"simulate-log: {len(path)} commands of {machine.name} at {args.rate:g} Hz -> {args.output}",
           file=sys.stderr)
     return 0

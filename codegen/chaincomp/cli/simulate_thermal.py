@@ -8,7 +8,7 @@ import sys
 
 from ..errors import ChaincompError
 from ..measure import thermal as T
-from ..model.yamlsource import write_checked
+from ..output import write_file
 from .common import add_machine_argument, add_seed_argument, check_output, load, number
 
 MAX_SAMPLES = T.MAX_ROWS
@@ -67,10 +67,7 @@ def run(args) -> int:
         lines.append(",".join(f"{c[k]:.6f}" if i else f"{c[k]:.3f}" for i, c in enumerate(columns)))
         if k and k % 200000 == 0:
             print(f"simulate-thermal: {k}/{len(t)} rows", file=sys.stderr)
-    try:
-        write_checked(args.output, "\n".join(lines) + "\n")
-    except OSError as exc:
-        raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
+    write_file(args.output, "\n".join(lines) + "\n")
     print(f"simulate-thermal: {len(t)} readings of {len(temps)} sensors and {len(drift)} drift columns of "
           f"{machine.name} -> {args.output}", file=sys.stderr)
     return 0

@@ -8,7 +8,7 @@ import random
 import mpmath
 
 from ..errors import ChaincompError
-from ..model.yamlsource import write_checked
+from ..output import write_file
 from ..symbolic.jets import JetModel
 from ..symbolic.numeric import ExactModel
 from .common import add_machine_argument, add_seed_argument, check_output, integer, load
@@ -62,8 +62,5 @@ def run(args) -> int:
             raise ChaincompError(f"the model is not finite at {at} (vector {len(lines) - 2}): the machine's "
                                  "expressions leave their domain within the axis limits", machine.file)
         lines.append(" ".join(" ".join(repr(float(v)) for v in row) for row in rows))
-    try:
-        write_checked(args.output, "\n".join(lines) + "\n")
-    except OSError as exc:
-        raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
+    write_file(args.output, "\n".join(lines) + "\n")
     return 0

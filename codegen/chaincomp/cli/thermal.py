@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import ChaincompError
 from ..measure import thermal as T
-from ..model.yamlsource import write_checked
+from ..output import write_file
 from .common import (add_format_argument, add_machine_argument, assignments, check_finite, check_output, integer,
                      load, names, number, parse_number, to_json)
 
@@ -181,10 +181,7 @@ def run_fit(args) -> int:
                                      "time_constant": t.time_constant, "time_constant_u": t.time_constant_u}
                                     for t in f.model.terms]} for e, f in fits.items()}}
     check_finite(doc)
-    try:
-        write_checked(args.output, text, loads)
-    except OSError as exc:
-        raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
+    write_file(args.output, text, loads)
     if held_result is not None:
         doc["check"] = {"log": args.check, "errors": held_result}
     if args.format == "json":
@@ -279,10 +276,7 @@ def run_stream(args) -> int:
     for k in range(len(log.t)):
         text_rows.append(",".join(f"{c[k] + 0.0:.0f}" if cols[(i - 1) % 3][3] and i else f"{c[k] + 0.0:.10g}"
                                   for i, c in enumerate(table)))   # (+ 0.0: never -0)
-    try:
-        write_checked(args.output, "\n".join(text_rows) + "\n")
-    except OSError as exc:
-        raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
+    write_file(args.output, "\n".join(text_rows) + "\n")
     if args.report == "json":
         print(to_json(doc))
         return 0

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import hashlib
 import json
 import os
 import re
@@ -25,6 +26,7 @@ from dataclasses import dataclass
 
 from ..errors import ChaincompError
 from ..model.machine import load_machine
+from ..output import staged, write_file, write_files
 from .buildtree import build_dir
 from .cpp import fnv1a64, generate, library, solver_shape, solvers
 
@@ -101,12 +103,15 @@ def build(machine_path: str) -> tuple[str, bool]:
     tc = toolchain()
     root = cache_root()
     path = cache_path(root, machine.name, source, tc.key())
-    if os.path.exists(path):
+    if intact(path):
         return path, True
     with _exclusive(os.path.dirname(path) + ".lock", root,
                     f"{machine.name}: another build of this model is running; waiting for it"):
-        if os.path.exists(path):
+        if intact(path):
             return path, True
+        if os.path.lexists(path):
+            _say(f"{machine.name}: the cached {path} is not the library built there (its SHA-256 is not the one "
+                 f"recorded in {os.path.basename(path)}.sha256): building it again")
         folder = os.path.dirname(path)
         try:
             tmp = tempfile.mkdtemp(dir=root, prefix="." + os.path.basename(folder) + "-")
@@ -121,6 +126,34 @@ def build(machine_path: str) -> tuple[str, bool]:
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
     return path, False
+
+
+def _sha256(path: str) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _record_digest(path: str) -> None:
+    """PATH.sha256 beside a file just built, in sha256sum's format (`sha256sum -c` checks it):
+    what the cache's readers check before trusting it."""
+    with open(path + ".sha256", "w", encoding="utf-8", newline="\n") as f:
+        f.write(f"{_sha256(path)}  {os.path.basename(path)}\n")
+
+
+def intact(path: str) -> bool:
+    """Whether the cached file at ``path`` is the one built there: its SHA-256 is the one
+    recorded beside it at build. A library truncated or overwritten since (a full disk, a copy,
+    an editor) is no longer trusted: loaded, it crashed every daemon start (SIGBUS, SIGILL).
+    chaincompd and replay check the same (open_model.cpp)."""
+    try:
+        with open(path + ".sha256", "rb") as f:
+            recorded = f.read(200)
+        return recorded == f"{_sha256(path)}  {os.path.basename(path)}\n".encode()
+    except OSError:
+        return False
 
 
 @contextlib.contextmanager
@@ -172,31 +205,26 @@ def _solver_object(machine, tc: Toolchain, root: str) -> str:
     folder = os.path.join(root, f"solvers-{fnv1a64(key):016x}")
     n, a, p, r, o = shape
     path = os.path.join(folder, f"core_{n}_{a}_{p}_{r}_{int(o)}.o")
-    if os.path.exists(path):
+    if intact(path):
         return path
     with _exclusive(path + ".lock", root,
                     f"{machine.name}: another build is making the compensation solver of this shape; waiting for it"):
-        if os.path.exists(path):
+        if intact(path):
             return path
         start = time.monotonic()
         _say(f"{machine.name}: compiling the compensation solver for its shape ({n} axes, {bin(a).count('1')} "
              f"rotary, pose {p}, {r} rows), once for every model of that shape")
         source = path[:-2] + ".cpp"
-        with open(source, "w", encoding="utf-8", newline="\n") as f:
-            f.write(text)
-        # this process' own name: a compiler left running by a build killed before (its lock
-        # released) cannot write into this one's object
-        tmp = f"{path}.{os.getpid()}.tmp"
-        try:
+        write_file(source, text)
+        # a temporary file of its own: a compiler left running by a build killed before (its lock
+        # released) cannot write into this one's object, and a failed compile leaves no half object
+        with staged(path) as (tmp,):
             proc = subprocess.run([tc.compiler, *tc.flags, *(f"-I{d}" for d in tc.include_dirs), "-c", source,
                                    "-o", tmp], capture_output=True, text=True)
             if proc.returncode != 0:
                 raise ChaincompError(f"{tc.compiler} failed on the compensation solver ({source}): "
                                      f"{_first_error(proc)}")
-            os.rename(tmp, path)
-        finally:
-            if os.path.lexists(tmp):
-                os.unlink(tmp)  # a failed or killed compile leaves no half object
+        _record_digest(path)
         _say(f"{machine.name}: solver built in {time.monotonic() - start:.1f} s")
     return path
 
@@ -231,29 +259,22 @@ def _compile(machine, source: bytes, tc: Toolchain, folder: str) -> None:
     proc = subprocess.run(cmd, cwd=folder, capture_output=True, text=True)
     if proc.returncode != 0:
         raise ChaincompError(f"{tc.compiler} failed on the generated code of {name}: {_first_error(proc)}")
+    _record_digest(os.path.join(folder, f"{name}.so"))
     _say(f"{name}: compiled in {time.monotonic() - start:.1f} s")
 
 
 def copy_to(path: str, folder: str) -> str:
-    """A copy of the library at ``path`` in ``folder`` (for --model on another computer),
-    written under a temporary name and renamed, so a reader never sees half of it."""
-    try:
-        if not os.path.isdir(folder):
-            os.mkdir(folder)  # the folder itself, never its parents: a typo makes no tree
-        return _copy_into(path, folder, 0o755)
-    except OSError as exc:
-        raise ChaincompError(f"-o {folder}: cannot write ({exc.strerror})") from None
+    """A copy of the library at ``path`` in ``folder`` (for --model on another computer), by
+    the one writer: a reader never sees half of it."""
+    return _copy_into(path, folder, 0o777, create=True)
 
 
-def _copy_into(path: str, folder: str, mode: int) -> str:
-    """folder/basename(path), written under a temporary name and renamed (a reader never sees
-    half of it); OSError for the caller to name."""
+def _copy_into(path: str, folder: str, mode: int, create: bool = False) -> str:
+    """folder/basename(path) (the folder created when ``create``); new files get ``mode``."""
     target = os.path.join(folder, os.path.basename(path))
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix="." + os.path.basename(path) + "-")
-    with os.fdopen(fd, "wb") as out, open(path, "rb") as src:
-        shutil.copyfileobj(src, out)
-    os.chmod(tmp, mode)
-    os.replace(tmp, target)
+    with open(path, "rb") as f:
+        data = f.read()
+    write_files({target: data}, folder=folder if create else None, mode=mode)
     return target
 
 
@@ -351,10 +372,10 @@ def build_linuxcnc(machine_path: str, params_path: str | None, module: str = RT_
     root = os.path.join(cache_root(), "linuxcnc")
     folder = os.path.join(root, f"{machine.name}-{key:016x}")
     path = os.path.join(folder, module + ".so")
-    if os.path.exists(path):
+    if intact(path):
         return path, True
     with _exclusive(folder + ".lock", root, f"{machine.name}: another build of {module} is running; waiting for it"):
-        if os.path.exists(path):
+        if intact(path):
             return path, True
         _compile_rt(machine, values, params_path, tc, root, folder, module)
     return path, False
@@ -392,6 +413,7 @@ def _compile_rt(machine, values: dict, params_path: str | None, tc: Toolchain, r
             lines = (proc.stderr or proc.stdout).splitlines()
             first = next((ln for ln in lines if "error" in ln), lines[-1] if lines else "no message")
             raise ChaincompError(f"building {module} for {machine.name} failed: {first}")
+        _record_digest(os.path.join(tmp, module + ".so"))
         shutil.rmtree(folder, ignore_errors=True)  # a folder whose module was deleted by hand
         os.rename(tmp, folder)  # atomic: the folder appears complete
         _say(f"{machine.name}: {module}.so built in {time.monotonic() - start:.1f} s")
@@ -411,6 +433,5 @@ def install_rt(path: str) -> str:
     folder = linuxcnc_module_dir()
     try:
         return _copy_into(path, folder, 0o644)
-    except OSError as exc:
-        raise ChaincompError(f"--install: cannot write {folder} ({exc.strerror}): run as root (sudo), "
-                             f"or copy {path} there yourself") from None
+    except ChaincompError as exc:
+        raise ChaincompError(f"--install: {exc}: run as root (sudo), or copy {path} there yourself") from None

@@ -208,45 +208,6 @@ def read_text(path: str, limit: int = MAX_FILE_BYTES) -> str:
         raise ChaincompError(f"not UTF-8 text (byte {data[exc.start]:#04x})", path, line) from None
 
 
-def write_checked(path: str, text: str | bytes, check=None) -> None:
-    """Write ``text`` to ``path`` so that an old file there stays whole until the new text is
-    complete and ``check(tmp)`` (if given) accepts it: written beside the file (the real one,
-    through a symbolic link, which stays a link), then renamed over it. A ``path`` that is not a
-    regular file (a device such as /dev/stdout or /dev/full, a named pipe) is written into
-    instead, after the check: a rename would replace the device node itself (run as root, it
-    turned /dev/full into a regular file and reported success). A failed write (a full disk)
-    leaves the old file, never a short one. OSError is the caller's to word."""
-    import stat
-    import tempfile
-    special = os.path.exists(path) and not stat.S_ISREG(os.stat(path).st_mode)   # stat follows links
-    target = path if special else os.path.realpath(path)
-    if special:
-        fd, tmp = tempfile.mkstemp(suffix=".tmp")
-    else:
-        base, n = os.path.join(os.path.dirname(target), "." + os.path.basename(target)), 0
-        while True:   # O_EXCL: never an existing file; 0o666: the umask applies, as to open()
-            tmp = f"{base}.{os.getpid()}.{n}.tmp"
-            try:
-                fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-                break
-            except FileExistsError:
-                n += 1
-    data = text.encode("utf-8") if isinstance(text, str) else text
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        if check is not None:
-            check(tmp)
-        if special:
-            with open(target, "wb") as f:
-                f.write(data)
-        else:
-            os.replace(tmp, target)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-
-
 def load_yaml(path: str) -> Any:
     """Parse ``path``; syntax errors become a ChaincompError with file and line."""
     text = read_text(path)
