@@ -11,6 +11,7 @@ import sys
 
 from ..errors import ChaincompError
 from ..model.machine import Machine, Symbol, load_machine
+from ..model.numbers import parse_number
 from ..model.params import load_params, parse_sets, parse_value
 from ..model.units import UNITS
 
@@ -193,25 +194,6 @@ def integer(lo: int, hi: int):
             raise argparse.ArgumentTypeError(f"must be between {lo} and {hi}, got {value}")
         return value
     return parse
-
-
-_DECIMAL = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
-
-
-def parse_number(text: str) -> float:
-    """A finite number written in plain ASCII decimals: float() alone would also take 'nan',
-    'inf', '1_000' and other scripts' digits. Raises ValueError with the reason."""
-    t = text.strip()
-    if _DECIMAL.fullmatch(t):
-        value = float(t)
-        if math.isfinite(value):
-            return value
-        raise ValueError(f"expected a finite number, got {text!r}")   # e.g. 1e400
-    try:
-        value = float(t)
-    except ValueError:
-        raise ValueError(f"expected a number, got {text!r}") from None
-    raise ValueError(f"expected a {'plain decimal' if math.isfinite(value) else 'finite'} number, got {text!r}")
 
 
 def number(lo: float = -math.inf, hi: float = math.inf, above: bool = False):

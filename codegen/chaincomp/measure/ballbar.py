@@ -32,7 +32,6 @@ deviation, µm, mm or nm).
 
 from __future__ import annotations
 
-import csv
 import math
 import re
 from dataclasses import dataclass, field
@@ -41,17 +40,16 @@ import numpy as np
 
 from ..errors import ChaincompError
 from ..escape import one_line
-from ..model import units as U
+from ..model import csvtable, units as U
 from ..model.expressions import MAX_LITERAL
 from ..model.machine import Machine
+from ..model.numbers import parse_number
 from ..model.params import parse_value
 from ..model.varying import Varying
-from ..model.yamlsource import read_text
 from ..output import write_file
 from ..symbolic.jets import JetModel
 from ..symbolic.numeric import ExactModel
 from .calibration import find_slides
-from .iso230_2 import _number, _split
 
 # plane -> (first in-plane coordinate, second, normal): the angle turns from the first towards the second
 PLANES = {"XY": (0, 1, 2), "YZ": (1, 2, 0), "ZX": (2, 0, 1)}
@@ -353,6 +351,13 @@ _META = re.compile(r"#\s*(machine|plane|axes|radius|centre|center|held|feed)\s*:
 _FIELDS = ("angle", "direction", "deviation")
 
 
+def _number(text: str, fail) -> float:
+    try:
+        return parse_number(text)
+    except ValueError as exc:
+        fail(str(exc))
+
+
 def _length(text: str, machine: Machine, fail) -> float:
     """'100 mm' or '100' (the machine's length unit) -> mm."""
     parts = text.split()
@@ -372,33 +377,16 @@ def _length(text: str, machine: Machine, fail) -> float:
 
 def read_trace(path: str, machine: Machine) -> Trace:
     """A trace CSV (see the module's docstring); every fault names the file, line and field."""
-    text = read_text(path).removeprefix("\ufeff")
+    table = csvtable.read(path, max_rows=MAX_ROWS, example="angle [deg],direction,deviation [um]")
     meta: dict[str, tuple[str, int]] = {}
-    header = None
-    rows: list[tuple[int, list[str]]] = []
-    for lineno, raw in enumerate(text.splitlines(), 1):
-        if not raw.strip():
-            continue
-        if raw.lstrip().startswith("#"):
-            m = _META.fullmatch(raw.strip())
-            if m and header is None:
-                key = m.group(1).lower().replace("center", "centre")
-                if key in meta:
-                    raise ChaincompError(f"{key} given twice (first on line {meta[key][1]})", path, lineno, key)
-                meta[key] = (m.group(2), lineno)
-            continue
-        try:
-            cells = next(csv.reader([raw]))
-        except csv.Error as exc:
-            raise ChaincompError(f"unreadable CSV row: {exc}", path, lineno) from None
-        if header is None:
-            header = (lineno, cells)
-            continue
-        if len(rows) == MAX_ROWS:
-            raise ChaincompError(f"more than {MAX_ROWS} points", path, lineno)
-        rows.append((lineno, cells))
-    if header is None:
-        raise ChaincompError("no header row (expected 'angle [deg],direction,deviation [um]')", path, 1)
+    for lineno, raw in table.comments:
+        m = _META.fullmatch(raw.strip())
+        if m and lineno < table.line:
+            key = m.group(1).lower().replace("center", "centre")
+            if key in meta:
+                raise ChaincompError(f"{key} given twice (first on line {meta[key][1]})", path, lineno, key)
+            meta[key] = (m.group(2), lineno)
+    header = (table.line, table.header)
 
     def need(key: str) -> tuple[str, int]:
         if key not in meta:
@@ -466,7 +454,7 @@ def read_trace(path: str, machine: Machine) -> Trace:
     hline, cells = header
     col, col_unit = {}, {}
     for k, cell in enumerate(cells):
-        name, unit = _split(cell)
+        name, unit = csvtable.split_unit(cell)
         if name.lower() in _FIELDS:
             if name.lower() in col:
                 raise ChaincompError(f"two columns named {name.lower()!r}", path, hline, name.lower())
@@ -492,23 +480,21 @@ def read_trace(path: str, machine: Machine) -> Trace:
         units[f] = u
     ang, dirs, devs, lines = [], [], [], []
     seen: dict[tuple[str, float], int] = {}
-    for lineno, row in rows:
-        if any(c.strip() for c in row[len(cells):]):   # e.g. '5,ccw,2,406': a decimal comma
-            raise ChaincompError(f"{len(row)} cells, the header has {len(cells)} (a decimal comma? write "
-                                 f"decimals with a point): {','.join(row)!r}", path, lineno)
+    for r in table.rows:
+        lineno, row = r.line, r.cells
+
         def cell(f: str) -> str:
-            k = col[f]
-            if k >= len(row) or not row[k].strip():
+            if not row[col[f]]:
                 raise ChaincompError("missing value", path, lineno, f)
-            return row[k]
-        a = _number(cell("angle"), failer(lineno, "angle")) * units["angle"].to_internal
+            return row[col[f]]
+        a = table.number(r, col["angle"], "angle") * units["angle"].to_internal
         if not abs(a) <= 100 * math.pi:
             raise ChaincompError(f"an angle of {cell('angle').strip()} is beyond ±50 turns", path, lineno, "angle")
         d = _DIRECTIONS.get(cell("direction").strip().lower())
         if d is None:
             raise ChaincompError(f"expected ccw or cw, got {cell('direction').strip()!r}", path, lineno,
                                  "direction")
-        v = _number(cell("deviation"), failer(lineno, "deviation")) * units["deviation"].to_internal
+        v = table.number(r, col["deviation"], "deviation") * units["deviation"].to_internal
         if not abs(v) < SMALL * radius:
             raise ChaincompError(f"a deviation of {cell('deviation').strip()} {units['deviation'].name} is not "
                                  f"small against the radius ({_num(radius)} mm): not a ballbar reading", path,
@@ -521,7 +507,7 @@ def read_trace(path: str, machine: Machine) -> Trace:
         dirs.append(d)
         devs.append(v)
         lines.append(lineno)
-    if not rows:
+    if not table.rows:
         raise ChaincompError("no readings below the header", path, hline)
     dirs_arr = np.array(dirs)
     for d in (CCW, CW):

@@ -1,8 +1,9 @@
 """ISO 230-2:2014 evaluation of the positioning of one axis from repeated bidirectional runs
 (a laser interferometer's readings), and the CSV those runs come in.
 
-The CSV: one row per reading, a header row naming the columns, ``#`` lines and blank lines
-ignored (line numbers still count them)::
+The CSV (read by ``model.csvtable``, the rules of every CSV a verb reads): one row per reading,
+a header row naming the columns, ``#`` lines and blank lines ignored (line numbers still count
+them)::
 
     # X axis, 5 bidirectional runs
     target [mm],run,direction,deviation [um]
@@ -23,17 +24,14 @@ deviation s needs n >= 2; with n = 1 the file is refused), and there must be 2 t
 
 from __future__ import annotations
 
-import csv
-import math
 import re
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import ChaincompError
-from ..model import units as U
+from ..model import csvtable, units as U
 from ..model.expressions import MAX_LITERAL
-from ..model.yamlsource import read_text
 
 FIELDS = ("target", "run", "direction", "deviation", "actual")
 UP, DOWN = "up", "down"
@@ -41,9 +39,7 @@ _DIRECTIONS = {"up": UP, "+": UP, "↑": UP, "pos": UP, "positive": UP,
                "down": DOWN, "-": DOWN, "↓": DOWN, "neg": DOWN, "negative": DOWN}
 # the unit deviations are reported in, per kind (as simulate-calibration's tables)
 REPORT_UNIT = {"length": "um", "angle": "arcsec", "ratio": "ppm"}
-_HEADER_UNIT = re.compile(r"^(.*?)\s*[\[(]\s*([^\])]+?)\s*[\])]\s*$")
 _RUN = re.compile(r"[0-9]{1,9}")
-_DECIMAL = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
 
 
 @dataclass
@@ -136,41 +132,11 @@ def parse_units(text: str | None, option: str = "--column-units") -> tuple[U.Uni
         raise ChaincompError(f"{option}: {exc.args[0]}") from None
 
 
-def _number(text: str, fail) -> float:
-    t = text.strip()
-    if not _DECIMAL.fullmatch(t):
-        fail(f"expected a number, got {text!r}")
-    value = float(t)
-    if not math.isfinite(value):
-        fail(f"expected a finite number, got {text!r}")
-    return value
-
-
-def _split(name: str) -> tuple[str, str | None]:
-    m = _HEADER_UNIT.match(name.strip())
-    return (m.group(1).strip(), m.group(2)) if m else (name.strip(), None)
-
-
 def read_runs(path: str, column_map: dict[str, str] | None = None,
               units: tuple[U.Unit | None, U.Unit | None] = (None, None)) -> Runs:
     """The runs in a CSV file; every fault a ChaincompError naming the file, line and column."""
-    text = read_text(path)
-    if text.startswith("\ufeff"):   # a byte order mark, as spreadsheet programs write
-        text = text[1:]
-    rows = [(i, line) for i, line in enumerate(text.splitlines(), 1)
-            if line.strip() and not line.lstrip().startswith("#")]
-    if not rows:
-        raise ChaincompError("no header row (expected e.g. 'target [mm],run,direction,deviation [um]')", path, 1)
-    hline, htext = rows[0]
-    delimiter = ";" if htext.count(";") > htext.count(",") else "\t" if "\t" in htext and "," not in htext else ","
-
-    def cells(number: int, line: str) -> list[str]:
-        try:
-            return next(csv.reader([line], delimiter=delimiter))
-        except csv.Error as exc:   # e.g. a field past the csv module's limit of 131072 characters
-            raise ChaincompError(f"unreadable CSV row: {exc}", path, number) from None
-
-    header = cells(hline, htext)
+    table = csvtable.read(path, example="target [mm],run,direction,deviation [um]")
+    header, hline = table.header, table.line
     column_map = column_map or {}
     wanted = {f: f for f in FIELDS}
     for mapped, other in (("deviation", "actual"), ("actual", "deviation")):
@@ -181,8 +147,8 @@ def read_runs(path: str, column_map: dict[str, str] | None = None,
     head_units: dict[str, str | None] = {}
     for field, want in wanted.items():
         for k, cell in enumerate(header):
-            name, unit = _split(cell)
-            if want.lower() in (cell.strip().lower(), name.lower()):
+            name, unit = csvtable.split_unit(cell)
+            if want.lower() in (cell.lower(), name.lower()):
                 if field in col:
                     raise ChaincompError(f"two columns named {want!r} (columns {col[field] + 1} and {k + 1})",
                                          path, hline, want)
@@ -191,7 +157,7 @@ def read_runs(path: str, column_map: dict[str, str] | None = None,
     taken: dict[int, str] = {}
     for field, k in col.items():
         if k in taken:   # e.g. --columns actual=target: every deviation would be 0
-            raise ChaincompError(f"column {k + 1} ({header[k].strip()!r}) is both {taken[k]} and {field}", path,
+            raise ChaincompError(f"column {k + 1} ({header[k]!r}) is both {taken[k]} and {field}", path,
                                  hline, wanted[field])
         taken[k] = field
     if "deviation" in col and "actual" in col:
@@ -239,21 +205,16 @@ def read_runs(path: str, column_map: dict[str, str] | None = None,
     readings: dict[tuple[float, str, int], float] = {}
     first_line: dict[float, int] = {}
     where: dict[tuple[float, str, int], int] = {}
-    for line, raw in rows[1:]:
-        row = cells(line, raw)
+    for row in table.rows:
+        line = row.line
 
         def cell(field: str) -> str:
-            k = col[field]
-            if k >= len(row) or not row[k].strip():
+            text = row.cells[col[field]]
+            if not text:
                 raise ChaincompError("missing value", path, line, wanted[field])
-            return row[k]
+            return text
 
-        def fail_at(field):
-            def fail(msg):
-                raise ChaincompError(msg, path, line, wanted[field])
-            return fail
-
-        target = _number(cell("target"), fail_at("target"))
+        target = table.number(row, col["target"], wanted["target"])
         run_text = cell("run").strip()
         if not _RUN.fullmatch(run_text) or int(run_text) < 1:
             raise ChaincompError(f"expected a run number 1, 2, ..., got {run_text!r}", path, line, wanted["run"])
@@ -262,7 +223,7 @@ def read_runs(path: str, column_map: dict[str, str] | None = None,
         if d is None:
             raise ChaincompError(f"expected up or down (or +, -), got {cell('direction').strip()!r}", path, line,
                                  wanted["direction"])
-        v = _number(cell(value), fail_at(value))
+        v = table.number(row, col[value], wanted[value])
         if value == "actual":
             dev = (v * val_unit.to_internal - target * pos_unit.to_internal) / report.to_internal
         else:

@@ -334,7 +334,7 @@ GOOD_ROWS = "".join(f"{a},ccw,0.5\n" for a in range(0, 360, 10))
     (GOOD_HEAD.replace(",direction", ",way") + GOOD_ROWS, ":4: direction: no column 'direction'"),
     (GOOD_HEAD + GOOD_ROWS + "370,ccw,1.2.3\n", ":41: deviation: expected a number, got '1.2.3'"),
     (GOOD_HEAD + GOOD_ROWS + "370,sideways,1\n", ":41: direction: expected ccw or cw, got 'sideways'"),
-    (GOOD_HEAD + GOOD_ROWS + "nan,ccw,1\n", ":41: angle: expected a number, got 'nan'"),
+    (GOOD_HEAD + GOOD_ROWS + "nan,ccw,1\n", ":41: angle: expected a finite number, got 'nan'"),
     (GOOD_HEAD + GOOD_ROWS + "10,ccw,\n", ":41: deviation: missing value"),
     (GOOD_HEAD + GOOD_ROWS + "10,ccw,20000\n", ":41: deviation: a deviation of 20000 um is not small"),
     (GOOD_HEAD + GOOD_ROWS + "10,cw,1\n", ":41: direction: only 1 cw point"),

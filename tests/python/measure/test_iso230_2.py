@@ -208,12 +208,14 @@ def test_a_missing_reading_is_refused_naming_the_target(tmp_path, capsys):
 
 @pytest.mark.parametrize("row,field,message", [
     ("10,1,up,abc", "deviation", "expected a number, got 'abc'"),
-    ("10,1,up,nan", "deviation", "expected a number, got 'nan'"),
+    ("10,1,up,nan", "deviation", "expected a finite number, got 'nan'"),
     ("1e999,1,up,0.5", "target", "expected a finite number"),
     ("10,0,up,0.5", "run", "expected a run number"),
     ("10,1.5,up,0.5", "run", "expected a run number"),
     ("10,1,sideways,0.5", "direction", "expected up or down"),
-    ("10,1,up", "deviation", "missing value"),
+    ("10,1,up,", "deviation", "missing value"),
+    ("10,1,up", None, "3 cells, the header has 4"),   # the whole row at fault: no column
+    ("10,1,up,0,5", None, "5 cells, the header has 4 (a decimal comma?"),
     ("0,1,up,0.7", "run", "a second reading for target 0, run 1, up (the first on line 3)"),
 ])
 def test_bad_rows_are_refused_with_file_line_and_column(tmp_path, capsys, row, field, message):
@@ -224,7 +226,7 @@ def test_bad_rows_are_refused_with_file_line_and_column(tmp_path, capsys, row, f
     lines.insert(3, row)   # after two good rows, on line 4
     path.write_text("# comment\n" + "\n".join(lines) + "\n")
     line = refused(capsys, "iso230-2", str(path))
-    assert line.startswith(f"chaincomp iso230-2: error: {path}:5: {field}: "), line
+    assert line.startswith(f"chaincomp iso230-2: error: {path}:5: " + (f"{field}: " if field else "")), line
     assert message in line
 
 

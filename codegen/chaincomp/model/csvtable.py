@@ -1,0 +1,195 @@
+"""The one reader of the CSV files the verbs take (iso230-2 and laser-to-params runs, identify
+and simulate-measurements set-ups, ballbar traces, thermal logs, plot's replay CSV): every verb
+reads its file with ``read`` and then only says which columns it needs, so that a file one verb
+refuses no other reads as something else (a decimal comma made ``-400,1,up,0,6150`` a row of
+five cells that ballbar refused and iso230-2 read as deviation 0).
+
+The rules, one for all (the corpus in tests/conformance/csv/ holds a file per case):
+
+- UTF-8, a leading byte order mark ignored; lines end at LF or CRLF; a control character other
+  than tab (NUL, a lone CR, ...) is refused at its line;
+- lines that are blank or whose first character (after spaces) is ``#`` are comments outside a
+  quoted cell; line numbers count them;
+- the first other line is the header; its separator is ``;`` where it holds more semicolons than
+  commas, a tab where it holds tabs and no comma, otherwise ``,``; every column has a name, no
+  name twice (empty names at its end are trailing separators, dropped);
+- cells per RFC 4180: a cell in double quotes may hold the separator, a line break and doubled
+  quotes; spaces and tabs around a cell are not part of it; a quote inside an unquoted cell, or
+  text after a closing quote, is refused;
+- every row has exactly the header's number of cells: more (a decimal comma) or fewer are
+  refused at the row's line; only empty cells past the header's (a spreadsheet's trailing
+  separators) are dropped, as they hold nothing;
+- at most ``max_rows`` rows, ``MAX_COLUMNS`` columns, ``MAX_FIELD`` characters a cell;
+- a cell read as a number follows ``numbers.parse_number`` (plain finite decimals).
+
+Errors are ``FILE:LINE: COLUMN: message`` (no column where the whole row is at fault).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+from ..errors import ChaincompError
+from .numbers import parse_number
+from .yamlsource import MAX_FILE_BYTES, read_text
+
+MAX_FIELD = 131_072        # characters a cell (the limit Python's csv module had)
+MAX_COLUMNS = 1024
+MAX_ROWS = 2_000_000
+_CONTROL = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f]|\r(?!\n)")
+_DECIMAL_COMMA = re.compile(r"\s*[+-]?[0-9]+,[0-9]+\s*")
+_HEADER_UNIT = re.compile(r"^(.*?)\s*[\[(]\s*([^\])]+?)\s*[\])]\s*$")
+_BLANK = " \t"
+
+
+@dataclass
+class Row:
+    line: int            # the line the row starts on
+    cells: list[str]
+
+
+@dataclass
+class Table:
+    path: str
+    line: int                        # the header's line
+    header: list[str]                # column names as written (units and all), without surrounding spaces
+    rows: list[Row]
+    comments: list[tuple[int, str]] = field(default_factory=list)   # (line, text) of the '#' lines
+    separator: str = ","
+
+    def fail(self, message: str, line: int | None = None, column: str | None = None):
+        raise ChaincompError(message, self.path, line, column)
+
+    def number(self, row: Row, k: int, column: str | None = None) -> float:
+        """Cell ``k`` of ``row`` as a number; an empty cell is a missing value. Errors name
+        ``column`` (the verb's name for it) or else the header's."""
+        text, column = row.cells[k], column or self.header[k]
+        if not text:
+            self.fail("missing value", row.line, column)
+        try:
+            return parse_number(text)
+        except ValueError as exc:
+            hint = " (a decimal comma? write decimals with a point)" if _DECIMAL_COMMA.fullmatch(text) else ""
+            self.fail(f"{exc}{hint}", row.line, column)
+
+
+def split_unit(name: str) -> tuple[str, str | None]:
+    """'target [mm]' or 'target (mm)' -> ('target', 'mm'); 'run' -> ('run', None)."""
+    m = _HEADER_UNIT.match(name.strip())
+    return (m.group(1).strip(), m.group(2)) if m else (name.strip(), None)
+
+
+def read(path: str, max_rows: int = MAX_ROWS, max_bytes: int = MAX_FILE_BYTES,
+         example: str = "") -> Table:
+    """The table in a CSV file (the module's rules); ``example`` is a header to suggest when
+    there is none."""
+    text = read_text(path, limit=max_bytes).removeprefix("\ufeff")   # the byte order mark spreadsheets write
+    bad = _CONTROL.search(text)
+    if bad:
+        what = "a carriage return not followed by a line feed" if bad.group() == "\r" else \
+            f"a control character U+{ord(bad.group()):04X}"
+        raise ChaincompError(f"{what}: not a text CSV file", path, text.count("\n", 0, bad.start()) + 1)
+    lines = text.split("\n")
+    table = Table(path, 0, [], [])
+    i = 0
+    while i < len(lines):
+        start = i + 1
+        line = lines[i].removesuffix("\r")
+        i += 1
+        if not line.strip(_BLANK):
+            continue
+        if line.lstrip(_BLANK).startswith("#"):
+            table.comments.append((start, line))
+            continue
+        if not table.header:
+            table.separator = ";" if line.count(";") > line.count(",") else \
+                "\t" if "\t" in line and "," not in line else ","
+        if '"' in line:
+            cells, i = _quoted(lines, i - 1, table.separator, path)
+        else:
+            cells = [c.strip(_BLANK) for c in line.split(table.separator)]
+        if len(line) > MAX_FIELD or i > start:
+            for k, c in enumerate(cells):
+                if len(c) > MAX_FIELD:
+                    raise ChaincompError(f"a cell of {len(c)} characters: at most {MAX_FIELD}", path, start,
+                                         table.header[k] if k < len(table.header) else None)
+        if len(cells) > len(table.header) > 0 and not any(cells[len(table.header):]):
+            del cells[len(table.header):]   # empty cells past the header: a spreadsheet's trailing separators
+        if not table.header:
+            while len(cells) > 1 and not cells[-1]:
+                cells.pop()
+            _check_header(cells, path, start)
+            table.header, table.line = cells, start
+            continue
+        if len(cells) != len(table.header):
+            hint = " (a decimal comma? write decimals with a point)" \
+                if len(cells) > len(table.header) and table.separator == "," else ""
+            raise ChaincompError(f"{len(cells)} cell{'s' if len(cells) != 1 else ''}, the header has "
+                                 f"{len(table.header)}{hint}", path, start)
+        if len(table.rows) == max_rows:
+            raise ChaincompError(f"more than {max_rows} rows", path, start)
+        table.rows.append(Row(start, cells))
+    if not table.header:
+        raise ChaincompError("no header row" + (f" (expected e.g. {example!r})" if example else ""), path, 1)
+    return table
+
+
+def _check_header(cells: list[str], path: str, line: int) -> None:
+    if len(cells) > MAX_COLUMNS:
+        raise ChaincompError(f"{len(cells)} columns: at most {MAX_COLUMNS}", path, line)
+    seen: dict[str, int] = {}
+    for k, name in enumerate(cells, 1):
+        if not name:
+            raise ChaincompError(f"column {k} has no name", path, line)
+        if name in seen:
+            raise ChaincompError(f"two columns named {name!r} (columns {seen[name]} and {k})", path, line)
+        seen[name] = k
+
+
+def _quoted(lines: list[str], i: int, sep: str, path: str) -> tuple[list[str], int]:
+    """The cells of the record that starts on lines[i] and holds a quote (RFC 4180: a quoted
+    cell may run over line ends), and the index of the line after it."""
+    first = i + 1
+    text = lines[i].removesuffix("\r")
+    i += 1
+    cells, j = [], 0
+    while True:
+        while j < len(text) and text[j] in _BLANK and text[j] != sep:
+            j += 1
+        if j < len(text) and text[j] == '"':
+            parts, j = [], j + 1
+            while True:
+                q = text.find('"', j)
+                if q < 0:   # the cell goes on past the line end
+                    if i == len(lines):
+                        raise ChaincompError("a quoted cell is not closed (a quote missing?)", path, first)
+                    parts += [text[j:], "\n"]
+                    text, j = lines[i].removesuffix("\r"), 0
+                    i += 1
+                    continue
+                parts.append(text[j:q])
+                if text.startswith('"', q + 1):   # "" is one quote
+                    parts.append('"')
+                    j = q + 2
+                    continue
+                j = q + 1
+                break
+            cell = "".join(parts)
+            while j < len(text) and text[j] in _BLANK and text[j] != sep:
+                j += 1
+            if j < len(text) and text[j] != sep:
+                raise ChaincompError(f"text after a closing quote: {text[j:j + 20]!r} (a quote inside a quoted cell "
+                                     "is written twice: \"\")", path, i)
+        else:
+            end = text.find(sep, j)
+            end = len(text) if end < 0 else end
+            cell = text[j:end].strip(_BLANK)
+            if '"' in cell:
+                raise ChaincompError(f"a quote inside the unquoted cell {cell[:40]!r}: quote the whole cell and "
+                                     "write the quote twice (\"a \"\"b\"\"\")", path, i)
+            j = end
+        cells.append(cell)
+        if j >= len(text):
+            return cells, i
+        j += 1   # past the separator
