@@ -67,26 +67,63 @@ def parse_klipper(line):
     return out
 
 
-def parse_marlin(line, min_factor=-1.0, max_factor=1.0):
+def parse_marlin(line, min_factor=-1.0, max_factor=1.0, unit_factor=1.0, for_z=True):
     """Parse `M852 [I<xy>|S<xy>] [J<xz>] [K<yz>]` (Marlin M852.cpp).
 
     Factors are given directly as tangents. S is an alias for I, and I wins if both are given.
-    Values outside [SKEW_FACTOR_MIN, SKEW_FACTOR_MAX] = [-1, 1] are rejected, not clamped, and are
-    left out of the result. Assumes G21 (mm mode); Marlin reads them with value_linear_units().
+    Marlin reads them with parser.value_linear_units(): the value times the current length unit
+    (``unit_factor``: 1 after G21, 25.4 after G20). Values outside [SKEW_FACTOR_MIN,
+    SKEW_FACTOR_MAX] = [-1, 1] (after that scaling) are rejected, not clamped, and are left out of
+    the result. J and K are read only in a Marlin built with SKEW_CORRECTION_FOR_Z (``for_z``).
     """
     s = _strip_comment(line)
     words = s.split(None, 1)
     if not words or words[0].upper() != "M852":
         raise ValueError("not an M852 line: %r" % line)
-    w = {k.upper(): float(v) for k, v in _WORD.findall(words[1] if len(words) > 1 else "")}
+    w = {k.upper(): float(v) * unit_factor for k, v in _WORD.findall(words[1] if len(words) > 1 else "")}
     out = {}
     for key, letters in (("xy", ("I", "S")), ("xz", ("J",)), ("yz", ("K",))):
+        if key != "xy" and not for_z:
+            continue
         for L in letters:
             if L in w:
                 if min_factor <= w[L] <= max_factor:
                     out[key] = w[L]
                 break
     return out
+
+
+def _commands(program):
+    """(first word upper-cased, line) of each line of a G-code program that holds a command."""
+    for line in program.splitlines():
+        s = _strip_comment(line)
+        if s:
+            yield s.split(None, 1)[0].upper(), s
+
+
+def replay_marlin(program, factors=None, inch=False, for_z=True):
+    """The skew factors after a G-code program, from the state before it (``factors``, G20 in force
+    if ``inch``): G20/G21 set the length unit M852 reads its values in (Marlin gcode/units/G20_G21.cpp
+    set_input_linear_units: 25.4 or 1), and each M852 sets the factors it gives (M852.cpp)."""
+    state = dict(factors or {"xy": 0.0, "xz": 0.0, "yz": 0.0})
+    for word, line in _commands(program):
+        if word in ("G20", "G21"):
+            inch = word == "G20"
+        elif word == "M852":
+            state.update(parse_marlin(line, unit_factor=25.4 if inch else 1.0, for_z=for_z))
+    if not for_z:
+        state["xz"] = state["yz"] = 0.0   # planner.h skew() has no z terms without SKEW_CORRECTION_FOR_Z
+    return state
+
+
+def replay_rrf(program, state=None):
+    """The axis compensation after a G-code program, from the state before it: each M556 sets the
+    tangents it gives, and P only when P is given (GCodes2.cpp case 556): an earlier P1 stays."""
+    state = dict(state or {"tanXY": 0.0, "tanYZ": 0.0, "tanXZ": 0.0, "compensateXY": True})
+    for word, line in _commands(program):
+        if word == "M556":
+            state.update(parse_rrf(line))
+    return state
 
 
 def parse_rrf(line):

@@ -109,6 +109,8 @@ class Export:
     after_offset: Residual | None = None  # the residual once that offset is touched off
     shares: list[ErrorShare] = field(default_factory=list)
     isg: object | None = None            # isg_volcomp.IsgFile: the file's axes, chain, names
+    without_z: Residual | None = None    # marlin: the residual, touched off, with I alone (J, K need
+                                         # SKEW_CORRECTION_FOR_Z)
 
 
 def _errors_only(machine: Machine, values: dict, keep: set[str] | None) -> dict:
@@ -411,6 +413,8 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     if offset is not None:
         out.after_offset = left = Residual.of(shifted(after, offset))
         base = Residual.of(shifted(before, before[0].reshape(3, -1).mean(axis=1)))
+    if fmt == "marlin":
+        out.without_z = _touched_off(_xy_only(lin, c, sets, exact, values))
     if not left.max < base.max * (1 - 1e-3) - 1e-7:   # 0.1 nm: rounding, not compensation
         worse = left.max > base.max + 1e-7   # a fit on a coarse grid, worse between its points
         raise ChaincompError(f"--format {fmt} " + ("leaves more tool error than no compensation" if worse else
@@ -431,6 +435,20 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     if reversal:
         with_reversal(tables, reversal)
     return out
+
+
+def _xy_only(lin: list[Symbol], c: np.ndarray, sets: list[dict], exact: ExactModel, values: dict) -> list[np.ndarray]:
+    """The tool error when Marlin applies M852's I alone: built without SKEW_CORRECTION_FOR_Z
+    its M852 reads no J or K and planner.h skew() moves x by -xy.y only."""
+    only = np.eye(3)
+    only[0, 1] = c[0, 1]
+    return [tool_error(exact, values, q, apply_matrix(lin, only, q)) for q in sets]
+
+
+def _touched_off(dp: list[np.ndarray]) -> Residual:
+    """The residual once the constant error is touched off (its mean over the check points)."""
+    mean = np.concatenate([d.reshape(3, -1) for d in dp], axis=1).mean(axis=1)
+    return Residual.of([d - mean.reshape(3, *([1] * (d.ndim - 1))) for d in dp])
 
 
 def _held_at_the_ends(machine: Machine, values: dict) -> dict:
@@ -543,6 +561,8 @@ def to_json(e: Export) -> dict:
         doc["matrix"] = e.matrix.tolist()
         doc["offset_um"] = (e.offset * 1e3).tolist()
         doc["after_offset"] = res(e.after_offset)
+    if e.without_z is not None:
+        doc["without_skew_correction_for_z"] = res(e.without_z)
     if e.isg is not None:
         f = e.isg
         doc["isg"] = {"axes": {c: a.name for c, a in f.letters.items()}, "chain": f.chain,
@@ -578,6 +598,8 @@ def to_text(e: Export) -> str:
                      + "; ".join(" ".join(f"{v:.9f}" for v in row) for row in e.matrix))
         if e.format == "linuxcnc-matrixkins":
             lines += ["  " + line.lstrip("# ") for line in matrixkins_passthrough(e)]
+        if e.without_z is not None:
+            lines.append(f"  {MARLIN_FOR_Z}: with I alone, once touched off: {um(e.without_z)}")
     if e.isg is not None:
         f = e.isg
         lines.append(f"  axes {', '.join(f'{c}={a.name}' for c, a in f.letters.items())}; chain {f.chain} "
@@ -610,16 +632,27 @@ def klipper_lengths(factor: float, side: float = KLIPPER_SIDE) -> tuple[float, f
     return (side * float(np.sqrt(2 * (1 + np.cos(theta)))), side * float(np.sqrt(2 * (1 - np.cos(theta)))), side)
 
 
+MARLIN_FOR_Z = "M852's J (XZ) and K (YZ) act only in a Marlin built with SKEW_CORRECTION_FOR_Z"
+
+
 def skew_text(e: Export) -> str:
-    """The firmware's command. Marlin M852 (gcode/calibrate/M852.cpp) and Klipper SET_SKEW
-    (docs/G-Codes.md) take the factors of skew_factors(); RepRapFirmware M556 (Move.cpp
-    AxisTransform: x += tanXY.y + tanXZ.z, y += tanYZ.z) adds, with X = S.tanXY, Y = S.tanYZ,
-    Z = S.tanXZ (GCodes2.cpp case 556)."""
+    """The firmware's commands, with the state they need set first. Marlin M852
+    (gcode/calibrate/M852.cpp) and Klipper SET_SKEW (docs/G-Codes.md) take the factors of
+    skew_factors(); M852 reads them with value_linear_units(), x25.4 after a G20, so G21
+    comes first. RepRapFirmware M556 (Move.cpp AxisTransform: x += tanXY.y + tanXZ.z,
+    y += tanYZ.z) adds, with X = S.tanXY, Y = S.tanYZ, Z = S.tanXZ (GCodes2.cpp case 556),
+    and keeps an earlier P (P1: the XY term on Y) unless P is given: P0 is written."""
     f = skew_factors(e)
     if e.format == "marlin":
-        return f"M852 I{f['xy']:.9f} J{f['xz']:.9f} K{f['yz']:.9f}"
+        return "\n".join([f"; {MARLIN_FOR_Z}; without it I alone leaves max {e.without_z.max * 1e3:.3f} um once "
+                          "touched off (chaincomp export's report)",
+                          "; M852 reads its factors in the current length unit (x25.4 after G20): G21 (mm) first, "
+                          "and it stays in force",
+                          "G21", f"M852 I{f['xy']:.9f} J{f['xz']:.9f} K{f['yz']:.9f}"])
     if e.format == "klipper":
         planes = {p: ",".join(f"{v:.9f}" for v in klipper_lengths(f[p.lower()])) for p in ("XY", "XZ", "YZ")}
         return "SET_SKEW " + " ".join(f"{p}={v}" for p, v in planes.items())
     c, s = e.matrix, KLIPPER_SIDE
-    return f"M556 S{s:g} X{s * c[0, 1]:.9f} Y{s * c[1, 2]:.9f} Z{s * c[0, 2]:.9f}"
+    return "\n".join(["; P0 (the XY term corrects X, RRF's default) replaces an earlier M556 P1, which M556 "
+                      "without P keeps",
+                      f"M556 S{s:g} X{s * c[0, 1]:.9f} Y{s * c[1, 2]:.9f} Z{s * c[0, 2]:.9f} P0"])

@@ -27,7 +27,7 @@ def add_parser(sub) -> None:
                                    "leaves of it (an error the format cannot represent is left out). Formats: "
                                    "linuxcnc-comp (one [JOINT_n]COMP_FILE per joint: -o is a folder), "
                                    "linuxcnc-matrixkins (C_xx..C_zz of LinuxCNC's matrixkins: -o is a HAL file), "
-                                   "marlin (M852 I J K), klipper (SET_SKEW), rrf (M556): -o is the G-code line; "
+                                   "marlin (G21, M852 I J K), klipper (SET_SKEW), rrf (M556 P0): -o is the G-code; "
                                    "isg-volcomp (the ISO 230-1 errors in an ISG CSV file and its compensation "
                                    "list, for ISG's and Beckhoff TwinCAT CNC's volumetric compensation: -o is a "
                                    "folder). "

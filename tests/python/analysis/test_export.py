@@ -180,12 +180,12 @@ def test_matrixkins_cancels_squareness(capsys, tmp_path):
 @pytest.mark.parametrize("fmt", ["marlin", "klipper", "rrf"])
 def test_printer_skew_cancels_squareness(capsys, tmp_path, fmt):
     doc, out = export(capsys, tmp_path, SQUARENESS, fmt, "--grid", "5", "--no-breakdown")
-    line = out.read_text().strip()
-    parse = {"marlin": firmware_skew.parse_marlin, "klipper": firmware_skew.parse_klipper,
-             "rrf": firmware_skew.parse_rrf}[fmt]
+    program = out.read_text()
+    replay = {"marlin": firmware_skew.replay_marlin, "klipper": firmware_skew.parse_klipper,
+              "rrf": firmware_skew.replay_rrf}[fmt]
     apply = {"marlin": firmware_skew.apply_marlin, "klipper": firmware_skew.apply_klipper,
              "rrf": firmware_skew.apply_rrf}[fmt]
-    factors = parse(line)
+    factors = replay(program)
     x, y, z = random_points()
     motor = apply(factors, np.array([x, y, z]))
     err = np.linalg.norm(own_model(*motor, **SQ) - np.array([x, y, z]), axis=0) * 1e3
