@@ -19,7 +19,6 @@ sensors greedily; ``simulate`` writes such a log from a known model."""
 
 from __future__ import annotations
 
-import csv
 import math
 import re
 from dataclasses import dataclass, field
@@ -28,10 +27,11 @@ import numpy as np
 import yaml
 
 from ..errors import ChaincompError
-from ..model import units as U
+from ..model import csvtable, units as U
 from ..model.expressions import MAX_LITERAL
 from ..model.machine import Machine
-from ..model.yamlsource import LineDict, LineList, describe, line_of, load_yaml, read_text, yaml11_number
+from ..model.numbers import DECIMAL as _DECIMAL
+from ..model.yamlsource import LineDict, LineList, describe, line_of, load_yaml, yaml11_number
 
 REFERENCE_TEMPERATURE = 20.0   # degC: ISO 1, the reference temperature of geometrical specifications
 MAX_ERRORS = 64                # errors of one thermal model
@@ -45,7 +45,6 @@ MAX_LOG_BYTES = 256 * 1024 * 1024
 MIN_TIME_STEP = 1e-6           # s: a log's time resolution (LCM's utime)
 MAX_COLUMNS = 64
 SENSOR = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,31}")
-_DECIMAL = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")   # ASCII digits only
 _HEADER_UNIT = re.compile(r"^(.*?)\s*\[([^\]]*)\]\s*$")
 TEMPERATURE_UNITS = ("degC", "°C")
 SIMULATION_POINTS = 4_000_000   # the truth's time steps at most (then fewer per reading)
@@ -264,33 +263,9 @@ def read_log(path: str, machine: Machine, rename: dict[str, str] | None = None, 
     """A CSV log: a 'time [s]' column, temperature columns ('NAME [degC]') and drift columns
     named by errors of the machine ('EZZ [um]'; ``rename`` maps other names to errors)."""
     rename = dict(rename or {})
-    text = read_text(path, limit=MAX_LOG_BYTES)
-    if text.startswith("\ufeff"):
-        text = text[1:]
-
-    def lines():
-        """(number, line) of the lines that are not blank or comments: split at line ends only
-        (not at U+2028 or a form feed inside a comment, as str.splitlines would)."""
-        for number, line in enumerate(text.split("\n"), 1):
-            line = line.removesuffix("\r")
-            if line.strip(" \t") and not line.lstrip(" \t").startswith("#"):
-                yield number, line
-
-    rows = lines()
-    hline, htext = next(rows, (1, None))
-    if htext is None:
-        raise ChaincompError("no header row (expected e.g. 'time [s],T_spindle [degC],EZZ [um]')", path, 1)
-    delimiter = ";" if htext.count(";") > htext.count(",") else "\t" if "\t" in htext and "," not in htext else ","
-    if htext.count(delimiter) + 1 > MAX_COLUMNS:
-        raise ChaincompError(f"{htext.count(delimiter) + 1} columns: a log holds at most {MAX_COLUMNS}", path, hline)
-
-    def cells(number: int, line: str) -> list[str]:
-        try:
-            return next(csv.reader([line], delimiter=delimiter))
-        except csv.Error as exc:
-            raise ChaincompError(f"unreadable CSV row: {exc}", path, number) from None
-
-    header = cells(hline, htext)
+    table = csvtable.read(path, max_rows=MAX_ROWS, max_bytes=MAX_LOG_BYTES,
+                          example="time [s],T_spindle [degC],EZZ [um]")
+    header, hline = table.header, table.line
     if len(header) > MAX_COLUMNS:
         raise ChaincompError(f"{len(header)} columns: a log holds at most {MAX_COLUMNS}", path, hline)
     errors = {s.name: s for s in machine.errors}
@@ -350,23 +325,16 @@ def read_log(path: str, machine: Machine, rename: dict[str, str] | None = None, 
         if name in seen:
             raise ChaincompError(f"two columns of {name} ({seen[name] + 1} and {k + 1})", path, hline, header[k].strip())
         seen[name] = k
-    data = np.empty((min(text.count("\n") + 1, MAX_ROWS), len(header)))
+    data = np.empty((len(table.rows), len(header)))
     n = 0
     previous = None
-    for line, raw in rows:
-        if n == MAX_ROWS:
-            raise ChaincompError(f"more than {MAX_ROWS} rows: a log holds at most {MAX_ROWS}", path, line)
-        row = cells(line, raw)
-        if len(row) != len(header):
-            raise ChaincompError(f"{len(row)} cells, the header has {len(header)}", path, line)
+    for row in table.rows:
+        line = row.line
         values = []
-        for k, cell in enumerate(row):
-            t = cell.strip(" \t")
-            if not _DECIMAL.fullmatch(t):
-                raise ChaincompError(f"expected a number, got {cell!r}", path, line, header[k].strip())
-            v = float(t)
+        for k, cell in enumerate(row.cells):
+            v = table.number(row, k)
             if not abs(v) <= MAX_LITERAL:
-                raise ChaincompError(f"{t!r} is larger than {MAX_LITERAL:g} in magnitude", path, line, header[k].strip())
+                raise ChaincompError(f"{cell!r} is larger than {MAX_LITERAL:g} in magnitude", path, line, header[k])
             if kinds[k] == "temperature" and not TEMPERATURE_RANGE[0] <= v <= TEMPERATURE_RANGE[1]:
                 raise ChaincompError(f"{v:g} degC is outside [{TEMPERATURE_RANGE[0]:g}, {TEMPERATURE_RANGE[1]:g}] "
                                      "degC: a broken sensor?", path, line, header[k].strip())

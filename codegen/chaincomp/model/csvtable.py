@@ -6,8 +6,8 @@ five cells that ballbar refused and iso230-2 read as deviation 0).
 
 The rules, one for all (the corpus in tests/conformance/csv/ holds a file per case):
 
-- UTF-8, a leading byte order mark ignored; lines end at LF or CRLF; a control character other
-  than tab (NUL, a lone CR, ...) is refused at its line;
+- UTF-8, a leading byte order mark ignored; lines end at LF or CRLF, and nowhere else (not at
+  U+2028 or a form feed, which are text); a NUL or a CR not followed by LF is refused at its line;
 - lines that are blank or whose first character (after spaces) is ``#`` are comments outside a
   quoted cell; line numbers count them;
 - the first other line is the header; its separator is ``;`` where it holds more semicolons than
@@ -37,7 +37,7 @@ from .yamlsource import MAX_FILE_BYTES, read_text
 MAX_FIELD = 131_072        # characters a cell (the limit Python's csv module had)
 MAX_COLUMNS = 1024
 MAX_ROWS = 2_000_000
-_CONTROL = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f]|\r(?!\n)")
+_NOT_TEXT = re.compile(r"\x00|\r(?!\n)")   # a binary file; an old Mac line end (read as one line by some, two by others)
 _DECIMAL_COMMA = re.compile(r"\s*[+-]?[0-9]+,[0-9]+\s*")
 _HEADER_UNIT = re.compile(r"^(.*?)\s*[\[(]\s*([^\])]+?)\s*[\])]\s*$")
 _BLANK = " \t"
@@ -85,11 +85,11 @@ def read(path: str, max_rows: int = MAX_ROWS, max_bytes: int = MAX_FILE_BYTES,
     """The table in a CSV file (the module's rules); ``example`` is a header to suggest when
     there is none."""
     text = read_text(path, limit=max_bytes).removeprefix("\ufeff")   # the byte order mark spreadsheets write
-    bad = _CONTROL.search(text)
+    bad = _NOT_TEXT.search(text)
     if bad:
-        what = "a carriage return not followed by a line feed" if bad.group() == "\r" else \
-            f"a control character U+{ord(bad.group()):04X}"
-        raise ChaincompError(f"{what}: not a text CSV file", path, text.count("\n", 0, bad.start()) + 1)
+        what = "a carriage return not followed by a line feed (lines end in LF or CRLF)" if bad.group() == "\r" \
+            else "a NUL character: not a text file"
+        raise ChaincompError(what, path, text.count("\n", 0, bad.start()) + 1)
     lines = text.split("\n")
     table = Table(path, 0, [], [])
     i = 0

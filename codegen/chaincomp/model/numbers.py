@@ -12,7 +12,7 @@ DECIMAL = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
 def parse_number(text: str) -> float:
     """A finite number written in plain ASCII decimals: float() alone would also take 'nan',
     'inf', '1_000' and other scripts' digits. Raises ValueError with the reason."""
-    t = text.strip()
+    t = text.strip(" \t\r\n")   # str.strip() alone would also take other scripts' spaces (U+3000)
     if DECIMAL.fullmatch(t):
         value = float(t)
         if math.isfinite(value):

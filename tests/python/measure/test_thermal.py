@@ -181,14 +181,14 @@ def _log(lathe, text, name="bad.csv"):
     ("time [s],T_a [degC],EQQ [um]\n", ["EQQ", "not an error of lathe_zx"]),
     ("time [s],T_a [degC],EBS [um]\n", ["EBS is an angle", "um"]),
     ("time [s],T_a [degC],EZS [furlong]\n", ["unknown unit 'furlong'"]),
-    ("time [s],T_a [degC],T_a [degC],EZS [um]\n", ["two columns of T_a"]),
+    ("time [s],T_a [degC],T_a [degC],EZS [um]\n", ["two columns named 'T_a [degC]' (columns 2 and 3)"]),
     ("time [s],T a [degC],EZS [um]\n", ["sensor name 'T a'"]),
     ("time [s],EZS [um]\n1,2\n", ["no temperature column"]),
-    (GOOD_LOG.replace("\n5,20.5,", "\n5,nan,"), [":7: T_a [degC]: expected a number, got 'nan'"]),
+    (GOOD_LOG.replace("\n5,20.5,", "\n5,nan,"), [":7: T_a [degC]: expected a finite number, got 'nan'"]),
     (GOOD_LOG.replace("\n5,20.5,", "\n5,999,"), [":7: T_a [degC]: 999 degC is outside"]),
     (GOOD_LOG.replace("\n5,", "\n4,"), [":7: time [s]: time 4 s does not follow 4 s"]),
     (GOOD_LOG.replace("\n5,20.5,1.0\n", "\n5,20.5\n"), [":7: 2 cells, the header has 3"]),
-    (GOOD_LOG.replace("\n5,20.5,1.0\n", "\n5,20.5,1e999\n"), ["larger than"]),
+    (GOOD_LOG.replace("\n5,20.5,1.0\n", "\n5,20.5,1e300\n"), ["larger than"]),
     ("time [s],T_a [degC],EZS [um]\n1,20,0\n2,21,1\n", ["2 rows: a fit needs at least 10"]),
     ("", ["no header row"]),
 ])
@@ -338,9 +338,9 @@ def test_more_bad_models(lathe, edit, words):
 
 
 @pytest.mark.parametrize("old, new, words", [
-    ("\n5,20.5,1.0\n", "\n5,\u0662\u0660.\u0665,1.0\n", [":7: T_a [degC]: expected a number"]),   # Arabic-Indic digits
-    ("\n5,20.5,1.0\n", "\n5,\uff12\uff10.5,1.0\n", [":7: T_a [degC]: expected a number"]),        # fullwidth
-    ("\n5,20.5,1.0\n", "\n5,\u300020.5,1.0\n", [":7: T_a [degC]: expected a number"]),            # ideographic space
+    ("\n5,20.5,1.0\n", "\n5,\u0662\u0660.\u0665,1.0\n", [":7: T_a [degC]: expected a plain decimal number"]),   # Arabic-Indic digits
+    ("\n5,20.5,1.0\n", "\n5,\uff12\uff10.5,1.0\n", [":7: T_a [degC]: expected a plain decimal number"]),        # fullwidth
+    ("\n5,20.5,1.0\n", "\n5,\u300020.5,1.0\n", [":7: T_a [degC]: expected a plain decimal number"]),            # ideographic space
     ("\n5,20.5,", "\n4.0000000001,20.5,", [":7: time [s]: time 4 s does not follow 4 s by at least 1e-06 s"]),
 ])
 def test_more_bad_logs(lathe, old, new, words):
@@ -355,7 +355,7 @@ def test_a_line_separator_in_a_comment_does_not_split_it(lathe):
     p = _log(lathe, "# a note\u2028on two lines\n# and\x0ca form feed\n" + GOOD_LOG.replace("\n5,20.5,", "\n5,nan,"),
              "sep.csv")
     one_error_line(run_in_process("thermal", "fit", lathe / "lathe.yaml", p, "-o", lathe / "never.yaml"),
-                   "thermal fit", f"{p}:9: T_a [degC]: expected a number, got 'nan'")
+                   "thermal fit", f"{p}:9: T_a [degC]: expected a finite number, got 'nan'")
 
 
 def test_the_simulated_log_is_read_every_1_over_rate_seconds(lathe):
