@@ -25,7 +25,6 @@ without the redundancy to estimate its own uncertainty, is refused.
 
 from __future__ import annotations
 
-import csv
 import math
 import re
 from dataclasses import dataclass, field
@@ -34,12 +33,12 @@ import numpy as np
 
 from ..errors import ChaincompError
 from ..escape import one_line
+from ..model import csvtable
 from ..model.display import DEFAULT_UNITS, display_unit, plus_minus, quantity
 from ..model.expressions import MAX_LITERAL
 from ..model.machine import Machine
 from ..model.units import INTERNAL, UNITS
 from ..model.varying import MAX_POLYNOMIAL_COEFFICIENTS, MAX_TABLE_KNOTS, MAX_VARYING_ERRORS
-from ..model.yamlsource import read_text
 from ..output import write_file
 from ..symbolic.derive import COMPONENTS
 from ..symbolic.numeric import ExactModel
@@ -166,36 +165,19 @@ def read_table(path: str, machine: Machine, coords_required: bool = True) -> Tab
     are matched exactly as spelt: axis X and coordinate x are different columns."""
     axes = [s.name for s in machine.axes]
     length = UNITS[machine.length_unit].to_internal
-    text = read_text(path).removeprefix("\ufeff")     # the byte-order mark spreadsheets write
-    header, rows, lines = None, [], []
-    for lineno, raw in enumerate(text.split("\n"), 1):
-        raw = raw.rstrip("\r")
-        if not raw.strip() or raw.lstrip().startswith("#"):
-            continue
-        try:
-            cells = [c.strip() for c in next(csv.reader([raw]))]
-        except csv.Error as exc:   # e.g. a field past the csv module's limit of 131072 characters
-            raise ChaincompError(f"unreadable CSV row: {exc}", path, lineno) from None
-        if header is None:
-            header = _header(cells, machine, coords_required, path, lineno)
-            continue
-        if len(cells) != len(header):
-            raise ChaincompError(f"expected {len(header)} values ({', '.join(header)}), got {len(cells)}",
-                                 path, lineno)
-        if len(rows) == MAX_ROWS:
-            raise ChaincompError(f"more than {MAX_ROWS} rows", path, lineno)
+    data = csvtable.read(path, max_rows=MAX_ROWS)
+    header = _header(data.header, machine, coords_required, path, data.line)
+    rows, lines = [], []
+    for r in data.rows:
+        lineno = r.line
         row = {}
-        for name, cell in zip(header, cells):
+        for k, (name, cell) in enumerate(zip(header, r.cells)):
             if cell == "" and name not in axes:
                 row[name] = math.nan
                 continue
-            try:
-                value = float(cell)
-            except ValueError:
-                value = math.nan
+            value = data.number(r, k)
             if not abs(value) <= MAX_LITERAL:
-                raise ChaincompError(f"expected a number of magnitude at most {MAX_LITERAL:g}, got {cell!r}"
-                                     if math.isfinite(value) else f"expected a number, got {cell!r}",
+                raise ChaincompError(f"expected a number of magnitude at most {MAX_LITERAL:g}, got {cell!r}",
                                      path, lineno, name)
             row[name] = value
         k = [row.get(c, math.nan) for c in DIRECTIONS]
@@ -206,7 +188,7 @@ def read_table(path: str, machine: Machine, coords_required: bool = True) -> Tab
         _check_quaternion(row, header, path, lineno)
         rows.append(row)
         lines.append(lineno)
-    if header is None or not rows:
+    if not rows:
         raise ChaincompError("no measurements: expected a header row and at least one data row", path)
     quats = np.array([[r.get(c, math.nan) for c in QUATERNION] for r in rows])
     quats /= np.linalg.norm(quats, axis=1, keepdims=True)            # NaN rows stay NaN
@@ -261,11 +243,9 @@ def _header(cells, machine, coords_required, path, lineno) -> list[str]:
     axes = [s.name for s in machine.axes]
     columns = measured_columns(machine)
     header = []
-    if len(cells) == 1 and any(sep in cells[0] for sep in ";\t|"):
-        sep = next(sep for sep in ";\t|" if sep in cells[0])
-        raise ChaincompError(f"the header is one cell {cells[0]!r}: columns are separated by commas, not "
-                             f"{'tabs' if sep == chr(9) else repr(sep)} (export the sheet as comma-separated CSV)",
-                             path, lineno, "header")
+    if len(cells) == 1 and "|" in cells[0]:
+        raise ChaincompError(f"the header is one cell {cells[0]!r}: columns are separated by commas, semicolons "
+                             "or tabs, not '|' (export the sheet as comma-separated CSV)", path, lineno, "header")
     for cell in cells:
         named = re.fullmatch(r"(\S+)\s*[\[(].*[\])]", cell)
         if named and named.group(1) in axes + list(columns):

@@ -160,7 +160,7 @@ GOOD = "# measured\nAp,Cp,x,y,z\n0,0,0,-10,-28\n90,0,15,-5,-22\n"
 @pytest.mark.slow
 def test_malformed_row_names_its_line(tmp_path):
     err = bad(tmp_path, GOOD + "180,0,1,2\n")
-    assert err.endswith("m.csv:5: expected 5 values (Ap, Cp, x, y, z), got 4")
+    assert err.endswith("m.csv:5: 4 cells, the header has 5")
     err = bad(tmp_path, GOOD + "180,zero,1,2,3\n")
     assert err.endswith("m.csv:5: Cp: expected a number, got 'zero'")
 

@@ -325,7 +325,7 @@ def test_columns_are_matched_exactly(tmp_path, capsys):
         "m.csv:1: header: unknown column 'ap' (expected the axes X, Y, Z, Ap, Cp and measured coordinates "
         "x, y, z, kx, ky, kz); names are case-sensitive: did you mean 'Ap'?")
     path.write_text("X,Y,Z,Ap,Cp,X\n0,0,0,0,0,1\n")
-    assert "m.csv:1: header: column 'X' appears twice" in refused(capsys, "identify", FIVE, path)
+    assert "m.csv:1: two columns named 'X' (columns 1 and 6)" in refused(capsys, "identify", FIVE, path)
     # a spreadsheet's byte-order mark is not part of the first column's name
     m = load_machine(FIVE)
     declared, axes = random_setups(m, np.random.default_rng(5), 20)

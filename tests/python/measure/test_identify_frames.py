@@ -281,8 +281,8 @@ GOOD = "0.5,0.5,0.5,0.5"
 @pytest.mark.parametrize("cells, field, words", [
     ("0.5,0.5,0.5,0.6", "qw", "not a unit quaternion (norm 1.05357, expected 1 within 0.001)"),
     ("1.1,0,0,0", "qw", "not a unit quaternion"),
-    ("nan,0,0,1", "qw", "expected a number, got 'nan'"),
-    ("0.5,inf,0.5,0.5", "qx", "expected a number, got 'inf'"),
+    ("nan,0,0,1", "qw", "expected a finite number, got 'nan'"),
+    ("0.5,inf,0.5,0.5", "qx", "expected a finite number, got 'inf'"),
     ("0.5,0.5,,0.5", "qy", "needs all four quaternion components"),
     ("0,0,0,0", "qw", "not a unit quaternion (norm 0"),
 ])
