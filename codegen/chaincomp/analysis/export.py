@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import ChaincompError
 from ..model.machine import Machine, Symbol
-from ..model.varying import varying_errors
+from ..model.varying import Table, varying_errors
 from ..symbolic.numeric import ExactModel
 
 # LinuxCNC: motion.h EMCMOT_COMP_SIZE; a larger file is refused entry by entry
@@ -109,6 +109,7 @@ class Export:
     after_offset: Residual | None = None  # the residual once that offset is touched off
     shares: list[ErrorShare] = field(default_factory=list)
     isg: object | None = None            # isg_volcomp.IsgFile: the file's axes, chain, names
+    knot_axes: list[str] = field(default_factory=list)   # joints checked at the params' table knots too
     without_z: Residual | None = None    # marlin: the residual, touched off, with I alone (J, K need
                                          # SKEW_CORRECTION_FOR_Z)
 
@@ -353,10 +354,44 @@ def between_entries(axes: list[Symbol], entries: int, grid: list[np.ndarray]) ->
     return sets
 
 
+def table_knots(axes: list[Symbol], values: dict) -> dict[str, np.ndarray]:
+    """Per joint, the knots of the params' tables along it that lie inside its limits (declared
+    unit): a table's error bends there, so its largest residual may lie there and not at the
+    grid, the entries or their midpoints."""
+    knots: dict[str, set[float]] = {}
+    for v in varying_errors(values).values():
+        if isinstance(v, Table):
+            knots.setdefault(v.axis, set()).update(np.asarray(v.x, float).tolist())
+    out = {}
+    for a in axes:
+        lo, hi = sorted(a.to_internal(float(x)) for x in a.limits)
+        inside = [a.from_internal(x) for x in sorted(knots.get(a.name, ())) if lo <= x <= hi]
+        if inside:
+            out[a.name] = np.asarray(inside, float)
+    return out
+
+
+def at_knots(axes: list[Symbol], knots: dict[str, np.ndarray], grid: list[np.ndarray]) -> list[dict]:
+    """Per joint with knots (table_knots), its knots x the check grid of the other joints."""
+    return [_mesh(axes, [knots[a.name] if k == j else grid[k] for k in range(len(axes))])
+            for j, a in enumerate(axes) if a.name in knots]
+
+
+def distinct(sets: list[dict]) -> dict:
+    """The check points of ``sets`` (meshes of the same axes) once each, flattened: a point in
+    two sets (a knot on the grid, an entry's midpoint on a knot) counts once in the report."""
+    names = list(sets[0])
+    pts = np.concatenate([np.stack([np.broadcast_to(q[n], _shape(q)).ravel() for n in names]) for q in sets], axis=1)
+    _, first = np.unique(np.round(pts, 9), axis=1, return_index=True)   # 1e-9 mm or rad: one point
+    keep = pts[:, np.sort(first)]
+    return {n: keep[i] for i, n in enumerate(names)}
+
+
 def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, points: int, entries: int,
            reversal: dict[str, float] | None = None, shares: bool = True, progress=None) -> Export:
     """Fit the format to the model (``values``: internal units, every symbol) and replay it
-    over the check grid (for tables also between every two entries of each joint); with
+    over the check grid (for tables also between every two entries of each joint), and along
+    each joint at the params' table knots, each point once; with
     ``shares`` also each nonzero error alone."""
     if fmt not in FORMATS:
         raise ChaincompError(f"--format {fmt!r}: expected one of {', '.join(FORMATS)}")
@@ -376,10 +411,12 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
                              f"{', '.join(a.name for a in lin)} first with --joints")
     free = np.ones((3, 3), bool) if fmt == "linuxcnc-matrixkins" else SKEW
     exact = ExactModel(machine)
-    sets = [_mesh(axes, grid)]
+    knots = table_knots(axes, values)
+    sets = [_mesh(axes, grid)] + at_knots(axes, knots, grid)
     if fmt == "linuxcnc-comp":
         check_table_sizes(axes, entries, grid)
         sets += between_entries(axes, entries, grid)
+    sets = [distinct(sets)]
     n_points = sum(int(np.prod(_shape(q))) for q in sets)
     names = [s.name for s in machine.errors if _nonzero(values.get(s.name, 0.0))]
     if shares and len(names) * n_points > MAX_BREAKDOWN:
@@ -407,7 +444,7 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     for a, q in zip(after, sets):
         _check_finite(machine, a, q, f"the tool point with {fmt}'s correction")
     out = Export(fmt, machine, points, n_points, Residual.of(before), Residual.of(after),
-                 tables, c, [a.name for a in lin], axes, offset)
+                 tables, c, [a.name for a in lin], axes, offset, knot_axes=list(knots))
     # what the format does beyond a touch-off (a matrix leaves the constant to the work offset)
     left, base = out.after, out.before
     if offset is not None:
@@ -550,6 +587,7 @@ def to_json(e: Export) -> dict:
     def res(r: Residual | None):
         return None if r is None else {"max_um": r.max * 1e3, "rms_um": r.rms * 1e3}
     doc = {"format": e.format, "machine": e.machine.name, "grid": e.grid, "check_points": e.grid_points,
+           "knot_axes": e.knot_axes,
            "before": res(e.before), "after": res(e.after)}
     if e.tables:
         doc["joints"] = [{"axis": t.axis.name, "unit": t.axis.unit.name, "entries": len(t.nominal),
@@ -579,6 +617,9 @@ def to_text(e: Export) -> str:
         return f"max {r.max * 1e3:.3f} um, RMS {r.rms * 1e3:.3f} um"
     between = (", and between every two entries of each joint" if e.tables else
                ", and between every two records of each table" if e.isg is not None and e.isg.records > 1 else "")
+    if e.knot_axes:
+        between += f", and at the params' table knots along {', '.join(e.knot_axes)}"
+    between += ", each point once"
     rule = ("the file as ISG holds it, composed as ISO 230-1 on this model" if e.isg is not None else
             "the controller's own rule")
     lines = [f"export {e.format} for {e.machine.name}: checked on {e.grid_points} points "
@@ -588,8 +629,9 @@ def to_text(e: Export) -> str:
     if e.tables:
         lines.append("  " + "; ".join(f"{t.axis.name}: {len(t.nominal)} entries, largest trim "
                                        f"{np.max(np.abs(t.forward)):.6g} {t.axis.unit.name}" for t in e.tables))
-        lines.append("  mean reversal B̄ in the tables: " + ", ".join(f"{t.axis.name} {t.mean_reversal:.6g} "
-                                                                     f"{t.axis.unit.name}" for t in e.tables))
+        if any(t.mean_reversal for t in e.tables):
+            lines.append("  mean reversal B̄ in the tables: " + ", ".join(f"{t.axis.name} {t.mean_reversal:.6g} "
+                                                                         f"{t.axis.unit.name}" for t in e.tables))
         lines.append(f"  {BACKLASH_NOTE}")
     if e.matrix is not None:
         lines.append(f"  once the constant offset {', '.join(f'{v * 1e3:+.3f}' for v in e.offset)} um "
