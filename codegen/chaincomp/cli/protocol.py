@@ -112,10 +112,7 @@ def _poses(args, machine, fixed, assume, measure) -> int:
     design = design_poses(machine, args.poses or DEFAULT_POSES, args.seed, args.index, measure, assume,
                           args.pool, fixed={n: machine.symbol(n).to_internal(v) for n, v in fixed.items()})
     if args.output:
-        try:
-            write_poses(args.output, design, f"chaincomp protocol {machine.name} --poses {len(design)} "
-                                             f"--index {design.index} --seed {design.seed}")
-        except OSError as exc:
-            raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
+        write_poses(args.output, design, f"chaincomp protocol {machine.name} --poses {len(design)} "
+                                         f"--index {design.index} --seed {design.seed}")
     print(to_json(design_json(design, args.output)) if args.format == "json" else design_text(design, args.output))
     return 0

@@ -191,8 +191,5 @@ def run(args) -> int:
                 f"axes in their declared units; x, y, z: tool tip in {machine.length_unit}"
                 + ("; qw, qx, qy, qz: the tool frame's orientation in the base frame (unit quaternion)"
                    if quaternion else "")]
-    try:
-        write_table(args.output, machine, axes, coords, measure, comments, quats)
-    except OSError as exc:
-        raise ChaincompError(f"cannot write: {exc.strerror}", args.output) from None
+    write_table(args.output, machine, axes, coords, measure, comments, quats)
     return 0
