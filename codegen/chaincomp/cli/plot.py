@@ -5,7 +5,6 @@ the volume. Titles, labels and units come from ``figures`` for every view."""
 
 from __future__ import annotations
 
-import csv
 import math
 import os
 import sys
@@ -15,6 +14,7 @@ import numpy as np
 
 from ..errors import ChaincompError
 from ..escape import html_text
+from ..model import csvtable
 from ..model.display import add_units_argument, display_unit
 from ..model.expressions import MAX_LITERAL
 from ..model.units import UNITS
@@ -30,6 +30,8 @@ COMPONENTS = ("dx", "dy", "dz", "dkx", "dky", "dkz", "norm")
 # 1000 x 1000 points: 4-5 s for one model, 39 s for exact minus second (five_axis_ac, 2026-12)
 MAX_GRID = 1000
 MAX_UTIME = 2 ** 62    # µs, as simulate-log writes them: int64 with room for any duration
+# a replay CSV: simulate-log's most samples, at about 250 bytes a record
+MAX_REPLAY_ROWS, MAX_REPLAY_BYTES = 4_000_000, 1024 ** 3
 # arrows in the volume view: 12^3 = 1728 still read as a field, more are a blur
 MAX_VOLUME_GRID = 12
 VIEWS = ("map", "surface", "volume")
@@ -525,49 +527,32 @@ def _read_replay_csv(path: str) -> tuple[int, dict[str, np.ndarray]]:
     def fail(message: str, line: int | None = None, field: str | None = None):
         raise ChaincompError(message, path, line, field)
 
-    try:
-        with open(path, newline="", encoding="utf-8-sig") as f:   # -sig: a byte order mark is no column name
-            reader = csv.DictReader(f)
-            names = reader.fieldnames or []
-            twice = next((c for i, c in enumerate(names) if c in names[:i]), None)
-            if twice is not None:
-                fail(f"two columns named {twice!r}", 1)
-            wanted = ["utime", "residual_point_mm"] + [c for c in names if c == "residual_direction_rad"
-                                                        or c.startswith(("commanded_", "corrected_", "correction_"))]
-            missing = [c for c in ("result", "utime", "residual_point_mm") if c not in names]
-            if missing or not any(c.startswith("commanded_") for c in names):
-                fail(f"not a 'chaincomp replay' CSV: no {(missing or ['commanded_*'])[0]} column", 1)
-            for c in wanted:
-                if c.startswith(("commanded_", "corrected_", "correction_")) and not c.endswith(("_mm", "_deg")):
-                    fail(f"column {c}: an axis column ends in _mm or _deg (the units on the wire)", 1)
-            out: dict[str, list[float]] = {c: [] for c in wanted}
-            rows = 0
-            back = None
-            for row in reader:
-                rows += 1
-                if None in row or None in row.values():   # cells past the header, or too few
-                    cells = len(names) + len(row.get(None) or ()) - sum(v is None for v in row.values())
-                    fail(f"a row of {cells} cells, the header has {len(names)}", reader.line_num)
-                if row.get("result") != "ok":
-                    continue
-                for c in wanted:
-                    try:
-                        v = parse_number(row.get(c) or "")
-                    except ValueError as exc:
-                        fail(str(exc), reader.line_num, c)
-                    if c == "utime" and not (0 <= v <= MAX_UTIME and v == int(v)):
-                        fail(f"expected whole microseconds from 0 to 2^62, got {row[c]!r}", reader.line_num, c)
-                    elif c != "utime" and not abs(v) <= MAX_LITERAL:
-                        fail(f"{row[c]!r} is beyond {MAX_LITERAL:g} in magnitude", reader.line_num, c)
-                    out[c].append(v)
-                if back is None and len(out["utime"]) > 1 and out["utime"][-1] < out["utime"][-2]:
-                    back = reader.line_num
-    except OSError as exc:
-        fail(f"cannot read: {exc.strerror}")
-    except UnicodeDecodeError as exc:
-        fail(f"not UTF-8 text (byte 0x{exc.object[exc.start]:02x})")
-    except csv.Error as exc:
-        fail(f"not a CSV file: {exc}")
+    table = csvtable.read(path, max_rows=MAX_REPLAY_ROWS, max_bytes=MAX_REPLAY_BYTES)
+    names = table.header
+    wanted = ["utime", "residual_point_mm"] + [c for c in names if c == "residual_direction_rad"
+                                                or c.startswith(("commanded_", "corrected_", "correction_"))]
+    missing = [c for c in ("result", "utime", "residual_point_mm") if c not in names]
+    if missing or not any(c.startswith("commanded_") for c in names):
+        fail(f"not a 'chaincomp replay' CSV: no {(missing or ['commanded_*'])[0]} column", table.line)
+    for c in wanted:
+        if c.startswith(("commanded_", "corrected_", "correction_")) and not c.endswith(("_mm", "_deg")):
+            fail(f"column {c}: an axis column ends in _mm or _deg (the units on the wire)", table.line)
+    column = {c: k for k, c in enumerate(names)}
+    out: dict[str, list[float]] = {c: [] for c in wanted}
+    back, rows = None, 0
+    for row in table.rows:
+        rows += 1
+        if row.cells[column["result"]] != "ok":
+            continue
+        for c in wanted:
+            v = table.number(row, column[c])
+            if c == "utime" and not (0 <= v <= MAX_UTIME and v == int(v)):
+                fail(f"expected whole microseconds from 0 to 2^62, got {row.cells[column[c]]!r}", row.line, c)
+            elif c != "utime" and not abs(v) <= MAX_LITERAL:
+                fail(f"{row.cells[column[c]]!r} is beyond {MAX_LITERAL:g} in magnitude", row.line, c)
+            out[c].append(v)
+        if back is None and len(out["utime"]) > 1 and out["utime"][-1] < out["utime"][-2]:
+            back = row.line
     if not out["utime"]:
         fail("no corrected records to plot (is it a 'chaincomp replay' CSV?)")
     if back is not None:

@@ -507,7 +507,7 @@ def read_trace(path: str, machine: Machine) -> Trace:
         dirs.append(d)
         devs.append(v)
         lines.append(lineno)
-    if not table.rows:
+    if not lines:
         raise ChaincompError("no readings below the header", path, hline)
     dirs_arr = np.array(dirs)
     for d in (CCW, CW):

@@ -325,7 +325,7 @@ def read_log(path: str, machine: Machine, rename: dict[str, str] | None = None, 
         if name in seen:
             raise ChaincompError(f"two columns of {name} ({seen[name] + 1} and {k + 1})", path, hline, header[k].strip())
         seen[name] = k
-    data = np.empty((len(table.rows), len(header)))
+    data = np.empty((min(table.lines_left, MAX_ROWS), len(header)))
     n = 0
     previous = None
     for row in table.rows:

@@ -22,12 +22,15 @@ The rules, one for all (the corpus in tests/conformance/csv/ holds a file per ca
 - at most ``max_rows`` rows, ``MAX_COLUMNS`` columns, ``MAX_FIELD`` characters a cell;
 - a cell read as a number follows ``numbers.parse_number`` (plain finite decimals).
 
-Errors are ``FILE:LINE: COLUMN: message`` (no column where the whole row is at fault).
+Errors are ``FILE:LINE: COLUMN: message`` (no column where the whole row is at fault). The
+header is read first, the rows as the verb iterates them: the fault reported is the file's
+first, whether the reader's or the verb's.
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 from ..errors import ChaincompError
@@ -43,7 +46,7 @@ _HEADER_UNIT = re.compile(r"^(.*?)\s*[\[(]\s*([^\])]+?)\s*[\])]\s*$")
 _BLANK = " \t"
 
 
-@dataclass
+@dataclass(slots=True)
 class Row:
     line: int            # the line the row starts on
     cells: list[str]
@@ -51,12 +54,15 @@ class Row:
 
 @dataclass
 class Table:
+    """A CSV file's header, read; its rows are read as they are iterated (once), so that a log
+    of millions of rows is never held as text cells."""
     path: str
     line: int                        # the header's line
     header: list[str]                # column names as written (units and all), without surrounding spaces
-    rows: list[Row]
-    comments: list[tuple[int, str]] = field(default_factory=list)   # (line, text) of the '#' lines
+    rows: Iterator[Row]
+    comments: list[tuple[int, str]] = field(default_factory=list)   # (line, text) of the '#' lines so far
     separator: str = ","
+    lines_left: int = 0              # lines below the header: at least the rows to come
 
     def fail(self, message: str, line: int | None = None, column: str | None = None):
         raise ChaincompError(message, self.path, line, column)
@@ -82,57 +88,80 @@ def split_unit(name: str) -> tuple[str, str | None]:
 
 def read(path: str, max_rows: int = MAX_ROWS, max_bytes: int = MAX_FILE_BYTES,
          example: str = "") -> Table:
-    """The table in a CSV file (the module's rules); ``example`` is a header to suggest when
-    there is none."""
+    """The table in a CSV file (the module's rules): the header now, the rows as they are
+    iterated; ``example`` is a header to suggest when there is none."""
     text = read_text(path, limit=max_bytes).removeprefix("\ufeff")   # the byte order mark spreadsheets write
     bad = _NOT_TEXT.search(text)
     if bad:
         what = "a carriage return not followed by a line feed (lines end in LF or CRLF)" if bad.group() == "\r" \
             else "a NUL character: not a text file"
         raise ChaincompError(what, path, text.count("\n", 0, bad.start()) + 1)
-    lines = text.split("\n")
-    table = Table(path, 0, [], [])
-    i = 0
-    while i < len(lines):
-        start = i + 1
-        line = lines[i].removesuffix("\r")
-        i += 1
-        if not line.strip(_BLANK):
+    table = Table(path, 0, [], iter(()))
+    records = _records(text, table)
+    for line, cells in records:
+        while len(cells) > 1 and not cells[-1]:
+            cells.pop()   # empty names at the end: a spreadsheet's trailing separators
+        _check_header(cells, path, line)
+        table.header, table.line = cells, line
+        table.lines_left = text.count("\n") + 1 - line
+        table.rows = _rows(records, table, max_rows)
+        return table
+    raise ChaincompError("no header row" + (f" (expected e.g. {example!r})" if example else ""), path, 1)
+
+
+def _rows(records, table: Table, max_rows: int) -> Iterator[Row]:
+    width, n = len(table.header), 0
+    for line, cells in records:
+        if len(cells) > width and not any(cells[width:]):
+            del cells[width:]   # empty cells past the header: a spreadsheet's trailing separators
+        if len(cells) != width:
+            hint = " (a decimal comma? write decimals with a point)" if len(cells) > width and table.separator == "," \
+                else ""
+            table.fail(f"{len(cells)} cell{'s' if len(cells) != 1 else ''}, the header has {width}{hint}", line)
+        if n == max_rows:
+            table.fail(f"more than {max_rows} rows", line)
+        n += 1
+        yield Row(line, cells)
+
+
+def _records(text: str, table: Table) -> Iterator[tuple[int, list[str]]]:
+    """(line, cells) of each record that is not a comment or blank; the separator is set by
+    the first."""
+    lines = _lines(text)
+    for start, line in lines:
+        content = line.lstrip(_BLANK)
+        if not content:
             continue
-        if line.lstrip(_BLANK).startswith("#"):
+        if content[0] == "#":
             table.comments.append((start, line))
             continue
         if not table.header:
             table.separator = ";" if line.count(";") > line.count(",") else \
                 "\t" if "\t" in line and "," not in line else ","
+        long = len(line) > MAX_FIELD
         if '"' in line:
-            cells, i = _quoted(lines, i - 1, table.separator, path)
-        else:
+            cells, long = _quoted(start, line, lines, table.separator, table.path), True
+        elif " " in line or "\t" in line:
             cells = [c.strip(_BLANK) for c in line.split(table.separator)]
-        if len(line) > MAX_FIELD or i > start:
+        else:
+            cells = line.split(table.separator)
+        if long:
             for k, c in enumerate(cells):
                 if len(c) > MAX_FIELD:
-                    raise ChaincompError(f"a cell of {len(c)} characters: at most {MAX_FIELD}", path, start,
-                                         table.header[k] if k < len(table.header) else None)
-        if len(cells) > len(table.header) > 0 and not any(cells[len(table.header):]):
-            del cells[len(table.header):]   # empty cells past the header: a spreadsheet's trailing separators
-        if not table.header:
-            while len(cells) > 1 and not cells[-1]:
-                cells.pop()
-            _check_header(cells, path, start)
-            table.header, table.line = cells, start
-            continue
-        if len(cells) != len(table.header):
-            hint = " (a decimal comma? write decimals with a point)" \
-                if len(cells) > len(table.header) and table.separator == "," else ""
-            raise ChaincompError(f"{len(cells)} cell{'s' if len(cells) != 1 else ''}, the header has "
-                                 f"{len(table.header)}{hint}", path, start)
-        if len(table.rows) == max_rows:
-            raise ChaincompError(f"more than {max_rows} rows", path, start)
-        table.rows.append(Row(start, cells))
-    if not table.header:
-        raise ChaincompError("no header row" + (f" (expected e.g. {example!r})" if example else ""), path, 1)
-    return table
+                    table.fail(f"a cell of {len(c)} characters: at most {MAX_FIELD}", start,
+                               table.header[k] if k < len(table.header) else None)
+        yield start, cells
+
+
+def _lines(text: str) -> Iterator[tuple[int, str]]:
+    """(number, line) at LF or CRLF only: str.splitlines would also split at U+2028, a form feed, ..."""
+    at, number = 0, 0
+    while at <= len(text):
+        end = text.find("\n", at)
+        end = len(text) if end < 0 else end
+        number += 1
+        yield number, text[at:end].removesuffix("\r")
+        at = end + 1
 
 
 def _check_header(cells: list[str], path: str, line: int) -> None:
@@ -147,12 +176,10 @@ def _check_header(cells: list[str], path: str, line: int) -> None:
         seen[name] = k
 
 
-def _quoted(lines: list[str], i: int, sep: str, path: str) -> tuple[list[str], int]:
-    """The cells of the record that starts on lines[i] and holds a quote (RFC 4180: a quoted
-    cell may run over line ends), and the index of the line after it."""
-    first = i + 1
-    text = lines[i].removesuffix("\r")
-    i += 1
+def _quoted(first: int, text: str, lines, sep: str, path: str) -> list[str]:
+    """The cells of the record that starts on line ``first`` (``text``) and holds a quote
+    (RFC 4180: a quoted cell may run over line ends, taken from ``lines``)."""
+    number = first
     cells, j = [], 0
     while True:
         while j < len(text) and text[j] in _BLANK and text[j] != sep:
@@ -162,11 +189,11 @@ def _quoted(lines: list[str], i: int, sep: str, path: str) -> tuple[list[str], i
             while True:
                 q = text.find('"', j)
                 if q < 0:   # the cell goes on past the line end
-                    if i == len(lines):
-                        raise ChaincompError("a quoted cell is not closed (a quote missing?)", path, first)
                     parts += [text[j:], "\n"]
-                    text, j = lines[i].removesuffix("\r"), 0
-                    i += 1
+                    number, text = next(lines, (None, None))
+                    if text is None:
+                        raise ChaincompError("a quoted cell is not closed (a quote missing?)", path, first)
+                    j = 0
                     continue
                 parts.append(text[j:q])
                 if text.startswith('"', q + 1):   # "" is one quote
@@ -180,16 +207,16 @@ def _quoted(lines: list[str], i: int, sep: str, path: str) -> tuple[list[str], i
                 j += 1
             if j < len(text) and text[j] != sep:
                 raise ChaincompError(f"text after a closing quote: {text[j:j + 20]!r} (a quote inside a quoted cell "
-                                     "is written twice: \"\")", path, i)
+                                     "is written twice: \"\")", path, number)
         else:
             end = text.find(sep, j)
             end = len(text) if end < 0 else end
             cell = text[j:end].strip(_BLANK)
             if '"' in cell:
                 raise ChaincompError(f"a quote inside the unquoted cell {cell[:40]!r}: quote the whole cell and "
-                                     "write the quote twice (\"a \"\"b\"\"\")", path, i)
+                                     "write the quote twice (\"a \"\"b\"\"\")", path, number)
             j = end
         cells.append(cell)
         if j >= len(text):
-            return cells, i
+            return cells
         j += 1   # past the separator

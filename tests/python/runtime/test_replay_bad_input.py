@@ -41,8 +41,8 @@ def _replay_rows(change):
 
 @pytest.mark.parametrize("change,where", [
     # a row cut short read as a record without a result: counted as rejected, silently
-    (lambda r: r.__setitem__(2, r[2][:3]), ":4: a row of 3 cells, the header has 14"),
-    (lambda r: r[2].append("7"), ":4: a row of 15 cells, the header has 14"),
+    (lambda r: r.__setitem__(2, r[2][:3]), ":4: 3 cells, the header has 14"),
+    (lambda r: r[2].append("7"), ":4: 15 cells, the header has 14 (a decimal comma?"),
     # 1e308 mm reached the exact model
     (lambda r: r[1].__setitem__(4, "1e308"), ":3: commanded_X_mm: '1e308' is beyond 1e+15 in magnitude"),
     (lambda r: r[1].__setitem__(1, "-5"), ":3: utime: expected whole microseconds from 0 to 2^62, got '-5'"),
