@@ -47,6 +47,8 @@ def run(args) -> int:
             raise ChaincompError(f"-o {args.output}: is a file, expected a folder")
         if not os.path.isdir(parent):
             raise ChaincompError(f"-o {args.output}: folder {parent} does not exist")
+        if not os.access(args.output if os.path.isdir(args.output) else parent, os.W_OK):
+            raise ChaincompError(f"-o {args.output}: not writable")
     for given, option in ((args.params, "--params"), (args.install, "--install"), (args.name != RT_MODULE, "--name")):
         if given and not args.linuxcnc:
             raise ChaincompError(f"{option} goes with --linuxcnc")
