@@ -170,6 +170,16 @@ def apply_klipper(factors, xyz):
     return p
 
 
+def klipper_refuses(factors, xyz, bounds):
+    """Where Klipper refuses the move ("Move out of range"): skew_correction.py hands the
+    kinematics the skewed position (calc_skew), and the kinematics' check_move refuses an end
+    position outside a rail's [position_min, position_max]. bounds=(xmin, xmax, ymin, ymax); z is
+    not skewed. A boolean per point."""
+    q = apply_klipper(factors, xyz)
+    x0, x1, y0, y1 = bounds
+    return ~((q[0] >= x0) & (q[0] <= x1) & (q[1] >= y0) & (q[1] <= y1))
+
+
 def apply_marlin(factors, xyz, bounds=None):
     """Commanded -> planner position, Marlin planner.h skew(), called first in apply_modifiers().
 

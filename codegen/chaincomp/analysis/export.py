@@ -93,6 +93,18 @@ class JointTable:
 
 
 @dataclass
+class Uncorrected:
+    """The check points where a printer firmware does not apply its skew (skew_window): Marlin
+    passes them through uncorrected, Klipper refuses the move. ``after`` and ``after_offset``
+    of the Export are over the other points; here, what is left at these."""
+    points: int
+    of: int
+    rule: str
+    past_limits: float               # mm: how far the skewed X or Y leaves the limits, at most
+    left: Residual | None = None     # marlin: the tool error there, once touched off (uncorrected)
+
+
+@dataclass
 class Export:
     """What an exporter fitted, and what it leaves."""
     format: str
@@ -110,6 +122,7 @@ class Export:
     shares: list[ErrorShare] = field(default_factory=list)
     isg: object | None = None            # isg_volcomp.IsgFile: the file's axes, chain, names
     knot_axes: list[str] = field(default_factory=list)   # joints checked at the params' table knots too
+    uncorrected: Uncorrected | None = None   # marlin, klipper: the check points the firmware leaves or refuses
     without_z: Residual | None = None    # marlin: the residual, touched off, with I alone (J, K need
                                          # SKEW_CORRECTION_FOR_Z)
 
@@ -443,15 +456,28 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     tables, c, offset, after = fit(values)
     for a, q in zip(after, sets):
         _check_finite(machine, a, q, f"the tool point with {fmt}'s correction")
-    out = Export(fmt, machine, points, n_points, Residual.of(before), Residual.of(after),
+    window = skew_window(fmt, lin, c, sets[0])   # (sets: one flat set of distinct points)
+    if window is not None and not window.any():
+        raise ChaincompError(f"--format {fmt}: the firmware would correct none of the {n_points} check points "
+                             f"({MARLIN_WINDOW if fmt == 'marlin' else KLIPPER_WINDOW}): nothing written")
+    kept = after if window is None else [after[0][:, window]]
+    out = Export(fmt, machine, points, n_points, Residual.of(before), Residual.of(kept),
                  tables, c, [a.name for a in lin], axes, offset, knot_axes=list(knots))
-    # what the format does beyond a touch-off (a matrix leaves the constant to the work offset)
+    # what the format does beyond a touch-off (a matrix leaves the constant to the work offset),
+    # against no compensation on the same points
     left, base = out.after, out.before
     if offset is not None:
-        out.after_offset = left = Residual.of(shifted(after, offset))
-        base = Residual.of(shifted(before, before[0].reshape(3, -1).mean(axis=1)))
+        out.after_offset = left = Residual.of(shifted(kept, offset))
+        if window is None:
+            base = Residual.of(shifted(before, before[0].reshape(3, -1).mean(axis=1)))
+        else:   # each touched off by its mean over the points the firmware corrects
+            left, base = _touched_off(kept), _touched_off([before[0][:, window]])
+    if window is not None:
+        out.uncorrected = _uncorrected(fmt, lin, c, sets[0], window, shifted(before, offset)[0])
     if fmt == "marlin":
-        out.without_z = _touched_off(_xy_only(lin, c, sets, exact, values))
+        only_i = _xy_only(lin, c, sets, exact, values)
+        out.without_z = _touched_off(only_i if window is None else
+                                     [only_i[0][:, skew_window(fmt, lin, _i_alone(c), sets[0])]])
     if not left.max < base.max * (1 - 1e-3) - 1e-7:   # 0.1 nm: rounding, not compensation
         worse = left.max > base.max + 1e-7   # a fit on a coarse grid, worse between its points
         raise ChaincompError(f"--format {fmt} " + ("leaves more tool error than no compensation" if worse else
@@ -474,12 +500,54 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     return out
 
 
-def _xy_only(lin: list[Symbol], c: np.ndarray, sets: list[dict], exact: ExactModel, values: dict) -> list[np.ndarray]:
-    """The tool error when Marlin applies M852's I alone: built without SKEW_CORRECTION_FOR_Z
-    its M852 reads no J or K and planner.h skew() moves x by -xy.y only."""
+def _i_alone(c: np.ndarray) -> np.ndarray:
+    """The matrix Marlin applies with M852's I alone: built without SKEW_CORRECTION_FOR_Z its
+    M852 reads no J or K and planner.h skew() moves x by -xy.y only."""
     only = np.eye(3)
     only[0, 1] = c[0, 1]
-    return [tool_error(exact, values, q, apply_matrix(lin, only, q)) for q in sets]
+    return only
+
+
+def _xy_only(lin: list[Symbol], c: np.ndarray, sets: list[dict], exact: ExactModel, values: dict) -> list[np.ndarray]:
+    """The tool error when Marlin applies M852's I alone (_i_alone)."""
+    return [tool_error(exact, values, q, apply_matrix(lin, _i_alone(c), q)) for q in sets]
+
+
+MARLIN_WINDOW = ("Marlin's skew() corrects a point only with X and Y at least 1 mm above their minimum and the "
+                 "corrected X and Y inside the limits (planner.h)")
+KLIPPER_WINDOW = "Klipper refuses a move whose corrected X or Y leaves the limits ('Move out of range')"
+
+
+def skew_window(fmt: str, lin: list[Symbol], c: np.ndarray, q: dict) -> np.ndarray | None:
+    """Where a printer firmware applies its skew at the commands ``q`` (flat), or None (everywhere):
+    Marlin planner.h skew() only where X_MIN_POS + 1 <= X <= X_MAX_POS and likewise Y, and the
+    skewed X and Y within [MIN_POS, MAX_POS] (elsewhere the point passes uncorrected); Klipper's
+    toolhead refuses a move whose skewed position leaves an axis' limits (skew_correction.py
+    transforms the move before the kinematics' check). The machine's limits of the first two
+    linear axes stand for the firmware's X and Y limits (mm)."""
+    if fmt not in ("marlin", "klipper"):
+        return None
+    skewed = apply_matrix(lin, c, q)
+    ok = np.ones(_shape(q), bool)
+    for a in lin[:2]:
+        lo, hi = sorted(a.to_internal(float(v)) for v in a.limits)
+        ok &= (skewed[a.name] >= lo) & (skewed[a.name] <= hi)
+        if fmt == "marlin":
+            ok &= (q[a.name] >= lo + 1.0) & (q[a.name] <= hi)
+    return ok
+
+
+def _uncorrected(fmt: str, lin: list[Symbol], c: np.ndarray, q: dict, window: np.ndarray,
+                 touched_off: np.ndarray) -> Uncorrected:
+    skewed = apply_matrix(lin, c, q)
+    past = 0.0
+    for a in lin[:2]:
+        lo, hi = sorted(a.to_internal(float(v)) for v in a.limits)
+        out = np.maximum(lo - skewed[a.name], skewed[a.name] - hi)[~window]
+        past = max(past, float(out.max(initial=0.0)))
+    n = int(np.count_nonzero(~window))
+    left = Residual.of(touched_off[:, ~window]) if fmt == "marlin" and n else None
+    return Uncorrected(n, int(window.size), MARLIN_WINDOW if fmt == "marlin" else KLIPPER_WINDOW, past, left)
 
 
 def _touched_off(dp: list[np.ndarray]) -> Residual:
@@ -601,6 +669,10 @@ def to_json(e: Export) -> dict:
         doc["after_offset"] = res(e.after_offset)
     if e.without_z is not None:
         doc["without_skew_correction_for_z"] = res(e.without_z)
+    if e.uncorrected is not None:
+        u = e.uncorrected
+        doc["uncorrected"] = {"points": u.points, "of": u.of, "rule": u.rule, "past_limits_um": u.past_limits * 1e3,
+                              "left": res(u.left)}
     if e.isg is not None:
         f = e.isg
         doc["isg"] = {"axes": {c: a.name for c, a in f.letters.items()}, "chain": f.chain,
@@ -642,6 +714,14 @@ def to_text(e: Export) -> str:
             lines += ["  " + line.lstrip("# ") for line in matrixkins_passthrough(e)]
         if e.without_z is not None:
             lines.append(f"  {MARLIN_FOR_Z}: with I alone, once touched off: {um(e.without_z)}")
+        if e.uncorrected is not None:
+            u = e.uncorrected
+            lines.append(f"  {u.rule}: the residuals above are over the {u.of - u.points} of {u.of} points it "
+                         f"corrects; " + (f"{u.points} it does not" + (
+                             f" (the corrected X or Y up to {u.past_limits * 1e3:.3f} um past the limits)"
+                             if u.past_limits > 0 else "") +
+                             (f": {um(u.left)} there, uncorrected, once touched off" if u.left else
+                              ": refused, not moved") if u.points else "none it does not"))
     if e.isg is not None:
         f = e.isg
         lines.append(f"  axes {', '.join(f'{c}={a.name}' for c, a in f.letters.items())}; chain {f.chain} "

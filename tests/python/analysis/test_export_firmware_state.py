@@ -56,3 +56,36 @@ def test_rrf_replaces_an_earlier_p1(capsys, tmp_path):
     # without P the earlier P1 would stay: the XY term on Y, several um off on this gantry
     no_p = firmware_skew.replay_rrf(program.replace(" P0", ""), earlier)
     assert np.linalg.norm(residual_um(firmware_skew.apply_rrf, no_p, (x, y, z)), axis=0).max() * 1e3 > 1.0
+
+
+OWN_BOUNDS = (0.0, 300.0, 0.0, 200.0)   # OWN's X and Y limits: the printer's X/Y MIN_POS and MAX_POS
+
+
+def test_marlin_reports_the_points_its_skew_corrects_and_those_it_leaves(capsys, tmp_path):
+    """Marlin's skew() (planner.h) corrects a point only 1 mm or more above X and Y min with the
+    skewed X, Y inside the bounds; the others pass uncorrected. The report's residual is over the
+    corrected points, and it gives what the others keep."""
+    doc, out = export(capsys, tmp_path, SQUARENESS, "marlin", "--grid", "5", "--no-breakdown", "--json")
+    factors = firmware_skew.replay_marlin(out.read_text())
+    g = np.array(grid())
+    motor = firmware_skew.apply_marlin(factors, g, OWN_BOUNDS)
+    corrected = np.any(motor != g, axis=0)
+    offset = np.array(doc["offset_um"]).reshape(3, 1) * 1e-3
+    err = own_model(*motor, **SQ) - g - offset
+    norm = np.linalg.norm(err, axis=0) * 1e3
+    u = doc["uncorrected"]
+    assert u["of"] == 125 and u["points"] == np.count_nonzero(~corrected) > 0
+    assert doc["after_offset"]["max_um"] == pytest.approx(norm[corrected].max(), abs=0.01)
+    assert u["left"]["max_um"] == pytest.approx(norm[~corrected].max(), abs=0.01)
+    assert u["left"]["max_um"] > 10 * doc["after_offset"]["max_um"]   # the edges keep the squareness
+
+
+def test_klipper_reports_the_moves_it_refuses(capsys, tmp_path):
+    doc, out = export(capsys, tmp_path, SQUARENESS, "klipper", "--grid", "5", "--no-breakdown", "--json")
+    factors = firmware_skew.parse_klipper(out.read_text())
+    g = np.array(grid())
+    refused = firmware_skew.klipper_refuses(factors, g, OWN_BOUNDS)
+    offset = np.array(doc["offset_um"]).reshape(3, 1) * 1e-3
+    norm = np.linalg.norm(own_model(*firmware_skew.apply_klipper(factors, g), **SQ) - g - offset, axis=0) * 1e3
+    assert doc["uncorrected"]["points"] == np.count_nonzero(refused) > 0 and doc["uncorrected"]["left"] is None
+    assert doc["after_offset"]["max_um"] == pytest.approx(norm[~refused].max(), abs=0.01)
