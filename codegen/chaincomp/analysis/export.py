@@ -390,14 +390,23 @@ def at_knots(axes: list[Symbol], knots: dict[str, np.ndarray], grid: list[np.nda
             for j, a in enumerate(axes) if a.name in knots]
 
 
-def distinct(sets: list[dict]) -> dict:
-    """The check points of ``sets`` (meshes of the same axes) once each, flattened: a point in
-    two sets (a knot on the grid, an entry's midpoint on a knot) counts once in the report."""
+CHECK_CHUNK = 250_000   # check points evaluated at once
+
+
+def distinct(sets: list[dict]) -> list[dict]:
+    """The check points of ``sets`` (meshes of the same axes) once each, flattened, in chunks of
+    at most CHECK_CHUNK: a point in two sets (a knot on the grid, an entry's midpoint on a knot)
+    counts once in the report."""
     names = list(sets[0])
     pts = np.concatenate([np.stack([np.broadcast_to(q[n], _shape(q)).ravel() for n in names]) for q in sets], axis=1)
     _, first = np.unique(np.round(pts, 9), axis=1, return_index=True)   # 1e-9 mm or rad: one point
     keep = pts[:, np.sort(first)]
-    return {n: keep[i] for i, n in enumerate(names)}
+    return [{n: keep[i, k:k + CHECK_CHUNK] for i, n in enumerate(names)} for k in range(0, keep.shape[1], CHECK_CHUNK)]
+
+
+def _where(dp: list[np.ndarray], windows: list[np.ndarray] | None) -> list[np.ndarray]:
+    """The (3, N) errors of each chunk at the points its window keeps (all with None)."""
+    return dp if windows is None else [d[:, w] for d, w in zip(dp, windows)]
 
 
 def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, points: int, entries: int,
@@ -429,7 +438,7 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     if fmt == "linuxcnc-comp":
         check_table_sizes(axes, entries, grid)
         sets += between_entries(axes, entries, grid)
-    sets = [distinct(sets)]
+    sets = distinct(sets)
     n_points = sum(int(np.prod(_shape(q))) for q in sets)
     names = [s.name for s in machine.errors if _nonzero(values.get(s.name, 0.0))]
     if shares and len(names) * n_points > MAX_BREAKDOWN:
@@ -456,11 +465,11 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     tables, c, offset, after = fit(values)
     for a, q in zip(after, sets):
         _check_finite(machine, a, q, f"the tool point with {fmt}'s correction")
-    window = skew_window(fmt, lin, c, sets[0])   # (sets: one flat set of distinct points)
-    if window is not None and not window.any():
+    windows = [skew_window(fmt, lin, c, q) for q in sets] if fmt in ("marlin", "klipper") else None
+    if windows is not None and not any(w.any() for w in windows):
         raise ChaincompError(f"--format {fmt}: the firmware would correct none of the {n_points} check points "
                              f"({MARLIN_WINDOW if fmt == 'marlin' else KLIPPER_WINDOW}): nothing written")
-    kept = after if window is None else [after[0][:, window]]
+    kept = _where(after, windows)
     out = Export(fmt, machine, points, n_points, Residual.of(before), Residual.of(kept),
                  tables, c, [a.name for a in lin], axes, offset, knot_axes=list(knots))
     # what the format does beyond a touch-off (a matrix leaves the constant to the work offset),
@@ -468,16 +477,14 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     left, base = out.after, out.before
     if offset is not None:
         out.after_offset = left = Residual.of(shifted(kept, offset))
-        if window is None:
-            base = Residual.of(shifted(before, before[0].reshape(3, -1).mean(axis=1)))
-        else:   # each touched off by its mean over the points the firmware corrects
-            left, base = _touched_off(kept), _touched_off([before[0][:, window]])
-    if window is not None:
-        out.uncorrected = _uncorrected(fmt, lin, c, sets[0], window, shifted(before, offset)[0])
+        base = _touched_off(_where(before, windows))
+        if windows is not None:   # the fit's offset is over every point: both by their mean where it corrects
+            left = _touched_off(kept)
+    if windows is not None:
+        out.uncorrected = _uncorrected(fmt, lin, c, sets, windows, shifted(before, offset))
     if fmt == "marlin":
-        only_i = _xy_only(lin, c, sets, exact, values)
-        out.without_z = _touched_off(only_i if window is None else
-                                     [only_i[0][:, skew_window(fmt, lin, _i_alone(c), sets[0])]])
+        out.without_z = _touched_off(_where(_xy_only(lin, c, sets, exact, values),
+                                            [skew_window(fmt, lin, _i_alone(c), q) for q in sets]))
     if not left.max < base.max * (1 - 1e-3) - 1e-7:   # 0.1 nm: rounding, not compensation
         worse = left.max > base.max + 1e-7   # a fit on a coarse grid, worse between its points
         raise ChaincompError(f"--format {fmt} " + ("leaves more tool error than no compensation" if worse else
@@ -518,15 +525,13 @@ MARLIN_WINDOW = ("Marlin's skew() corrects a point only with X and Y at least 1 
 KLIPPER_WINDOW = "Klipper refuses a move whose corrected X or Y leaves the limits ('Move out of range')"
 
 
-def skew_window(fmt: str, lin: list[Symbol], c: np.ndarray, q: dict) -> np.ndarray | None:
-    """Where a printer firmware applies its skew at the commands ``q`` (flat), or None (everywhere):
+def skew_window(fmt: str, lin: list[Symbol], c: np.ndarray, q: dict) -> np.ndarray:
+    """Where a printer firmware (marlin, klipper) applies its skew at the commands ``q`` (flat):
     Marlin planner.h skew() only where X_MIN_POS + 1 <= X <= X_MAX_POS and likewise Y, and the
     skewed X and Y within [MIN_POS, MAX_POS] (elsewhere the point passes uncorrected); Klipper's
     toolhead refuses a move whose skewed position leaves an axis' limits (skew_correction.py
     transforms the move before the kinematics' check). The machine's limits of the first two
     linear axes stand for the firmware's X and Y limits (mm)."""
-    if fmt not in ("marlin", "klipper"):
-        return None
     skewed = apply_matrix(lin, c, q)
     ok = np.ones(_shape(q), bool)
     for a in lin[:2]:
@@ -537,17 +542,20 @@ def skew_window(fmt: str, lin: list[Symbol], c: np.ndarray, q: dict) -> np.ndarr
     return ok
 
 
-def _uncorrected(fmt: str, lin: list[Symbol], c: np.ndarray, q: dict, window: np.ndarray,
-                 touched_off: np.ndarray) -> Uncorrected:
-    skewed = apply_matrix(lin, c, q)
+def _uncorrected(fmt: str, lin: list[Symbol], c: np.ndarray, sets: list[dict], windows: list[np.ndarray],
+                 touched_off: list[np.ndarray]) -> Uncorrected:
+    """The check points outside the firmware's windows (skew_window), and what they keep."""
     past = 0.0
-    for a in lin[:2]:
-        lo, hi = sorted(a.to_internal(float(v)) for v in a.limits)
-        out = np.maximum(lo - skewed[a.name], skewed[a.name] - hi)[~window]
-        past = max(past, float(out.max(initial=0.0)))
-    n = int(np.count_nonzero(~window))
-    left = Residual.of(touched_off[:, ~window]) if fmt == "marlin" and n else None
-    return Uncorrected(n, int(window.size), MARLIN_WINDOW if fmt == "marlin" else KLIPPER_WINDOW, past, left)
+    for q, w in zip(sets, windows):
+        skewed = apply_matrix(lin, c, q)
+        for a in lin[:2]:
+            lo, hi = sorted(a.to_internal(float(v)) for v in a.limits)
+            past = max(past, float(np.maximum(lo - skewed[a.name], skewed[a.name] - hi)[~w].max(initial=0.0)))
+    outside = [~w for w in windows]
+    n = sum(int(np.count_nonzero(o)) for o in outside)
+    left = Residual.of(_where(touched_off, outside)) if fmt == "marlin" and n else None
+    return Uncorrected(n, sum(w.size for w in windows), MARLIN_WINDOW if fmt == "marlin" else KLIPPER_WINDOW,
+                       past, left)
 
 
 def _touched_off(dp: list[np.ndarray]) -> Residual:
@@ -715,13 +723,13 @@ def to_text(e: Export) -> str:
         if e.without_z is not None:
             lines.append(f"  {MARLIN_FOR_Z}: with I alone, once touched off: {um(e.without_z)}")
         if e.uncorrected is not None:
-            u = e.uncorrected
+            u, marlin = e.uncorrected, e.format == "marlin"
+            past = (f" (the corrected X or Y up to {u.past_limits * 1e3:.3f} um past the limits)"
+                    if u.past_limits > 0 else "")
+            rest = (f"{u.points} it leaves uncorrected{past}: {um(u.left)} there, once touched off" if marlin else
+                    f"{u.points} it refuses{past}") if u.points else "no other"
             lines.append(f"  {u.rule}: the residuals above are over the {u.of - u.points} of {u.of} points it "
-                         f"corrects; " + (f"{u.points} it does not" + (
-                             f" (the corrected X or Y up to {u.past_limits * 1e3:.3f} um past the limits)"
-                             if u.past_limits > 0 else "") +
-                             (f": {um(u.left)} there, uncorrected, once touched off" if u.left else
-                              ": refused, not moved") if u.points else "none it does not"))
+                         f"{'corrects' if marlin else 'moves to'}; {rest}")
     if e.isg is not None:
         f = e.isg
         lines.append(f"  axes {', '.join(f'{c}={a.name}' for c, a in f.letters.items())}; chain {f.chain} "
