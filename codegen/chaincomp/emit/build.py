@@ -139,8 +139,7 @@ def _sha256(path: str) -> str:
 def _record_digest(path: str) -> None:
     """PATH.sha256 beside a file just built, in sha256sum's format (`sha256sum -c` checks it):
     what the cache's readers check before trusting it."""
-    with open(path + ".sha256", "w", encoding="utf-8", newline="\n") as f:
-        f.write(f"{_sha256(path)}  {os.path.basename(path)}\n")
+    write_file(path + ".sha256", f"{_sha256(path)}  {os.path.basename(path)}\n")
 
 
 def intact(path: str) -> bool:
@@ -163,7 +162,8 @@ def _exclusive(lock_path: str, root: str, waiting: str):
     its result."""
     try:
         os.makedirs(os.path.dirname(lock_path), exist_ok=True)
-        lock = open(lock_path, "w")
+        # never through a link planted at the lock's name (open(.., "w") would empty the file it names)
+        lock = os.fdopen(os.open(lock_path, os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW, 0o666), "w")
     except OSError as exc:
         raise ChaincompError(f"cannot write the model cache {root}: {exc.strerror}") from None
     with lock:
