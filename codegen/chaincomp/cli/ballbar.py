@@ -11,12 +11,12 @@ import sys
 import numpy as np
 
 from ..errors import ChaincompError
+from ..escape import one_line
 from ..measure import ballbar as bb
 from ..measure.calibration import _write_loadable
 from ..measure.protocol import check_errors
 from ..model.display import fixed, plus_minus
 from ..model.expressions import MAX_LITERAL
-from ..escape import one_line
 from ..model.params_merge import merge
 from ..model.varying import Varying
 from ..symbolic.jets import JetModel
@@ -24,7 +24,7 @@ from ..symbolic.numeric import ExactModel
 from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, add_values_arguments,
                      _same_file, check_image, check_output, integer, load, names, number, refuse_empty, to_json,
                      values_for)
-from .figures import save
+from .figures import save, use_agg
 
 UM = bb.UM
 
@@ -177,8 +177,7 @@ def _division(span_um: float) -> float:
 def plot(trace: bb.Trace, ev: dict, fig_um: dict, title: str, output: str) -> None:
     """Polar plot as ballbar software draws it: the nominal circle at the middle ring, the
     deviation magnified (rings one division apart), both directions."""
-    import matplotlib
-    matplotlib.use("Agg")
+    use_agg()
     import matplotlib.pyplot as plt
     # the scale spans the trace and the nominal circle (0): a few divisions, whatever the values
     lo, hi = min(float(trace.deviation.min()) / UM, 0.0), max(float(trace.deviation.max()) / UM, 0.0)

@@ -108,8 +108,7 @@ def _map_axes(grid: B.Grid, text: str | None) -> list[str]:
 
 def plot(b: B.Budget, output: str, pick: list[str], component: str | None, params: str | None = None,
          sets=(), tolerances: str | None = None) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
+    F.use_agg()
     import matplotlib.pyplot as plt
     fig = build_plot(b, pick, component, params, sets, tolerances)
     F.save(fig, output)

@@ -10,6 +10,7 @@ import re
 import sys
 
 from ..errors import ChaincompError
+from ..escape import one_line
 from ..model.machine import Machine, Symbol, load_machine
 from ..model.numbers import parse_number
 from ..model.params import load_params, parse_sets, parse_value
@@ -117,8 +118,9 @@ def values_for(machine: Machine, params_path: str | None, sets: list[str]) -> tu
         v = s.from_internal(values[s.name])
         lo, hi = s.limits
         if not lo <= v <= hi:
-            print(f"chaincomp: warning: {s.role} {s.name} = {v:g} {s.unit.name} is outside its limits "
-                  f"[{lo:g}, {hi:g}]" + (f" ({machine.file}:{s.line})" if s.role != "axis" else ""), file=sys.stderr)
+            print(one_line(f"chaincomp: warning: {s.role} {s.name} = {v:g} {s.unit.name} is outside its limits "
+                           f"[{lo:g}, {hi:g}]" + (f" ({machine.file}:{s.line})" if s.role != "axis" else "")),
+                  file=sys.stderr)
     has_errors = any(machine.symbol(n).role == "error" for n in given)
     return values, has_errors
 
@@ -128,7 +130,7 @@ def load(path: str) -> Machine:
     machine = load_machine(path)
     from ..analysis.lint import lint
     for f in lint(machine):
-        print(f"chaincomp: {f.level}: {machine.file}:{f}", file=sys.stderr)
+        print(one_line(f"chaincomp: {f.level}: {machine.file}:{f}"), file=sys.stderr)
     return machine
 
 

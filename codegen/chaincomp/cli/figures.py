@@ -22,6 +22,14 @@ COMPONENT_TEXT = {"dx": "dx", "dy": "dy", "dz": "dz", "norm": "|tool point error
                   "dkz": "dkz (tool axis tilt towards z)"}
 
 
+def use_agg() -> None:
+    """matplotlib without a display, every text drawn as written: titles carry file names and
+    --set values, whose $ would otherwise start mathtext (and a stray one stop the verb)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    matplotlib.rcParams["text.parse_math"] = False
+
+
 def model_text(model: str) -> str:
     """'1' -> 'first-order model'; 'exact-first' or 'exact-1' -> 'exact minus first-order model'."""
     return " minus ".join(ORDER_TEXT[m] for m in model.split("-")) + " model"

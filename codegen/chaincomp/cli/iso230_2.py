@@ -94,8 +94,7 @@ def _text(runs: iso.Runs, ev: iso.Evaluation) -> str:
 
 
 def plot(runs: iso.Runs, ev: iso.Evaluation, output: str) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
+    F.use_agg()
     import matplotlib.pyplot as plt
     t = runs.targets
     fig, ax = plt.subplots(figsize=(9, 5.5))

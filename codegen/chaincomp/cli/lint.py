@@ -6,6 +6,7 @@ import sys
 
 from ..analysis.lint import lint
 from ..errors import ChaincompError
+from ..escape import one_line
 from ..model.machine import load_machine
 from .common import add_machine_argument
 
@@ -26,10 +27,10 @@ def run(args) -> int:
     machine = load_machine(args.machine)
     findings = lint(machine)
     for f in findings:
-        print(f"chaincomp lint: {f.level}: {machine.file}:{f}", file=sys.stderr)
+        print(one_line(f"chaincomp lint: {f.level}: {machine.file}:{f}"), file=sys.stderr)
     if findings and args.strict:
         raise ChaincompError(f"{len(findings)} warning{'s' if len(findings) > 1 else ''} (--strict)",
                              machine.file)
     if not findings:
-        print(f"{machine.file}: {machine.name}: no findings")
+        print(one_line(f"{machine.file}: {machine.name}: no findings"))
     return 0

@@ -160,8 +160,7 @@ def _normalise(args) -> None:
 
 
 def run(args) -> int:
-    import matplotlib
-    matplotlib.use("Agg")
+    F.use_agg()
     _normalise(args)
     refuse_empty(("--params", args.params), ("--over", args.over), ("--range", args.range1),
                  ("--range2", args.range2), ("-o", args.output), ("--html", args.html))

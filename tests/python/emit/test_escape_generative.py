@@ -41,7 +41,7 @@ def _unescape(text: str) -> str:
     return _ESCAPE.sub(lambda m: chr(int(next(g for g in m.groups() if g), 16)), text)
 
 
-@settings(max_examples=300, **SETTINGS)
+@settings(max_examples=200, **SETTINGS)
 @given(TEXT)
 def test_cpp_comment_is_one_ascii_line_without_splice_or_end(text):
     c = escape.cpp_comment(text)
@@ -50,7 +50,7 @@ def test_cpp_comment_is_one_ascii_line_without_splice_or_end(text):
     assert _unescape(c) == text                                   # nothing lost: each escape decodes
 
 
-@settings(max_examples=300, **SETTINGS)
+@settings(max_examples=200, **SETTINGS)
 @given(TEXT)
 def test_yaml_scalar_reads_back_and_a_comment_line_writes_no_value(text):
     assert yaml.safe_load(f"k: {escape.yaml_scalar(text)}\n") == {"k": text}
@@ -58,7 +58,7 @@ def test_yaml_scalar_reads_back_and_a_comment_line_writes_no_value(text):
     assert len(escape.one_line(text).splitlines()) <= 1
 
 
-@settings(max_examples=300, **SETTINGS)
+@settings(max_examples=200, **SETTINGS)
 @given(TEXT)
 def test_markdown_text_renders_as_itself_in_a_paragraph_and_a_cell(text):
     from markdown_it import MarkdownIt
@@ -110,7 +110,7 @@ class _Tags(html.parser.HTMLParser):
         self.data.append(data)
 
 
-@settings(max_examples=300, **SETTINGS)
+@settings(max_examples=200, **SETTINGS)
 @given(TEXT)
 def test_html_text_is_data_and_reads_back(text):
     p = _Tags()
@@ -131,14 +131,14 @@ def _tex_plain(line: str) -> bool:
     return not any(c in rest for c in "\\{}$&#%^_~") and "\n" not in rest
 
 
-@settings(max_examples=300, **SETTINGS)
+@settings(max_examples=200, **SETTINGS)
 @given(TEXT)
 def test_latex_text_holds_no_special(text):
     assert _tex_plain(escape.latex(text))
     assert r"\end{verbatim}" not in escape.latex_verbatim(text)
 
 
-@settings(max_examples=300, **SETTINGS)
+@settings(max_examples=200, **SETTINGS)
 @given(TEXT)
 def test_csv_cell_reads_back_as_text_never_a_formula(text):
     row = next(csv.reader(io.StringIO(escape.csv_text(text) + ",1\r\n", newline="")))
@@ -146,7 +146,7 @@ def test_csv_cell_reads_back_as_text_never_a_formula(text):
     assert row[0] == text or row[0] == "'" + text and text.startswith(("=", "+", "-", "@", "\t", "\r"))
 
 
-@settings(max_examples=300, **SETTINGS)
+@settings(max_examples=200, **SETTINGS)
 @given(TEXT)
 def test_gcode_comment_cannot_close_or_break(text):
     c = escape.gcode_comment(text)
@@ -283,3 +283,13 @@ def test_plot_page_titles_hold_no_markup_of_a_file_name(tmp_path_factory, name):
         p.feed(t)
         p.close()
         assert set(p.tags) <= {"br"}, t
+
+
+def test_a_dollar_in_a_file_name_is_drawn_not_read_as_mathtext(tmp_path):
+    """matplotlib reads text between two $ as mathtext: a params file named so stopped plot
+    with an internal error (exit 3) instead of drawing its name."""
+    machine = _write(tmp_path, _machine_doc("m0", ["plain"] * 9))
+    params = tmp_path / "$\\frac{a$.yaml"
+    params.write_text("machine: m0\nvalues:\n  EXX: 5 um\n", encoding="utf-8")
+    res = cli("plot", machine, "--params", str(params), "--grid", "5", "-o", str(tmp_path / "p.png"), check=False)
+    assert res.returncode == 0 and (tmp_path / "p.png").stat().st_size > 0, res.stderr
