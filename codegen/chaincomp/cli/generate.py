@@ -35,6 +35,13 @@ def run(args) -> int:
     order = args.order
     if os.path.exists(args.output) and not os.path.isdir(args.output):
         raise ChaincompError(f"-o {args.output}: exists and is not a folder")
+    there = os.path.abspath(args.output)   # the folder, or the nearest of its parents that exists
+    while not os.path.lexists(there):
+        there = os.path.dirname(there)
+    if not os.path.isdir(there):
+        raise ChaincompError(f"-o {args.output}: cannot create output folder: {there} is a file")
+    if not os.access(there, os.W_OK):   # before the work, which can take minutes
+        raise ChaincompError(f"-o {args.output}: not writable")
     machines = [load(path) for path in args.machines]
     names = [m.name for m in machines]
     dup = {n for n in names if names.count(n) > 1}
