@@ -92,3 +92,8 @@ def test_a_write_that_fails_midway_leaves_the_old_header_whole(tmp_path):
     assert proc.returncode == 2 and "cannot write" in proc.stderr and "File too large" in proc.stderr, proc.stderr
     assert (out / "me220_xz.hpp").read_text() == "old\n"
     assert not [f for f in os.listdir(out) if f.startswith(".")]   # no temporary file left
+    new = tmp_path / "new" / "gen"   # folders it created for a write that failed: removed again
+    proc = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "generate", machine_path("me220_xz"), "-o",
+                           str(new)], capture_output=True, text=True, cwd=ROOT, preexec_fn=limit)
+    assert proc.returncode == 2 and "File too large" in proc.stderr, proc.stderr
+    assert not (tmp_path / "new").exists()
