@@ -40,6 +40,7 @@ from dataclasses import dataclass
 from decimal import Decimal
 
 from ..errors import ChaincompError
+from ..escape import one_line, yaml_scalar
 from .expressions import MAX_LITERAL, NAME, RESERVED
 from .machine import MAX_CHAIN_ELEMENTS, MAX_SYMBOLS
 from .yamlsource import read_text
@@ -303,15 +304,9 @@ def _decimal(value: float, scale: int = 1) -> str:
     return text if len(text) <= 32 else format(d, "e")
 
 
-def _quote(text: str) -> str:
-    """A YAML double-quoted scalar holding printable ASCII only."""
-    clean = "".join(c if " " <= c <= "~" else "?" for c in text)
-    return '"' + clean.replace("\\", "\\\\").replace('"', '\\"') + '"'
-
-
 def _flow(expr: str) -> str:
     """An expression as a YAML flow scalar: quoted where a comma or bracket would end it."""
-    return _quote(expr) if re.search(r"[,()\[\]{}:#]", expr) else expr
+    return yaml_scalar(expr) if re.search(r"[,()\[\]{}:#]", expr) else expr
 
 
 def _aligned(axis: tuple) -> tuple[str, int] | None:
@@ -324,7 +319,7 @@ def _aligned(axis: tuple) -> tuple[str, int] | None:
 
 def _motion(j: PathJoint, motion: str) -> list[str]:
     """Chain elements moving the joint by ``motion`` (an expression in internal units)."""
-    label = f"label: {_quote('joint ' + j.name)}"
+    label = f"label: {yaml_scalar('joint ' + j.name)}"
     along = _aligned(j.axis)
     if j.type == "prismatic":
         if along:
@@ -341,14 +336,14 @@ def _motion(j: PathJoint, motion: str) -> list[str]:
     ux, uy, uz = (_decimal(a) for a in j.axis)
     phi = f"atan2({uy}, {ux})"
     theta = f"atan2(sqrt(({ux})^2 + ({uy})^2), {uz})"
-    frame = f"label: {_quote('joint ' + j.name + ' axis frame')}"
+    frame = f"label: {yaml_scalar('joint ' + j.name + ' axis frame')}"
     return [f"{{rotate: z, angle: {_flow(phi)}, {frame}}}", f"{{rotate: y, angle: {_flow(theta)}}}",
             f"{{rotate: z, angle: {_flow(motion)}, {label}}}",
             f"{{rotate: y, angle: {_flow('-' + theta)}}}", f"{{rotate: z, angle: {_flow('-' + phi)}}}"]
 
 
 def _origin(j: PathJoint) -> list[str]:
-    label = f", label: {_quote(j.name + ' origin')}"
+    label = f", label: {yaml_scalar(j.name + ' origin')}"
     out = []
     if any(j.xyz):
         out.append(f"{{translate: [{', '.join(_decimal(v, 1000) for v in j.xyz)}]{label}}}")
@@ -397,18 +392,18 @@ def machine_text(urdf_path: str, base: str, tip: str, errors: str = "none", tool
         lo, hi = j.limits
         meaning = f"URDF joint {j.name} ({j.type})"
         declare(j.axis_name, j, f"  - {{name: {j.axis_name}, role: axis, unit: {unit}, limits: [{lo!r}, {hi!r}], "
-                                f"meaning: {_quote(meaning)}}}")
+                                f"meaning: {yaml_scalar(meaning)}}}")
     for j in moving:
         if offsets:
             unit = "um" if j.type == "prismatic" else "arcsec"
             declare(f"{j.axis_name}_zero", j, f"  - {{name: {j.axis_name}_zero, role: error, unit: {unit}, "
-                                              f"meaning: {_quote('zero offset of joint ' + j.name)}}}")
+                                              f"meaning: {yaml_scalar('zero offset of joint ' + j.name)}}}")
         if blocks:
             for k in _BLOCK:
                 unit = "um" if k[0] == "d" else "arcsec"
                 what = {"d": "origin error along ", "e": "origin error about "}[k[0]] + k[1]
                 declare(f"{j.axis_name}_{k}", j, f"  - {{name: {j.axis_name}_{k}, role: error, unit: {unit}, "
-                                                 f"meaning: {_quote(what + ' of joint ' + j.name)}}}")
+                                                 f"meaning: {yaml_scalar(what + ' of joint ' + j.name)}}}")
 
     chain: list[str] = []
     for j in joints:
@@ -417,7 +412,7 @@ def machine_text(urdf_path: str, base: str, tip: str, errors: str = "none", tool
             continue
         if blocks:
             chain.append("{errors: {" + ", ".join(f"{k}: {j.axis_name}_{k}" for k in _BLOCK) + "}, order: txyz, "
-                         f"label: {_quote(j.name + ' origin errors')}}}")
+                         f"label: {yaml_scalar(j.name + ' origin errors')}}}")
         chain += _motion(j, f"{j.axis_name} + {j.axis_name}_zero" if offsets else j.axis_name)
     if len(symbols) > MAX_SYMBOLS or len(chain) > MAX_CHAIN_ELEMENTS:
         raise src.fail(f"the path {base} -> {tip} makes {len(symbols)} symbols and {len(chain)} chain elements "
@@ -425,9 +420,9 @@ def machine_text(urdf_path: str, base: str, tip: str, errors: str = "none", tool
                        f"{MAX_CHAIN_ELEMENTS})", joints[0].line)
 
     header = [
-        f"# Imported from the URDF {_comment(urdf_path)} by chaincomp {version} import-urdf",
-        f"# robot {_comment(robot)}, path {_comment(base)} -> {_comment(tip)}: "
-        + ", ".join(f"{_comment(j.name)} ({j.type})" for j in joints),
+        f"# Imported from the URDF {one_line(urdf_path)} by chaincomp {version} import-urdf",
+        f"# robot {one_line(robot)}, path {one_line(base)} -> {one_line(tip)}: "
+        + ", ".join(f"{one_line(j.name)} ({j.type})" for j in joints),
         f"# errors: {errors}. Lengths in mm (the URDF's metres x 1000, exactly), angles in rad as written;",
         "# revolute limits converted from rad to deg, continuous joints limited to [-360, 360] deg.",
         "# The tool point, direction" + (" and reference" if tool_reference is not None else "")
@@ -437,11 +432,11 @@ def machine_text(urdf_path: str, base: str, tip: str, errors: str = "none", tool
     if renamed:
         header += ["# Joints renamed for the machine format (letters, digits and '_'; no reserved word; not x, y, z,",
                    "# kx, ky, kz, the measured coordinates' names): "
-                   + ", ".join(f"{_comment(j.name)} -> {j.axis_name}" for j in renamed)]
+                   + ", ".join(f"{one_line(j.name)} -> {j.axis_name}" for j in renamed)]
     desc = f"{robot} from URDF, {base} -> {tip}"
     lines = header + [
         f"name: {machine_name}",
-        f"description: {_quote(desc)}",
+        f"description: {yaml_scalar(desc)}",
         "length_unit: mm",
         "rotation_sense: right_hand",
         "error_block_order: txyz",
@@ -459,8 +454,3 @@ def machine_text(urdf_path: str, base: str, tip: str, errors: str = "none", tool
     if tool_reference is not None:
         lines.append(f"  reference: [{', '.join(repr(float(v)) for v in tool_reference)}]")
     return "\n".join(lines) + "\n"
-
-
-def _comment(text: str) -> str:
-    """Text for a comment line: printable ASCII, so no line break can end the comment."""
-    return "".join(c if " " <= c <= "~" else "?" for c in text)
