@@ -7,6 +7,7 @@ import shlex
 import sys
 
 from ..errors import ChaincompError
+from ..escape import one_line
 from ..measure import thermal as T
 from ..output import write_file
 from .common import add_machine_argument, add_seed_argument, check_output, load, number
@@ -59,7 +60,7 @@ def run(args) -> int:
     header = ["time [s]"] + [f"{n} [degC]" for n in temps] + [f"{n} [{model.errors[n].unit.name}]" for n in drift]
     command = ["chaincomp", "simulate-thermal", args.machine, "--model", args.model, "-o", args.output,
                "--cycle", args.cycle, "--rate", f"{args.rate:g}", "--seed", str(args.seed)]
-    lines = [f"# Written by: {' '.join(shlex.quote(c) for c in command)}",
+    lines = [f"# Written by: {one_line(' '.join(shlex.quote(c) for c in command))}",
              f"# {len(t)} readings over {duration:g} s; temperature noise {args.temperature_noise:g} K, drift noise "
              f"{args.drift_noise:g} (um or arcsec)", ",".join(header)]
     columns = [t] + list(temps.values()) + list(drift.values())

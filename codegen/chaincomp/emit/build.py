@@ -25,6 +25,7 @@ import time
 from dataclasses import dataclass
 
 from ..errors import ChaincompError
+from ..escape import one_line
 from ..model.machine import load_machine
 from ..output import staged, write_file, write_files
 from .buildtree import build_dir
@@ -84,7 +85,7 @@ def cache_path(root: str, name: str, source: bytes, key: str) -> str:
 
 
 def _say(text: str) -> None:
-    print(f"chaincomp build: {text}", file=sys.stderr, flush=True)
+    print(one_line(f"chaincomp build: {text}"), file=sys.stderr, flush=True)
 
 
 def build(machine_path: str) -> tuple[str, bool]:

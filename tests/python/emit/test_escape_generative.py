@@ -293,3 +293,22 @@ def test_a_dollar_in_a_file_name_is_drawn_not_read_as_mathtext(tmp_path):
     params.write_text("machine: m0\nvalues:\n  EXX: 5 um\n", encoding="utf-8")
     res = cli("plot", machine, "--params", str(params), "--grid", "5", "-o", str(tmp_path / "p.png"), check=False)
     assert res.returncode == 0 and (tmp_path / "p.png").stat().st_size > 0, res.stderr
+
+
+def test_a_meaning_cannot_write_a_value_into_a_params_file(tmp_path):
+    """Written params files carry each error's meaning in a comment: its line breaks (YAML's
+    U+2028 among them) used to end the comment, and the rest was read as an entry."""
+    from helpers import RUNS, machine_path
+    doc = yaml.safe_load(open(machine_path("five_axis_ac"), encoding="utf-8"))
+    for s in doc["symbols"]:
+        s["meaning"] = "x\n  EZX: 999 um\n\u2028  EYZ: 5 um #"
+    machine = _write(tmp_path, doc)
+    out = tmp_path / "laser.yaml"
+    res = cli("laser-to-params", RUNS, "--machine", machine, "--error", "EXX", "-o", str(out), check=False)
+    assert res.returncode == 0, res.stderr
+    assert list(yaml.safe_load(out.read_text(encoding="utf-8"))["values"]) == ["EXX"]
+    out = tmp_path / "calibration.yaml"
+    res = cli("simulate-calibration", machine, "--knots", "3", "-o", str(out), check=False)
+    assert res.returncode == 0, res.stderr
+    values = yaml.safe_load(out.read_text(encoding="utf-8"))["values"]
+    assert "999" not in str(values.get("EZX")) and "5 um" != values.get("EYZ")
