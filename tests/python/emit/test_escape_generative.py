@@ -50,6 +50,22 @@ def test_cpp_comment_is_one_ascii_line_without_splice_or_end(text):
     assert _unescape(c) == text                                   # nothing lost: each escape decodes
 
 
+@settings(max_examples=3, **SETTINGS)
+@given(st.lists(st.binary(max_size=40) | TEXT.map(lambda t: t.encode("utf-8")), min_size=20, max_size=20))
+def test_cpp_string_is_the_bytes_to_the_compiler(tmp_path_factory, strings):
+    """Each literal, compiled, holds its bytes and only them (checked by static_assert)."""
+    lines = []
+    for i, data in enumerate(strings):
+        lines.append(f"constexpr char s{i}[] = {escape.cpp_string(data)};")
+        lines.append(f"static_assert(sizeof(s{i}) == {len(data) + 1}, \"size\");")
+        lines += [f"static_assert(s{i}[{k}] == static_cast<char>({b}), \"byte\");" for k, b in enumerate(data)]
+    path = tmp_path_factory.mktemp("literal") / "literal.cpp"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    proc = subprocess.run(["g++", "-std=c++17", "-fsyntax-only", "-Werror", "-Wall", "-Wextra", "-Wpedantic",
+                           "-trigraphs", str(path)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+
+
 @settings(max_examples=200, **SETTINGS)
 @given(TEXT)
 def test_yaml_scalar_reads_back_and_a_comment_line_writes_no_value(text):
