@@ -17,8 +17,10 @@ Grammar (whitespace between tokens is free)::
     FUNC   := sin cos tan asin acos atan atan2 sqrt
 
 The work sympy does on a parsed expression is bounded before it sees it: text length,
-nesting depth, literal size, exponents (small constant rationals) and the degree a power
-tower or product could expand to.
+nesting depth, literal size, exponents (small constant rationals), the degree a power
+tower or product could expand to and the number of terms it could expand to (a multinomial
+(a+b+c+d+e)^64 is of degree 64 but has 635 376 terms). A chain of sums or products is built
+as a balanced tree, so a flat sum of hundreds of terms is not hundreds of levels deep.
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ MAX_LITERAL = 1e15     # magnitude of a number as written
 MAX_LITERAL_CHARS = 40
 MAX_EXPONENT = 64      # |p/q| of a power's constant exponent, and q
 MAX_DEGREE = 64        # degree a product or power tower could expand to
+MAX_TERMS = 1000       # terms any part of an expression could expand to (sympy's expand: derive)
 MAX_MAGNITUDE = 1e100  # any number sympy folds the constants into
 
 # C++ words and standard macros or library names the generated code would collide with.
@@ -93,6 +96,26 @@ def _shown(source: str) -> str:
 # a, b), ("neg", a), ("pow", a, Fraction exponent), or a function's name with its arguments
 # ("sin", a), ("atan2", y, x).
 ZERO = ("num", Fraction(0))
+
+
+def _balanced(op: str, nodes: list):
+    """``nodes`` joined by ``op`` (add or mul) as a balanced tree: the same value as the chain
+    the text reads, but log2(n) levels deep rather than n. Every function over the tree
+    recurses (evaluation, series, sympy); a flat sum of 500 terms overflowed Python's stack."""
+    if len(nodes) == 1:
+        return nodes[0]
+    half = len(nodes) // 2
+    return (op, _balanced(op, nodes[:half]), _balanced(op, nodes[half:]))
+
+
+def _chain(op: str, inverse: str, items: list):
+    """The tree of ``a op b inverse c ...`` (``items``: (is op, node), the first an op): the
+    terms of op balanced, then ``inverse`` of the balanced others once, so a divisor stays a
+    divisor (a*b/c*d is (a*b*d)/c, never a*b/(c/d), which would divide by d)."""
+    ups = [n for up, n in items if up]
+    downs = [n for up, n in items if not up]
+    node = _balanced(op, ups)
+    return (inverse, node, _balanced(op, downs)) if downs else node
 
 
 def fold(node) -> Fraction | None:
@@ -195,10 +218,11 @@ class Expr:
     """A parsed expression: an immutable tree (see above), its source text for messages, and
     its sympy form once built (or given: an expression sympy rewrote, see from_sympy)."""
 
-    __slots__ = ("node", "source", "_names", "_sympy")
+    __slots__ = ("node", "source", "_names", "_sympy", "terms")
 
     def __init__(self, node, source: str = "", sympy_form=None):
         self.node, self.source = node, source
+        self.terms = 1   # parsed: the bound on the terms it could expand to (the parser's)
         self._names = None
         self._sympy = sympy_form   # a sympy expression, a function making one, or None
 
@@ -275,10 +299,7 @@ def from_sympy(expr, source: str = "") -> Expr:
         if e is sp.pi:
             return ("pi",)
         if e.is_Add or e.is_Mul:
-            out = node(e.args[0])
-            for a in e.args[1:]:
-                out = ("add" if e.is_Add else "mul", out, node(a))
-            return out
+            return _balanced("add" if e.is_Add else "mul", [node(a) for a in e.args])
         if e.is_Pow and e.exp.is_Rational:
             return ("pow", node(e.base), Fraction(int(e.exp.p), int(e.exp.q)))
         if isinstance(e, sp.Abs):   # sqrt(x^2) of a real x
@@ -510,43 +531,50 @@ class _Parser:
         if self.depth > MAX_DEPTH:
             raise ExpressionError(f"expression {_shown(self.source)} is nested more than {MAX_DEPTH} deep")
 
-    # Each rule returns (node, degree): the degree bounds what expanding it could give.
+    # Each rule returns (node, degree, terms): what expanding it could give, as sympy's expand
+    # does for derive: its degree, and a bound on its terms. Products distribute (terms
+    # multiply), a natural power is a multinomial (C(t+p-1, p) terms of a sum of t), sums add;
+    # a call, a divisor and a power that is not natural are one term, their own expansion
+    # bounded where they are read.
     def expr(self):
         self.enter()
-        e, d = self.term()
+        items = [(True, *self.term())]
         while self.peek() in ("+", "-"):
             op = self.take()[1]
-            f, g = self.term()
-            e, d = ("add" if op == "+" else "sub", e, f), max(d, g)
+            items.append((op == "+", *self.term()))
         self.depth -= 1
-        return e, d
+        node = _chain("add", "sub", [(up, n) for up, n, _, _ in items])
+        return node, max(d for _, _, d, _ in items), self._terms(sum(t for _, _, _, t in items))
 
     def term(self):
-        e, d = self.unary()
+        items = [(True, *self.unary())]
+        degree, terms = items[0][2], items[0][3]
         while self.peek() in ("*", "/"):
             op = self.take()[1]
-            f, g = self.unary()
+            f, g, t = self.unary()
             if op == "/" and fold(f) == 0:   # a divisor only sympy sees is zero: Expr.to_sympy
                 raise ExpressionError(f"division by zero in {_shown(self.source)}")
-            e, d = ("mul" if op == "*" else "div", e, f), self._degree(d + g)
-        return e, d
+            items.append((op == "*", f, g, t))
+            degree = self._degree(degree + g)
+            terms = self._terms(terms * t if op == "*" else terms)
+        return _chain("mul", "div", [(up, n) for up, n, _, _ in items]), degree, terms
 
     def unary(self):
         if self.peek() in ("+", "-"):
             self.enter()
             op = self.take()[1]
-            e, d = self.unary()
+            e, d, t = self.unary()
             self.depth -= 1
-            return (e if op == "+" else ("neg", e)), d
+            return (e if op == "+" else ("neg", e)), d, t
         return self.power()
 
     def power(self):
-        base, d = self.atom()
+        base, d, t = self.atom()
         if self.peek() not in ("^", "**"):
-            return base, d
+            return base, d, t
         self.enter()
         self.take()
-        exp_node, _ = self.unary()
+        exp_node, _, _ = self.unary()
         self.depth -= 1
         exp = fold(exp_node)
         if exp is None:
@@ -559,7 +587,10 @@ class _Parser:
         if b is not None and abs(exp) * math.log10(max(abs(b.numerator), b.denominator, 1)) > \
                 math.log10(MAX_MAGNITUDE):
             raise ExpressionError(f"{_shown(self.source)} holds a number larger than {MAX_MAGNITUDE:g}")
-        return ("pow", base, exp), self._degree(d * math.ceil(abs(exp)))
+        # (x+y)^(5/2) expands as (x+y)^2*sqrt(x+y), and a negative power its divisor
+        whole = math.floor(abs(exp))
+        expanded = self._terms(math.comb(t + whole - 1, whole) if whole else 1)
+        return ("pow", base, exp), self._degree(d * math.ceil(abs(exp))), expanded if exp > 0 else 1
 
     def _sympy_exponent(self, node) -> Fraction:
         """An exponent that is no plain fraction (2^(1/2)*2^(1/2), pi/pi): sympy says whether it
@@ -573,7 +604,7 @@ class _Parser:
     def atom(self):
         kind, text = self.take()
         if kind == "num":
-            return self._number(text), 0
+            return self._number(text), 0, 1
         if kind == "name":
             if text in FUNCTIONS and text != "pi":
                 return self._call(text)
@@ -581,11 +612,11 @@ class _Parser:
                 raise ExpressionError(f"unknown function {text!r} in {_shown(self.source)} "
                                       f"(known: {', '.join(sorted(k for k in FUNCTIONS if k != 'pi'))})")
             if text == "pi":
-                return ("pi",), 0
+                return ("pi",), 0, 1
             if text not in self.names:
                 raise ExpressionError(f"unknown symbol {text!r} in {_shown(self.source)} "
                                       f"(declare it under 'symbols')")
-            return ("sym", text), 1
+            return ("sym", text), 1, 1
         if text == "(":
             e = self.expr()
             self.take(")")
@@ -595,7 +626,7 @@ class _Parser:
     def _call(self, name: str):
         self.enter()
         self.take("(")
-        args, deg = [self.expr()[0]], 1
+        args = [self.expr()[0]]
         while self.peek() == ",":
             self.take()
             args.append(self.expr()[0])
@@ -605,7 +636,7 @@ class _Parser:
         if len(args) != want:
             raise ExpressionError(f"{name} takes {want} argument{'s' if want > 1 else ''}, got {len(args)} "
                                   f"in {_shown(self.source)}")
-        return (name, *args), deg
+        return (name, *args), 1, 1
 
     def _number(self, text: str):
         if len(text) > MAX_LITERAL_CHARS:
@@ -626,6 +657,13 @@ class _Parser:
             raise ExpressionError(f"expression {_shown(self.source)} would expand to a polynomial of degree "
                                   f"over {MAX_DEGREE}")
         return d
+
+    def _terms(self, t: int) -> int:
+        if t > MAX_TERMS:
+            raise ExpressionError(f"expression {_shown(self.source)} could expand to up to {float(t):.3g} terms "
+                                  f"(at most {MAX_TERMS}; derive expands it): use fewer symbols in its powered "
+                                  f"sums and products, or smaller powers")
+        return t
 
 
 def parse_tree(text: object, names) -> Expr:
@@ -650,10 +688,12 @@ def parse_tree(text: object, names) -> Expr:
     if len(source) > MAX_LENGTH:
         raise ExpressionError(f"expression of {len(source)} characters (at most {MAX_LENGTH})")
     p = _Parser(source, names)
-    node, _ = p.expr()
+    node, _, terms = p.expr()
     if p.pos != len(p.tokens):
         raise p.fail(f"unexpected {p.tokens[p.pos][1]!r}")
-    return Expr(node, source)
+    e = Expr(node, source)
+    e.terms = terms
+    return e
 
 
 def check_sympy(expr, source: str) -> None:

@@ -22,6 +22,7 @@ from .yamlsource import describe, line_of, load_yaml, read_text
 ROLES = ("axis", "constant", "error")
 MAX_SYMBOLS = 256          # declared symbols of one machine
 MAX_CHAIN_ELEMENTS = 256   # elements written in one chain or loop branch
+MAX_MACHINE_TERMS = 2000   # terms all its expressions could expand to (expressions.MAX_TERMS each)
 SENSES = {"right_hand": 1, "left_hand": -1}
 AXES = ("x", "y", "z")
 # The coordinates a rotation about each axis mixes: i' = c·i − s·j, j' = s·i + c·j.
@@ -245,6 +246,7 @@ class _Ctx:
         self.joints: list = []    # the dh/mdh joints, for lint: (number, kind, alpha, error names, line)
         self.joint = 0            # the last dh/mdh joint's number in the chain being read
         self.auto: dict = {}      # error name -> line of the element that auto-named it
+        self.terms = 0            # the terms the expressions read so far could expand to (MAX_MACHINE_TERMS)
 
     def declare_error(self, name: str, unit: str, meaning: str, line: int, fld: str) -> str:
         """An error named by a dh/mdh/beta element: the declared one of that name, or a new one."""
@@ -367,6 +369,11 @@ def _parse_symbol(ctx: _Ctx, node, i: int, line) -> Symbol:
 def _expr(ctx: _Ctx, value, symbols, fld: str, line, want: str | None = None) -> Expr:
     try:
         expr = parse_tree(value, symbols)
+        ctx.terms += expr.terms
+        if ctx.terms > MAX_MACHINE_TERMS:
+            raise ExpressionError(f"the machine's expressions up to this one could expand to up to {ctx.terms} terms "
+                                  f"(at most {MAX_MACHINE_TERMS} in all; derive expands them): use fewer symbols in "
+                                  f"powered sums and products, or smaller powers")
         if not plausible(expr, ctx.values, ctx.errors):
             expr = _symbolic_check(ctx, expr)
     except ExpressionError as exc:

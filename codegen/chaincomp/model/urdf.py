@@ -141,12 +141,52 @@ def _read_model(src: _Source, root):
                                sub.sourceline, f"joint {name}.{part}")
     parsed = {}
     for name, el in joints.items():
-        _origin_numbers(src, el, name)   # before yourdfpy, which names no line
+        _joint_numbers(src, el, name)   # before yourdfpy, which names no line
+        _origin_numbers(src, el, name)
         try:
             parsed[name] = yourdfpy.URDF._parse_joint(el)
         except (ValueError, TypeError, AttributeError, KeyError, IndexError) as exc:
             raise src.fail(f"joint {name!r}: cannot read it: {exc}", el.sourceline, f"joint {name}") from None
     return links, joints, parsed
+
+
+# XML Schema 1.1 Part 2 §3.3.5 double, the type URDF's numbers are (xs:double; whitespace
+# collapsed, lists split at XML whitespace): Python's float() also took '1_0' (as 10), 'inf',
+# 'nan', 'infinity' and digits of other scripts.
+_XS_DOUBLE = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?INF|NaN")
+_XML_SPACE = re.compile(r"[ \t\n\r]+")
+
+
+def xs_doubles(text: str) -> list[float]:
+    """The numbers of an attribute holding xs:double values; ValueError naming one that is not."""
+    out = []
+    for token in _XML_SPACE.split(text.strip(" \t\n\r")) if text.strip(" \t\n\r") else []:
+        if not _XS_DOUBLE.fullmatch(token):
+            raise ValueError(f"{token[:40]!r} is not a number (XML Schema double: digits 0-9, an optional "
+                             f"sign, point and exponent)")
+        out.append(float(token))
+    return out
+
+
+_NUMBER_ATTRIBUTES = {   # those of a joint's elements (URDF's XSD: urdf.xsd), whoever reads them
+    "origin": ("xyz", "rpy"), "axis": ("xyz",), "limit": ("lower", "upper", "effort", "velocity"),
+    "dynamics": ("damping", "friction"), "mimic": ("multiplier", "offset"),
+    "calibration": ("rising", "falling"),
+    "safety_controller": ("soft_lower_limit", "soft_upper_limit", "k_position", "k_velocity")}
+
+
+def _joint_numbers(src: _Source, el, name: str) -> None:
+    """Every number of the joint written as an xs:double, refused at its line before yourdfpy
+    (which reads them with float() and names no line) sees them."""
+    for part, attrs in _NUMBER_ATTRIBUTES.items():
+        sub = el.find(part)
+        for attr in attrs:
+            if sub is not None and sub.get(attr) is not None:
+                try:
+                    xs_doubles(sub.get(attr))
+                except ValueError as exc:
+                    raise src.fail(f"joint {name!r} {part} {attr}: {exc}", sub.sourceline,
+                                   f"joint {name}.{part}.{attr}") from None
 
 
 def _finite(src: _Source, values, what: str, line: int, fld: str, count: int = 3) -> tuple:
@@ -166,7 +206,7 @@ def _finite(src: _Source, values, what: str, line: int, fld: str, count: int = 3
 def _attribute_numbers(src: _Source, el, attr: str, default: str, what: str, fld: str) -> tuple:
     text = el.get(attr, default) if el is not None else default
     try:
-        return _finite(src, (float(t) for t in text.split()), what, el.sourceline, fld)
+        return _finite(src, xs_doubles(text), what, el.sourceline, fld)
     except ValueError as exc:
         raise src.fail(f"{what}: {exc}", el.sourceline, fld) from None
 

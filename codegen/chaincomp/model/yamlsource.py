@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 from typing import Any
 
 import yaml
@@ -180,6 +181,11 @@ def _construct_number(loader: _Loader, node: yaml.ScalarNode):
         raise ChaincompError(f"ambiguous number {node.value!r}: YAML 1.1 and 1.2 read it differently; "
                              "write it in plain decimal", loader.name, node.start_mark.line + 1)
     if node.tag == "tag:yaml.org,2002:int":
+        limit = sys.get_int_max_str_digits()
+        if limit and len(node.value.lstrip("+-")) > limit:
+            # int() refuses so many digits (ValueError: exit 3): the value is beyond any float
+            # anyway, and as ±inf every field refuses it as not finite, at its line
+            return float(node.value)
         return yaml.SafeLoader.construct_yaml_int(loader, node)
     return yaml.SafeLoader.construct_yaml_float(loader, node)
 

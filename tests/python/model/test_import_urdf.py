@@ -323,13 +323,17 @@ def test_a_closed_loop_is_refused(tmp_path):
 
 
 @pytest.mark.parametrize("xyz, lower, what", [
-    ("0 nan 0", "-1", "origin xyz: nan is not a finite number"),
-    ("0 inf 0", "-1", "origin xyz: inf is not a finite number"),
+    # URDF numbers are xs:double (XML Schema 1.1 Part 2 §3.3.5): INF and NaN, not inf or nan
+    ("0 nan 0", "-1", "origin xyz: 'nan' is not a number (XML Schema double"),
+    ("0 inf 0", "-1", "origin xyz: 'inf' is not a number (XML Schema double"),
+    ("0 NaN 0", "-1", "origin xyz: nan is not a finite number"),
+    ("0 -INF 0", "-1", "origin xyz: -inf is not a finite number"),
     ("0 1e400 0", "-1", "origin xyz: inf is not a finite number"),
     ("0 0", "-1", "origin xyz: expected 3 numbers, got 2"),
     ("0 1e-40 0", "-1", "origin xyz: 1e-40 is below 1e-27 in magnitude (write 0)"),
-    ("0 zero 0", "-1", "origin xyz: could not convert string to float"),
-    ("0 0 0", "-inf", "limit: -inf is not a finite number"),
+    ("0 zero 0", "-1", "origin xyz: 'zero' is not a number (XML Schema double"),
+    ("0 0 0", "-inf", "limit lower: '-inf' is not a number (XML Schema double"),
+    ("0 0 0", "-INF", "limit: -inf is not a finite number"),
     ("0 0 0", "2", "lower limit 2.0 is not below upper limit 1.0"),
 ])
 def test_bad_numbers_are_refused_with_the_line(xyz, lower, what, tmp_path):
