@@ -27,6 +27,7 @@ import numpy as np
 import yaml
 
 from ..errors import ChaincompError
+from ..escape import one_line
 from ..model import csvtable, units as U
 from ..model.expressions import MAX_LITERAL
 from ..model.machine import Machine
@@ -228,7 +229,7 @@ def _name(sensor: str) -> str:
 
 def model_text(model: ThermalModel, header: list[str]) -> str:
     """The model as a file ``load_model`` reads (uncertainties as comments)."""
-    lines = [f"# {h}" for h in header]
+    lines = [f"# {one_line(h)}" for h in header]
     lines += [f"machine: {model.machine}",
               f"reference_temperature: {_g(model.reference)}   # degC: each term is gain * (lagged temperature - this)",
               "errors:"]
