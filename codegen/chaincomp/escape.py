@@ -13,11 +13,6 @@ from __future__ import annotations
 import html
 import re
 
-# The line breaks of every language read here: C++ and Markdown break at \n and \r, YAML 1.1
-# (PyYAML) also at U+0085, U+2028 and U+2029, and str.splitlines at \v, \f, \x1c-\x1e too.
-_BREAKS = "\n\r\v\f\x1c\x1d\x1e\x85\u2028\u2029"
-
-
 def _code(c: str) -> str:
     """A character as a C-style escape: \\xHH, \\uHHHH or \\UHHHHHHHH (never ends in a backslash)."""
     n = ord(c)
@@ -31,9 +26,10 @@ def _visible(c: str) -> str:
 
 
 def one_line(text: str) -> str:
-    """Free text as one line of printable characters (whitespace runs, line breaks among them,
-    as one space; other unprintable characters as escapes): for a terminal, or a comment of a
-    format that reads UTF-8 (YAML, INI, HAL)."""
+    """Free text as one line of printable characters (whitespace runs, line breaks among them —
+    \n, \r, \v, \f, U+0085, U+2028, U+2029, which YAML 1.1 also breaks at — as one space; other
+    unprintable characters as escapes): for a terminal, or a comment of a format that reads
+    UTF-8 (YAML, CSV, INI, HAL)."""
     return "".join(_visible(c) for c in " ".join(str(text).split()))
 
 
