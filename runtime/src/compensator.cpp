@@ -78,8 +78,9 @@ bool Compensator::seq_ok(const Command& in, const std::array<double, kMaxAxes>& 
 }
 
 // Point (mm) and direction (rad) error left at `target` (axis units) for the command at q
-// (internal units): what a target whose correction was limited or ramped really leaves. With
-// a frame corrected in full, the orientation residual compensate() reports (compensate.hpp).
+// (internal units): what a target whose correction was limited or ramped really leaves: the
+// direction wherever the pose has one (corrected or not), with a frame corrected in full the
+// orientation residual compensate() reports (compensate.hpp).
 // Tables that reject beyond their end are held there, as compensate's iterates hold them: a
 // target corrected a little past the end (the command inside) is a pose, not NaN.
 void Compensator::residual_at(const double* q, const std::array<double, kMaxAxes>& target,
@@ -95,7 +96,7 @@ void Compensator::residual_at(const double* q, const std::array<double, kMaxAxes
   };
   residual[0] = distance(0);
   residual[1] = 0.0;
-  if (!entry_.info->corrects_direction) return;
+  if (entry_.info->pose_size < 6) return;
   if (!entry_.info->corrects_orientation) {
     residual[1] = distance(3);
     return;

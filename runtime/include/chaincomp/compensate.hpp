@@ -383,6 +383,9 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
   // point and direction only): a set of equally good corrections.
   constexpr int dof = O ? 6 : kDirection ? 5 : 3;
   constexpr bool kRedundant = n > dof;
+  // The pull towards the command (below) also where fewer axes than conditions may leave a
+  // null space all the same (a table's C axis about the tool direction moves the point only).
+  constexpr bool kPull = kRedundant || (kDirection && n < dof);
   clean = false;
   out.corrected = command;
   out.residual_point = out.residual_direction = 0;
@@ -534,7 +537,7 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
         // the correction's part along the Jacobian's null space, so that the iteration ends
         // on the correction closest to the command whatever it starts from.
         Axes g = J.transpose() * r;
-        if constexpr (kRedundant) g += ws.levenberg * (q - command);
+        if constexpr (kPull) g += ws.levenberg * (q - command);
         delta = ws.factor.solve(g);
         // |J delta|^2 from (J^T J + l I) delta = g, without forming J delta
         step_change = delta.dot(g) - ws.levenberg * delta.squaredNorm();
@@ -599,14 +602,40 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
     if (failed != Status::kOk) return failed;
   }
   if (!q.allFinite() || !r.allFinite()) return Status::kNonFiniteOutput;
+  // The error left at the pose in ws.pose: the point, and the direction (orientation) wherever
+  // the pose has one, corrected by this shape or not (a three-axis machine's tilt is reported,
+  // never hidden as 0).
+  auto pose_error = [&](double& point, double& direction) {
+    point = (ws.pose.template head<3>() - ws.target.template head<3>()).norm();
+    direction = 0;
+    if constexpr (O) {
+      direction = orientation_residual(target_z, target_y, ws.pose.template segment<3>(3),
+                                       ws.pose.template segment<3>(6)).norm();
+    } else if constexpr (P >= 6) {
+      direction = (ws.pose.template segment<3>(3) - ws.target.template segment<3>(3)).norm();
+    }
+  };
   out.corrected = q;
-  out.residual_point = r.template head<3>().norm();
-  if constexpr (kDirection) {
-    out.residual_direction = r.template tail<3>().norm() / kDirectionWeight;
-  }
+  pose_error(out.residual_point, out.residual_direction);
   const bool ok = out.residual_point <= kPointTolerance && out.residual_direction <= kDirectionTolerance;
   clean = !damped && !clamped;
-  return ok ? Status::kOk : Status::kResidual;
+  if (ok) return Status::kOk;
+  // Never worse than no correction, by the objective the steps minimise (docs/guide/daemon.md,
+  // "The objective"): where the command itself scores no worse, it is the answer.
+  auto objective = [](double point, double direction) {
+    return point * point + kDirectionWeight * kDirectionWeight * direction * direction;
+  };
+  double none_point = 0, none_direction = 0;
+  pose_at_command();
+  pose_error(none_point, none_direction);
+  if (std::isfinite(none_point) && std::isfinite(none_direction) &&
+      objective(none_point, none_direction) <= objective(out.residual_point, out.residual_direction)) {
+    out.corrected = command;
+    out.residual_point = none_point;
+    out.residual_direction = none_direction;
+    clean = false;
+  }
+  return Status::kResidual;
 }
 
 template <int N, unsigned Angles, int P, int R, bool O>

@@ -208,7 +208,10 @@ COMMANDS = [np.array([10.0 + k, 20.0, -30.0 + 0.5 * k, 0.3 + 0.001 * k, 0.5 - 0.
 
 
 class Loaded:
-    def __init__(self, path, scale=1.0):
+    """A built library, prepared with ``values`` (internal units, by name; default ERRORS times
+    ``scale``) and every other parameter at its nominal value."""
+    def __init__(self, path, scale=1.0, values=None):
+        values_by_name = {k: scale * v for k, v in ERRORS.items()} if values is None else values
         self.lib = ctypes.CDLL(path)  # RTLD_LOCAL, as open_model.cpp's dlopen
         fn = self.lib.chaincomp_model_library
         fn.restype = ctypes.POINTER(_Library)
@@ -216,18 +219,23 @@ class Loaded:
         info = self.entry.info.contents
         self.n, self.pose_size = info.num_axes, info.pose_size
         params = [info.params[i] for i in range(info.num_params)]
-        values = np.array([scale * ERRORS[p.name.decode()] if p.name.decode() in ERRORS else p.nominal
-                           for p in params])
+        self.params = params
         self.model = ctypes.create_string_buffer(self.entry.model_size + self.entry.model_align)
         self.model_ptr = _align(self.model, self.entry.model_align)
-        self.entry.prepare(values.ctypes.data_as(_P), self.model_ptr)
         self.ws = ctypes.create_string_buffer(self.entry.workspace_size + self.entry.workspace_align)
         self.ws_ptr = _align(self.ws, self.entry.workspace_align)
+        self.prepare(values_by_name)
+
+    def prepare(self, values_by_name):
+        """The model with these values (internal units, by name), the others nominal, and a fresh
+        workspace."""
+        values = np.array([values_by_name.get(p.name.decode(), p.nominal) for p in self.params])
+        self.entry.prepare(values.ctypes.data_as(_P), self.model_ptr)
         self.entry.init_workspace(self.ws_ptr)
 
-    def compensate(self, command):
+    def compensate(self, command, residual=None):
         q = np.ascontiguousarray(command, dtype=float)
-        out, res = np.zeros(self.n), np.zeros(2)
+        out, res = np.zeros(self.n), np.zeros(2) if residual is None else residual
         s = self.entry.compensate(self.model_ptr, self.ws_ptr, q.ctypes.data_as(_P), out.ctypes.data_as(_P),
                                   res.ctypes.data_as(_P))
         return s, out

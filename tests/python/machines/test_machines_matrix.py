@@ -374,11 +374,16 @@ def test_simulate_log_replay(name, logs, tmp_path):
     miss = np.linalg.norm(p_act - p_nom, axis=1)
     assert len(rows) == 200 and all(r["result"] == "ok" for r in rows)
     assert np.abs(np.array(cmd) - np.array(cor)).max() > 0  # something was corrected
-    if point_correctable(name):
+    if point_correctable(name) and (five_axis(name) or m.tool_direction is None):
         assert all(r["status"] == "0" for r in rows)
         assert miss.max() < 1e-6
         if five_axis(name):
             assert np.linalg.norm(d_act - d_nom, axis=1).max() < 1e-9
+    elif point_correctable(name):  # three slides: the point corrected, the tilt left and reported
+        assert miss.max() < 1e-6
+        tilt = np.linalg.norm(d_act - d_nom, axis=1)
+        assert np.allclose(tilt, [float(r["residual_direction_rad"]) for r in rows], rtol=1e-6, atol=1e-12)
+        assert [r["status"] for r in rows] == ["1" if t > 1e-9 else "0" for t in tilt]
     elif arm(name):   # corrected (0), or near a singular pose the residual reported (1)
         ok = np.array([r["status"] == "0" for r in rows])
         assert {r["status"] for r in rows} <= {"0", "1"} and ok.sum() >= 100
