@@ -6,11 +6,14 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <array>
 #include <cctype>
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 
 #include "chaincomp/hash.hpp"
 #include "chaincomp/model_library.hpp"
@@ -82,6 +85,78 @@ bool run_build(const std::string& machine_path, std::string& error) {
     return false;
   }
   return true;
+}
+
+// SHA-256 (FIPS 180-4) of the file at `path` in lower-case hex, empty if it cannot be read:
+// the digest `chaincomp build` records beside a cached library (NAME.so.sha256).
+std::string sha256_file(const std::string& path) {
+  static constexpr std::uint32_t k[64] = {
+      0x428a2f98, 0x71374491, 0xb5c0fbcf, 0xe9b5dba5, 0x3956c25b, 0x59f111f1, 0x923f82a4, 0xab1c5ed5,
+      0xd807aa98, 0x12835b01, 0x243185be, 0x550c7dc3, 0x72be5d74, 0x80deb1fe, 0x9bdc06a7, 0xc19bf174,
+      0xe49b69c1, 0xefbe4786, 0x0fc19dc6, 0x240ca1cc, 0x2de92c6f, 0x4a7484aa, 0x5cb0a9dc, 0x76f988da,
+      0x983e5152, 0xa831c66d, 0xb00327c8, 0xbf597fc7, 0xc6e00bf3, 0xd5a79147, 0x06ca6351, 0x14292967,
+      0x27b70a85, 0x2e1b2138, 0x4d2c6dfc, 0x53380d13, 0x650a7354, 0x766a0abb, 0x81c2c92e, 0x92722c85,
+      0xa2bfe8a1, 0xa81a664b, 0xc24b8b70, 0xc76c51a3, 0xd192e819, 0xd6990624, 0xf40e3585, 0x106aa070,
+      0x19a4c116, 0x1e376c08, 0x2748774c, 0x34b0bcb5, 0x391c0cb3, 0x4ed8aa4a, 0x5b9cca4f, 0x682e6ff3,
+      0x748f82ee, 0x78a5636f, 0x84c87814, 0x8cc70208, 0x90befffa, 0xa4506ceb, 0xbef9a3f7, 0xc67178f2};
+  std::uint32_t h[8] = {0x6a09e667, 0xbb67ae85, 0x3c6ef372, 0xa54ff53a, 0x510e527f, 0x9b05688c, 0x1f83d9ab, 0x5be0cd19};
+  auto rotr = [](std::uint32_t x, int n) { return (x >> n) | (x << (32 - n)); };
+  auto block = [&](const unsigned char* p) {
+    std::uint32_t w[64];
+    for (int i = 0; i < 16; ++i)
+      w[i] = std::uint32_t(p[4 * i]) << 24 | std::uint32_t(p[4 * i + 1]) << 16 | std::uint32_t(p[4 * i + 2]) << 8 | p[4 * i + 3];
+    for (int i = 16; i < 64; ++i) {
+      const std::uint32_t s0 = rotr(w[i - 15], 7) ^ rotr(w[i - 15], 18) ^ (w[i - 15] >> 3);
+      const std::uint32_t s1 = rotr(w[i - 2], 17) ^ rotr(w[i - 2], 19) ^ (w[i - 2] >> 10);
+      w[i] = w[i - 16] + s0 + w[i - 7] + s1;
+    }
+    std::uint32_t a = h[0], b = h[1], c = h[2], d = h[3], e = h[4], f = h[5], g = h[6], hh = h[7];
+    for (int i = 0; i < 64; ++i) {
+      const std::uint32_t t1 = hh + (rotr(e, 6) ^ rotr(e, 11) ^ rotr(e, 25)) + ((e & f) ^ (~e & g)) + k[i] + w[i];
+      const std::uint32_t t2 = (rotr(a, 2) ^ rotr(a, 13) ^ rotr(a, 22)) + ((a & b) ^ (a & c) ^ (b & c));
+      hh = g, g = f, f = e, e = d + t1, d = c, c = b, b = a, a = t1 + t2;
+    }
+    h[0] += a, h[1] += b, h[2] += c, h[3] += d, h[4] += e, h[5] += f, h[6] += g, h[7] += hh;
+  };
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return "";
+  std::array<unsigned char, 128> buf{};
+  std::uint64_t bytes = 0;
+  for (;;) {
+    in.read(reinterpret_cast<char*>(buf.data()), 64);
+    const std::size_t n = static_cast<std::size_t>(in.gcount());
+    bytes += n;
+    if (n == 64) {
+      block(buf.data());
+      continue;
+    }
+    if (in.bad()) return "";
+    // the last bytes, 0x80, zeros and the length in bits: one block or two
+    buf[n] = 0x80;
+    const std::size_t end = n < 56 ? 64 : 128;
+    std::fill(buf.begin() + n + 1, buf.begin() + end, 0);
+    for (int i = 0; i < 8; ++i) buf[end - 1 - i] = static_cast<unsigned char>((bytes * 8) >> (8 * i));
+    block(buf.data());
+    if (end == 128) block(buf.data() + 64);
+    break;
+  }
+  static const char* hex = "0123456789abcdef";
+  std::string out;
+  for (std::uint32_t v : h)
+    for (int i = 28; i >= 0; i -= 4) out += hex[(v >> i) & 15];
+  return out;
+}
+
+// Whether the cached library at `path` is the one `chaincomp build` made there: its SHA-256
+// is the one recorded beside it (PATH.sha256, sha256sum's format). A library truncated or
+// overwritten since crashed every start (SIGBUS, SIGILL) until the folder was deleted by hand.
+bool cache_intact(const std::string& path) {
+  std::ifstream in(path + ".sha256", std::ios::binary);
+  std::string recorded(200, '\0');
+  in.read(&recorded[0], static_cast<std::streamsize>(recorded.size()));
+  recorded.resize(static_cast<std::size_t>(in.gcount()));
+  const std::string digest = sha256_file(path);
+  return !digest.empty() && recorded == digest + "  " + path.substr(path.rfind('/') + 1) + "\n";
 }
 
 }  // namespace
@@ -186,11 +261,17 @@ const ModelEntry* open_model(const std::string& machine_path, const std::string&
   const std::string root = model_cache_root(error);
   if (root.empty()) return nullptr;
   const std::string path = model_cache_path(root, name, text, toolchain);
-  if (access(path.c_str(), F_OK) != 0) {
+  if (!cache_intact(path)) {  // none, or not the one built there: chaincomp build (again) checks the same
     if (!run_build(machine_path, error)) return nullptr;
     if (access(path.c_str(), F_OK) != 0) {
       error = "chaincomp build did not leave " + path + " (its compiler, flags or sources differ from this program's: " +
               "rebuild with tools/setup)";
+      return nullptr;
+    }
+    if (!cache_intact(path)) {
+      const std::string folder = path.substr(0, path.rfind('/'));
+      error = path + ": not the library chaincomp build recorded (its SHA-256 differs from " + path +
+              ".sha256): remove the folder " + folder + " and run chaincomp build " + machine_path;
       return nullptr;
     }
   }

@@ -319,10 +319,12 @@ def test_daemon_on_a_built_machine_then_a_changed_constant(built, tmp_path):
                            f"{old_hash:016x}, the file's is {new_hash:016x}): rebuild it with chaincomp build "
                            f"{machine}\n")
 
-    # a stale library where the new one belongs in the cache is refused, not used
+    # a stale library where the new one belongs in the cache is refused, not used (with its
+    # digest: intact, so loaded and refused as built from another version)
     new_path = built["path"].replace(f"-{old_hash:016x}-", f"-{new_hash:016x}-")
     os.makedirs(os.path.dirname(new_path))
     shutil.copy(old, new_path)
+    shutil.copy(built["path"] + ".sha256", new_path + ".sha256")
     proc = daemon(env, "--machine", machine, "--params", params_of(machine))
     assert proc.returncode == 2 and proc.stderr.startswith(f"chaincompd: error: {new_path}: built from another version")
     shutil.rmtree(os.path.dirname(new_path))
