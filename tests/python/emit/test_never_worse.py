@@ -267,6 +267,22 @@ def test_compensation_is_never_worse(libraries, name, kind, draws, signs):
     assert residual[1] == pytest.approx(after[1], abs=1e-9)
     if status == 0:
         assert after[0] <= 1e-6 and after[1] <= 0.001 * ARCSEC, after
+    names = [a[0] for a in shape.axes]
+    if {"X", "Y", "Z"} <= set(names):  # slides reach any point: the point is corrected in full
+        assert after[0] <= 1e-6, after
+    rotary_axes = [a[0] for a in shape.axes if a[1] == "deg"]
+    if len(rotary_axes) == 1:
+        # one rotary axis: the direction it leaves is the least it can (the slides then hold the
+        # point), found here by a parabola through the direction error squared around the answer
+        i = names.index(rotary_axes[0])
+        def tilt2(angle):
+            moved = dict(zip(names, corrected), **{names[i]: angle})
+            return pose_error(shape, shape.pose({**geometry, **errors, **moved}), nominal)[1] ** 2
+        h = 1e-3
+        f0, fm, fp = tilt2(corrected[i]), tilt2(corrected[i] - h), tilt2(corrected[i] + h)
+        curvature = (fp - 2 * f0 + fm) / (2 * h * h)
+        least = f0 - (fp - fm) ** 2 / (16 * h * h * curvature) if curvature > 0 else 0.0
+        assert after[1] ** 2 <= least + 1e-20, (after, math.sqrt(max(least, 0)))
     if shape.corrects_all and kind != "near_singular" and _far_from_singular(shape, q):
         assert status == 0 and after[0] <= 1e-6 and after[1] <= 0.001 * ARCSEC, (q, after)
 
