@@ -33,6 +33,14 @@ def one_line(text: str) -> str:
     return "".join(_visible(c) for c in " ".join(str(text).split()))
 
 
+def terminal(text: str) -> str:
+    """Text from outside (a bus message, a file's name) on a terminal, kept exactly otherwise:
+    every unprintable character as its escape (ESC, BEL, BS, CR and the other C0 controls, DEL,
+    the C1 controls of ECMA-48, line breaks, format and bidi marks) and the backslash too, so no
+    byte moves the cursor, rewrites the screen or passes for an escape it is not."""
+    return "".join(_code(c) if c == "\\" or not c.isprintable() else c for c in str(text))
+
+
 def cpp_comment(text: str) -> str:
     """Text inside a C++ ``//`` (or ``/* */``) comment: printable ASCII as itself; a backslash,
     every other character, a ``?`` after ``?`` (trigraph ??/ is a backslash before C++17) and

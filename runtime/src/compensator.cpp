@@ -35,42 +35,37 @@ bool Compensator::reject(Reject r, Reject* why) noexcept {
 
 void Compensator::reset() noexcept {
   ++counters_.resets;
-  seq_known_ = have_seen_ = have_top_ = false;
-  run_length_ = 0;
+  order_.reset();
+  have_seen_ = have_top_ = false;
 }
 
-// Gaps: a seq beyond the highest one received skips commands that never arrived.
+// Gaps: a seq beyond the highest one received skips commands that never arrived; one more
+// than kMaxSeqJump ahead is no gap (the stream rule refuses it) and moves nothing.
 void Compensator::count_gap(std::int64_t seq) noexcept {
-  if (have_top_ && seq > top_seq_) {
-    // unsigned: seq - top_seq_ may exceed INT64_MAX
-    const std::uint64_t skipped = static_cast<std::uint64_t>(seq) - static_cast<std::uint64_t>(top_seq_) - 1;
-    if (skipped > 0) {
-      ++counters_.seq_gaps;
-      const auto room = static_cast<std::uint64_t>(INT64_MAX - counters_.seq_missing);
-      counters_.seq_missing += static_cast<std::int64_t>(std::min(skipped, room));
-    }
+  const std::uint64_t ahead = ahead_by(top_seq_, seq);
+  if (have_top_ && ahead > kMaxSeqJump) return;
+  if (have_top_ && ahead > 1) {
+    ++counters_.seq_gaps;
+    const auto room = static_cast<std::uint64_t>(INT64_MAX - counters_.seq_missing);
+    counters_.seq_missing += static_cast<std::int64_t>(std::min(ahead - 1, room));
   }
-  if (!have_top_ || seq > top_seq_) top_seq_ = seq;
+  if (!have_top_ || ahead > 0) top_seq_ = seq;
   have_top_ = true;
 }
 
-// In order after the last accepted seq; or, behind it, the kRestartRun-th command of a run
-// that is in order among itself: a new stream.
+// The stream rule (stream_order.hpp) on seq; a command continues a restart run when its utime
+// does not go back and each axis steps within max_step from the run's last command.
 bool Compensator::seq_ok(const Command& in, const std::array<double, kMaxAxes>& cmd, Reject* why) noexcept {
-  if (!seq_known_ || in.seq > last_seq_) {
-    run_length_ = 0;
-    return true;
-  }
-  bool follows = run_length_ > 0 && in.seq > run_seq_ && in.utime >= run_utime_;
-  for (int i = 0; i < n_; ++i) follows = follows && std::abs(cmd[i] - run_axes_[i]) <= config_.axes[i].max_step;
-  run_length_ = follows ? run_length_ + 1 : 1;
+  bool continues = in.utime >= run_utime_;
+  for (int i = 0; i < n_; ++i) continues = continues && std::abs(cmd[i] - run_axes_[i]) <= config_.axes[i].max_step;
+  const StreamOrder::Verdict v = order_.judge(in.seq, continues);
+  if (v == StreamOrder::Verdict::kNext) return true;
   const std::array<double, kMaxAxes> before = run_axes_;
-  run_seq_ = in.seq;
   run_utime_ = in.utime;
   run_axes_ = cmd;
-  if (run_length_ < kRestartRun) return reject(in.seq == last_seq_ ? Reject::kDuplicateSeq : Reject::kOutOfOrderSeq, why);
+  if (v == StreamOrder::Verdict::kSame) return reject(Reject::kDuplicateSeq, why);
+  if (v != StreamOrder::Verdict::kRestart) return reject(Reject::kOutOfOrderSeq, why);
   ++counters_.stream_restarts;
-  run_length_ = 0;
   top_seq_ = in.seq;
   seen_axes_ = before;  // the run's own last step is the one the step check sees
   have_seen_ = true;
@@ -153,7 +148,8 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
   // Ramp towards on (1) or off (0) over ramp_time of command time: bumpless switching.
   const double goal = enabled_ ? 1.0 : 0.0;
   if (ramp_ != goal) {
-    const double dt = have_last_ ? std::clamp((in.utime - last_utime_) * 1e-6, 0.0, config_.ramp_time_s) : 0.0;
+    // (utime is the sender's: any int64, the difference taken without overflow)
+    const double dt = have_last_ ? std::min(ahead_by(last_utime_, in.utime) * 1e-6, config_.ramp_time_s) : 0.0;
     const double step = config_.ramp_time_s > 0 ? dt / config_.ramp_time_s : 1.0;
     ramp_ = goal > ramp_ ? std::min(goal, ramp_ + step) : std::max(goal, ramp_ - step);
   }
@@ -248,8 +244,8 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
     if (!std::isfinite(out.axes[i])) return reject(Reject::kCompensationFailed, why);
   }
 
-  have_last_ = seq_known_ = true;
-  last_seq_ = in.seq;
+  have_last_ = true;
+  order_.accept(in.seq);
   last_utime_ = in.utime;
   last_correction_ = correction;
   return true;

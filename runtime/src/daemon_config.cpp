@@ -63,6 +63,14 @@ struct Reader {
     out = node.Scalar();
     return true;
   }
+  // A channel name: LCM refuses to publish on one longer than kMaxChannelName.
+  bool channel(const YAML::Node& node, const std::string& key, std::string& out) {
+    if (!text(node, key, out)) return false;
+    if (out.size() > kMaxChannelName)
+      return fail(node, key, std::to_string(out.size()) + " bytes: LCM's channel names are at most " +
+                                 std::to_string(kMaxChannelName) + " (LCM_MAX_CHANNEL_NAME_LENGTH)");
+    return true;
+  }
   bool keys(const YAML::Node& node, const std::string& where, const std::set<std::string>& allowed) {
     if (!node.IsMap()) return fail(node, where, "expected a mapping");
     for (const auto& kv : node) {
@@ -113,14 +121,8 @@ bool load_daemon_config(const MachineInfo& info, const std::string& path, Daemon
     return true;
   }
   YAML::Node doc;
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    error = path + ": cannot read file: " + std::strerror(errno);
-    return false;
-  }
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (!load_strict_yaml(path, text.str(), doc, error)) return false;
+  std::string text;
+  if (!read_input_file(path, text, error) || !load_strict_yaml(path, text, doc, error)) return false;
   Reader r{path, error};
   if (!r.keys(doc, "", {"lcm_url", "channels", "status_period", "latency_window", "start_enabled", "ramp_time",
                         "out_of_limits", "linear_axes", "rotary_axes", "axes", "realtime", "recv_buf_size",
@@ -137,12 +139,12 @@ bool load_daemon_config(const MachineInfo& info, const std::string& path, Daemon
   out.lcm_url = udpm_url(out.lcm_url, out.recv_buf_size);
   if (const YAML::Node ch = doc["channels"]) {
     if (!r.keys(ch, "channels", {"command", "corrected", "status", "control", "params", "temperatures"})) return false;
-    if (ch["command"] && !r.text(ch["command"], "channels.command", out.command_channel)) return false;
-    if (ch["corrected"] && !r.text(ch["corrected"], "channels.corrected", out.corrected_channel)) return false;
-    if (ch["status"] && !r.text(ch["status"], "channels.status", out.status_channel)) return false;
-    if (ch["control"] && !r.text(ch["control"], "channels.control", out.control_channel)) return false;
-    if (ch["params"] && !r.text(ch["params"], "channels.params", out.params_channel)) return false;
-    if (ch["temperatures"] && !r.text(ch["temperatures"], "channels.temperatures", out.temperatures_channel))
+    if (ch["command"] && !r.channel(ch["command"], "channels.command", out.command_channel)) return false;
+    if (ch["corrected"] && !r.channel(ch["corrected"], "channels.corrected", out.corrected_channel)) return false;
+    if (ch["status"] && !r.channel(ch["status"], "channels.status", out.status_channel)) return false;
+    if (ch["control"] && !r.channel(ch["control"], "channels.control", out.control_channel)) return false;
+    if (ch["params"] && !r.channel(ch["params"], "channels.params", out.params_channel)) return false;
+    if (ch["temperatures"] && !r.channel(ch["temperatures"], "channels.temperatures", out.temperatures_channel))
       return false;
   }
   if (const YAML::Node pu = doc["params_updates"]) {

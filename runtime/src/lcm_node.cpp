@@ -1,5 +1,6 @@
 #include "chaincomp/lcm_node.hpp"
 
+#include "chaincomp/hash.hpp"
 #include "chaincomp/params_io.hpp"
 #include "chaincomp_lcm/lcmt_params_update.hpp"
 #include "chaincomp_lcm/lcmt_temperatures.hpp"
@@ -11,6 +12,8 @@
 #include <sys/socket.h>
 
 #include <algorithm>
+#include <cctype>
+#include <climits>
 #include <cstdio>
 #include <cstdlib>
 #include <random>
@@ -21,6 +24,7 @@ static_assert(chaincomp_lcm::lcmt_params_update::MAX_VALUES == kMaxUpdateValues,
 static_assert(chaincomp_lcm::lcmt_chaincomp_status::NUM_PARAMS_REASONS == kNumRefusals, "params_refused's size");
 static_assert(chaincomp_lcm::lcmt_temperatures::MAX_VALUES == kMaxReadings, "lcmt_temperatures.MAX_VALUES");
 static_assert(chaincomp_lcm::lcmt_chaincomp_status::NUM_READING_REASONS == kNumReadingRefusals, "readings_refused");
+static_assert(kMaxChannelName == LCM_MAX_CHANNEL_NAME_LENGTH, "daemon_config.hpp's channel limit is LCM's");
 
 namespace {
 
@@ -60,8 +64,10 @@ std::int64_t big_endian64(const unsigned char* b) {
 
 bool decode_command(const void* data, std::size_t size, chaincomp_lcm::lcmt_axis_command& scratch,
                     Command& out) noexcept {
-  if (!machine_name_fits(data, size, kCommandMachineAt) || scratch.decode(data, 0, static_cast<int>(size)) < 0 ||
-      scratch.num_axes < 0 || scratch.num_axes > kMaxAxes) {
+  // the whole payload or nothing: trailing bytes are refused, as for updates and readings
+  if (!machine_name_fits(data, size, kCommandMachineAt) ||
+      scratch.decode(data, 0, static_cast<int>(size)) != static_cast<int>(size) || scratch.num_axes < 0 ||
+      scratch.num_axes > kMaxAxes) {
     return false;
   }
   out.utime = scratch.utime;
@@ -70,6 +76,21 @@ bool decode_command(const void* data, std::size_t size, chaincomp_lcm::lcmt_axis
   out.num_axes = scratch.num_axes;
   for (int i = 0; i < kMaxAxes; ++i) out.axes[i] = scratch.axes[i];
   return true;
+}
+
+bool decode_control(const void* data, std::size_t size, chaincomp_lcm::lcmt_chaincomp_control& out) noexcept {
+  return size <= static_cast<std::size_t>(INT32_MAX) && out.decode(data, 0, static_cast<int>(size)) == static_cast<int>(size);
+}
+
+std::string channel_regex(const std::string& name) {
+  // LCM compiles "^name$" with GLib's (PCRE) regex: a backslash makes any punctuation literal
+  std::string out;
+  for (const char c : name) {
+    const auto u = static_cast<unsigned char>(c);
+    if (u < 0x80 && !std::isalnum(u) && c != '_') out += '\\';
+    out += c;
+  }
+  return out;
 }
 
 void to_message(const Target& t, chaincomp_lcm::lcmt_corrected_target& o) noexcept {
@@ -110,13 +131,14 @@ LcmNode::LcmNode(lcm_t* lcm, const ModelEntry& entry, const void* model, const D
   s.sched_fifo_ok = rt.sched_fifo;
   s.cpu_pinned_ok = rt.cpu_pinned;
   status_buf_.resize(s.getEncodedSize() + 64);
-  command_sub_ = lcm_subscribe(lcm_, config_.command_channel.c_str(), &LcmNode::on_command, this);
-  control_sub_ = lcm_subscribe(lcm_, config_.control_channel.c_str(), &LcmNode::on_control, this);
+  sent_.assign(kSentRing, 0);
+  command_sub_ = subscribe(config_.command_channel, &LcmNode::on_command);
+  control_sub_ = subscribe(config_.control_channel, &LcmNode::on_control);
   // LCM drops a subscription's messages beyond its queue capacity (default 30): a short
   // stall of the loop at 10 kHz would lose commands. The socket buffer bounds it anyway.
   lcm_subscription_set_queue_capacity(command_sub_, kQueueCapacity);
   // Targets on the bus: its own heard back, and another daemon's for this machine.
-  target_sub_ = lcm_subscribe(lcm_, config_.corrected_channel.c_str(), &LcmNode::on_target, this);
+  target_sub_ = subscribe(config_.corrected_channel, &LcmNode::on_target);
   lcm_subscription_set_queue_capacity(target_sub_, kQueueCapacity);
   find_sockets();
   // An LD_PRELOAD allocation counter, when present, measures the steady state.
@@ -124,6 +146,18 @@ LcmNode::LcmNode(lcm_t* lcm, const ModelEntry& entry, const void* model, const D
   started_ = Clock::now();
   // A first status announces the node and makes LCM's lazy allocations for publishing.
   publish_status(false);
+}
+
+lcm_subscription_t* LcmNode::subscribe(const std::string& channel, lcm_msg_handler_t handler) {
+  return lcm_subscribe(lcm_, channel_regex(channel).c_str(), handler, this);
+}
+
+CommandTime LcmNode::command_time() const {
+  const auto us = [](Clock::time_point t) {
+    return std::chrono::duration_cast<std::chrono::microseconds>(t.time_since_epoch()).count();
+  };
+  const std::int64_t now = us(Clock::now());
+  return {comp_.last_utime(), commands_flowing(command_accepted_, us(command_at_), now), now};
 }
 
 LcmNode::~LcmNode() {
@@ -136,7 +170,7 @@ LcmNode::~LcmNode() {
 
 void LcmNode::accept_temperatures(ThermalState& thermal) {
   thermal_ = &thermal;
-  readings_sub_ = lcm_subscribe(lcm_, config_.temperatures_channel.c_str(), &LcmNode::on_readings, this);
+  readings_sub_ = subscribe(config_.temperatures_channel, &LcmNode::on_readings);
   lcm_subscription_set_queue_capacity(readings_sub_, kQueueCapacity);
 }
 
@@ -147,12 +181,12 @@ void LcmNode::on_readings(const lcm_recv_buf_t* rbuf, const char*, void* user) {
     return;
   }
   if (self->thermal_->take(self->readings_, self->machine_, self->thermal_update_) && self->updater_)
-    self->updater_->apply_values(self->thermal_update_, self->comp_.last_utime());
+    self->updater_->apply_values(self->thermal_update_, self->command_time());
 }
 
 void LcmNode::accept_params_updates(ParamsUpdater& updater) {
   updater_ = &updater;
-  params_sub_ = lcm_subscribe(lcm_, config_.params_channel.c_str(), &LcmNode::on_params, this);
+  params_sub_ = subscribe(config_.params_channel, &LcmNode::on_params);
   // a flood is refused one by one (min_interval), never dropped unseen by a short queue
   lcm_subscription_set_queue_capacity(params_sub_, kQueueCapacity);
 }
@@ -163,7 +197,7 @@ void LcmNode::on_params(const lcm_recv_buf_t* rbuf, const char*, void* user) {
     self->updater_->count_undecodable();
     return;
   }
-  self->updater_->apply(self->update_, self->instance_id_, self->comp_.last_utime());
+  self->updater_->apply(self->update_, self->instance_id_, self->command_time());
 }
 
 // LCM's udpm provider receives on a socket of its own thread; lcm_get_fileno gives a
@@ -211,11 +245,21 @@ void LcmNode::on_target(const lcm_recv_buf_t* rbuf, const char*, void* user) {
 }
 
 void LcmNode::handle_target(const lcm_recv_buf_t* rbuf) {
-  // Its own targets come back once each: told by fingerprint and instance without decoding.
+  // Its own targets come back once each, in the order published: told by fingerprint and
+  // instance without decoding, then found among those published and not yet heard (those
+  // before it were lost). Anyone may forge the instance: a payload it never published, or
+  // one already heard, counts nothing.
   const auto* b = static_cast<const unsigned char*>(rbuf->data);
   if (rbuf->data_size >= kTargetMachineAt && big_endian64(b) == heard_msg_.getHash() &&
       big_endian64(b + kTargetMachineAt - 8) == instance_id_) {
-    ++own_heard_;
+    const std::uint64_t h = fnv1a64(b, rbuf->data_size);
+    for (std::uint64_t i = sent_tail_; i < sent_head_; ++i) {
+      if (sent_[i & (kSentRing - 1)] == h) {
+        ++own_heard_;
+        sent_tail_ = i + 1;
+        break;
+      }
+    }
     return;
   }
   auto& t = heard_msg_;
@@ -241,9 +285,16 @@ void LcmNode::on_command(const lcm_recv_buf_t* rbuf, const char*, void* user) {
 
 void LcmNode::on_control(const lcm_recv_buf_t* rbuf, const char*, void* user) {
   auto* self = static_cast<LcmNode*>(user);
-  if (self->control_msg_.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) >= 0) {
-    self->comp_.set_enabled(self->control_msg_.enable);
-    if (self->control_msg_.reset) self->comp_.reset();
+  ++self->control_received_;
+  if (!decode_control(rbuf->data, rbuf->data_size, self->control_msg_)) {
+    ++self->control_refused_;
+    return;
+  }
+  self->comp_.set_enabled(self->control_msg_.enable);
+  if (self->control_msg_.reset) {  // a new stream for every input: commands, updates, readings
+    self->comp_.reset();
+    if (self->updater_) self->updater_->reset();
+    if (self->thermal_) self->thermal_->reset();
   }
 }
 
@@ -260,8 +311,12 @@ void LcmNode::handle_command(const lcm_recv_buf_t* rbuf) {
     const int n = o.encode(out_buf_.data(), 0, static_cast<int>(out_buf_.size()));
     if (n > 0 && lcm_publish(lcm_, config_.corrected_channel.c_str(), out_buf_.data(), n) == 0) {
       comp_.count_published();
+      sent_[sent_head_++ & (kSentRing - 1)] = fnv1a64(out_buf_.data(), static_cast<std::size_t>(n));
+      if (sent_head_ - sent_tail_ > kSentRing) sent_tail_ = sent_head_ - kSentRing;  // the oldest: lost
     }
     latency_.record(ns_since(t0));
+    command_accepted_ = true;
+    command_at_ = t0;
   }
   // LCM allocates per channel on the first message received and the first one published:
   // start-up ends with the first command handled.
@@ -309,6 +364,8 @@ void LcmNode::publish_status(bool final) {
     s.readings_received = thermal_->received();
     for (int i = 0; i < kNumReadingRefusals; ++i) s.readings_refused[i] = thermal_->refused()[i];
   }
+  s.control_received = control_received_;
+  s.control_refused = control_refused_;
   const int n = s.encode(status_buf_.data(), 0, static_cast<int>(status_buf_.size()));
   if (n > 0) lcm_publish(lcm_, config_.status_channel.c_str(), status_buf_.data(), n);
 }

@@ -26,23 +26,6 @@ std::string where(const std::string& path, const YAML::Node& node, const std::st
   return s + ": " + key + ": ";
 }
 
-bool read_file(const std::string& path, std::string& text, std::string& error) {
-  struct stat st {};
-  if (stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
-    error = path + ": not a regular file";
-    return false;
-  }
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    error = path + ": cannot read file: " + std::strerror(errno);
-    return false;
-  }
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  text = ss.str();
-  return true;
-}
-
 const char* kind_name(UnitKind k) {
   return k == UnitKind::kLength ? "length" : k == UnitKind::kAngle ? "angle" : "ratio";
 }
@@ -303,13 +286,13 @@ std::string hash_hex(std::uint64_t hash) {
 
 std::string file_hash_hex(const std::string& path) {
   std::string text, error;
-  if (!read_file(path, text, error)) return "";
+  if (!read_input_file(path, text, error)) return "";
   return hash_hex(fnv1a64(reinterpret_cast<const unsigned char*>(text.data()), text.size()));
 }
 
 bool read_machine_file(const std::string& path, std::string& text, std::string& name, std::string& error) {
   YAML::Node doc;
-  if (!read_file(path, text, error) || !load_strict_yaml(path, text, doc, error)) return false;
+  if (!read_input_file(path, text, error) || !load_strict_yaml(path, text, doc, error)) return false;
   if (!doc.IsMap() || !doc["name"] || !doc["name"].IsScalar()) {
     error = path + ": name: missing machine name";
     return false;
@@ -350,7 +333,7 @@ bool load_params(const MachineInfo& info, const std::string& path, std::vector<d
   for (int i = 0; i < info.num_params; ++i) values[i] = info.params[i].nominal;
   std::string text;
   YAML::Node doc;
-  if (!read_file(path, text, error) || !load_strict_yaml(path, text, doc, error)) return false;
+  if (!read_input_file(path, text, error) || !load_strict_yaml(path, text, doc, error)) return false;
   if (!doc.IsMap()) {
     error = path + ":1: expected a mapping with 'values'";
     return false;

@@ -60,35 +60,47 @@ void ParamsUpdater::count_undecodable() noexcept {
   refuse(Refuse::kUndecodable, nullptr);
 }
 
-bool ParamsUpdater::apply(const ParamsUpdate& u, std::int64_t instance_id, std::int64_t command_utime,
-                          Refuse* why) noexcept {
+void ParamsUpdater::reset() noexcept {
+  order_.reset();
+  applied_any_ = false;
+}
+
+bool ParamsUpdater::apply(const ParamsUpdate& u, std::int64_t instance_id, CommandTime now, Refuse* why) noexcept {
   ++received_;
   const MachineInfo& info = *entry_.info;
   if (u.machine != std::string_view(info.name)) return refuse(Refuse::kWrongMachine, why);
   if (u.instance_id != 0 && u.instance_id != instance_id) return refuse(Refuse::kOtherInstance, why);
   if (u.num_values < 1 || u.num_values > kMaxUpdateValues) return refuse(Refuse::kBadCount, why);
-  if (applied_any_ && u.seq <= last_seq_) return refuse(Refuse::kStaleSeq, why);
-  if (!check_and_apply(u, command_utime, why)) return false;
-  last_seq_ = u.seq;
+  if (!StreamOrder::taken(order_.judge(u.seq))) return refuse(Refuse::kStaleSeq, why);
+  if (!check_and_apply(u, now, why)) return false;
+  order_.accept(u.seq);
   return true;
 }
 
-bool ParamsUpdater::apply_values(const ParamsUpdate& u, std::int64_t command_utime, Refuse* why) noexcept {
+bool ParamsUpdater::apply_values(const ParamsUpdate& u, CommandTime now, Refuse* why) noexcept {
   ++received_;
-  return check_and_apply(u, command_utime, why);
+  return check_and_apply(u, now, why);
 }
 
-bool ParamsUpdater::check_and_apply(const ParamsUpdate& u, std::int64_t command_utime, Refuse* why) noexcept {
+bool ParamsUpdater::check_and_apply(const ParamsUpdate& u, CommandTime now, Refuse* why) noexcept {
   const MachineInfo& info = *entry_.info;
   if (u.num_values < 1 || u.num_values > kMaxUpdateValues) return refuse(Refuse::kBadCount, why);
-  // (a command stream that goes back in time, a new one, does not hold updates off)
-  if (applied_any_ && command_utime >= applied_utime_ &&
-      static_cast<double>(command_utime - applied_utime_) < limits_.min_interval_s * 1e6)
+  // Within min_interval of command time while commands flow (a command stream that went back
+  // in time, a new one, holds nothing off), of receipt time while they do not. (Both clocks
+  // any int64: differences without overflow.)
+  const std::int64_t at = now.flowing ? now.utime : now.received_us;
+  const std::int64_t since = now.flowing ? applied_utime_ : applied_received_;
+  if (applied_any_ && at >= since && static_cast<double>(ahead_by(since, at)) < limits_.min_interval_s * 1e6)
     return refuse(Refuse::kTooFrequent, why);
   for (int i = 0; i < u.num_values; ++i) {
     int j = 0;
     while (j < info.num_params && u.names[i] != std::string_view(info.params[j].name)) ++j;
-    if (j == info.num_params) return refuse(Refuse::kUnknownName, why);
+    if (j == info.num_params) {
+      // an axis is a symbol of the machine too, but not an error
+      bool axis = false;
+      for (int a = 0; a < info.num_axes; ++a) axis = axis || u.names[i] == std::string_view(info.axes[a].name);
+      return refuse(axis ? Refuse::kNotAnError : Refuse::kUnknownName, why);
+    }
     if (!updatable_[j]) return refuse(Refuse::kNotAnError, why);
     for (int k = 0; k < i; ++k) {
       if (index_[k] == j) return refuse(Refuse::kRepeatedName, why);
@@ -107,7 +119,8 @@ bool ParamsUpdater::check_and_apply(const ParamsUpdate& u, std::int64_t command_
   if (varying_ != nullptr && varying_->count > 0) entry_.attach_varying(model_, varying_);
   params_.swap(scratch_);
   ++version_;
-  applied_utime_ = command_utime;
+  applied_utime_ = now.utime;
+  applied_received_ = now.received_us;
   applied_any_ = true;
   return true;
 }

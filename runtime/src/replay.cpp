@@ -191,6 +191,12 @@ int main(int argc, char** argv) {
   std::vector<double> max_abs(n, 0.0), sum_sq(n, 0.0);
   const auto t0 = std::chrono::steady_clock::now();
   chaincomp::LogEvent ev;
+  // The updates' clock as the daemon keeps it, with the log's timestamps for its receipt times.
+  bool command_accepted = false;
+  std::int64_t command_at = 0;
+  auto command_time = [&](std::int64_t now) {
+    return chaincomp::CommandTime(comp.last_utime(), chaincomp::commands_flowing(command_accepted, command_at, now), now);
+  };
   std::size_t damage_listed = 0;
   auto list_damage = [&]() {  // damaged stretches of the log, as they are found
     for (; damage_listed < in.damage().size(); ++damage_listed) {
@@ -218,7 +224,7 @@ int main(int argc, char** argv) {
       if (!chaincomp::decode_readings(ev.data, ev.datalen, chaincomp_lcm::lcmt_temperatures::getHash(), readings)) {
         thermal.count_undecodable();
       } else if (thermal.take(readings, entry->info->name, update)) {
-        updater.apply_values(update, comp.last_utime());
+        updater.apply_values(update, command_time(ev.timestamp));
       }
       continue;
     }
@@ -226,7 +232,7 @@ int main(int argc, char** argv) {
       chaincomp::Refuse refused = chaincomp::Refuse::kUndecodable;
       if (!chaincomp::decode_params_update(ev.data, ev.datalen, chaincomp_lcm::lcmt_params_update::getHash(), update)) {
         updater.count_undecodable();
-      } else if (!updater.apply(update, daemon_instance, comp.last_utime(), &refused) && listed < 20) {
+      } else if (!updater.apply(update, daemon_instance, command_time(ev.timestamp), &refused) && listed < 20) {
         ++listed;
         std::fprintf(stderr, "chaincomp replay: event %lld (timestamp %lld): params update refused: %s\n",
                      static_cast<long long>(ev.eventnum), static_cast<long long>(ev.timestamp),
@@ -246,6 +252,8 @@ int main(int argc, char** argv) {
     }
     if (ok) {
       comp.count_published();
+      command_accepted = true;
+      command_at = ev.timestamp;
       for (int i = 0; i < n; ++i) {
         max_abs[i] = std::max(max_abs[i], std::abs(target.correction[i]));
         sum_sq[i] += target.correction[i] * target.correction[i];

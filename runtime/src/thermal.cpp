@@ -77,15 +77,9 @@ const char* article(UnitKind k) { return k == UnitKind::kAngle ? "an" : "a"; }
 
 bool load_thermal_model(const MachineInfo& info, const std::string& path, ThermalModel& out, std::string& error) {
   out = ThermalModel{};
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    error = path + ": cannot read file";
-    return false;
-  }
-  std::ostringstream text;
-  text << in.rdbuf();
+  std::string text;
   YAML::Node doc;
-  if (!load_strict_yaml(path, text.str(), doc, error)) return false;
+  if (!read_input_file(path, text, error) || !load_strict_yaml(path, text, doc, error)) return false;
   Loader L{path, error};
   if (!doc.IsMap()) return L.fail(1, "", "expected a mapping with 'machine' and 'errors', got " + describe(doc));
   if (!L.keys(doc, {"machine", "reference_temperature", "errors"}, {"machine", "errors"}, "a thermal model")) return false;
@@ -188,14 +182,21 @@ bool decode_readings(const void* data, std::size_t size, std::int64_t fingerprin
 }
 
 ThermalState::ThermalState(const ThermalModel& model, const std::vector<double>& base)
-    : model_(model), base_(base), last_u_(model.sensors.size(), 0.0), last_t_(model.sensors.size(), 0.0),
-      read_(model.sensors.size(), 0) {}
+    : model_(model), base_(base), last_u_(model.sensors.size(), 0.0),
+      order_(model.sensors.size(), StreamOrder(kMaxTimeJump)), read_(model.sensors.size(), 0),
+      settle_(model.sensors.size(), 1) {}
+
+void ThermalState::reset() noexcept {
+  for (std::size_t s = 0; s < order_.size(); ++s) {
+    order_[s].reset();
+    settle_[s] = 1;
+  }
+}
 
 bool ThermalState::take(const Readings& r, std::string_view machine, ParamsUpdate& update) noexcept {
   ++received_;
   if (!r.machine.empty() && r.machine != machine) return refuse(ReadingRefuse::kWrongMachine);
   const int ns = static_cast<int>(model_.sensors.size());
-  const double t = r.utime * 1e-6;
   // check all first: a message is taken whole or not at all
   for (int i = 0; i < r.num_values; ++i) {
     slot_[i] = -1;
@@ -204,34 +205,44 @@ bool ThermalState::take(const Readings& r, std::string_view machine, ParamsUpdat
     }
     if (slot_[i] < 0) continue;   // another model's sensor
     if (!(r.values[i] >= kLowest && r.values[i] <= kHighest)) return refuse(ReadingRefuse::kBadValue);
-    if (read_[slot_[i]] && !(t > last_t_[slot_[i]])) return refuse(ReadingRefuse::kTimeNotIncreasing);
     for (int k = 0; k < i; ++k) {
       if (slot_[k] == slot_[i]) return refuse(ReadingRefuse::kTimeNotIncreasing);   // twice at one time
     }
   }
+  // each sensor's stream rule sees the message (a refused one counts in its restart run)
+  bool in_order = true;
+  for (int i = 0; i < r.num_values; ++i) {
+    if (slot_[i] < 0) continue;
+    verdict_[i] = order_[slot_[i]].judge(r.utime);
+    in_order = in_order && StreamOrder::taken(verdict_[i]);
+  }
+  if (!in_order) return refuse(ReadingRefuse::kTimeNotIncreasing);
   for (int i = 0; i < r.num_values; ++i) {
     const int s = slot_[i];
     if (s < 0) continue;
     const double u = r.values[i];
+    const bool settle = settle_[s] || verdict_[i] == StreamOrder::Verdict::kRestart;
+    // (both int64: the difference exact, without overflow, and positive here unless settling)
+    const double dt = settle ? 0.0 : static_cast<double>(ahead_by(order_[s].last(), r.utime)) * 1e-6;
     for (int e = 0; e < model_.num_errors; ++e) {
       const ThermalError& err = model_.errors[e];
       for (int k = 0; k < err.num_terms; ++k) {
         const ThermalTerm& term = err.terms[k];
         if (term.sensor != s) continue;
         double& y = lag_[e][k];
-        if (!read_[s] || term.time_constant == 0) {
-          y = u;   // settled at the first reading; no lag
+        if (settle || term.time_constant == 0) {
+          y = u;   // settled at the first reading of a stream; no lag
           continue;
         }
-        const double dt = t - last_t_[s];
         const double one_minus_e = -std::expm1(-dt / term.time_constant);
         const double slope = (u - last_u_[s]) / dt;
         y = u - slope * term.time_constant * one_minus_e + (1.0 - one_minus_e) * (y - last_u_[s]);
       }
     }
     last_u_[s] = u;
-    last_t_[s] = t;
+    order_[s].accept(r.utime);
     read_[s] = 1;
+    settle_[s] = 0;
   }
   for (int s = 0; s < ns; ++s) {
     if (!read_[s]) return false;   // not every sensor read yet: nothing to apply

@@ -2,7 +2,12 @@
 
 #include <yaml-cpp/eventhandler.h>
 
+#include <sys/stat.h>
+
+#include <cerrno>
 #include <charconv>
+#include <cstring>
+#include <fstream>
 #include <cmath>
 #include <cstdio>
 #include <cstdint>
@@ -233,8 +238,7 @@ bool check_expansion(const std::vector<Checker::Node>& nodes, const std::string&
 // yamlsource.read_text and PyYAML's reader: UTF-8, and only the characters YAML allows (a
 // NUL byte also sent yaml-cpp 0.7 allocating without end: found by fuzz/fuzz_params).
 bool check_text(const std::string& path, const std::string& text, std::string& error) {
-  constexpr std::size_t kMaxBytes = 16u << 20;
-  if (text.size() > kMaxBytes) {
+  if (text.size() > kMaxFileBytes) {
     error = path + ": larger than 16 MiB";
     return false;
   }
@@ -290,6 +294,28 @@ std::string one_line(const std::string& msg) {
 }
 
 }  // namespace
+
+bool read_input_file(const std::string& path, std::string& text, std::string& error) {
+  struct stat st {};
+  if (stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
+    error = path + ": not a regular file";
+    return false;
+  }
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    error = path + ": cannot read file: " + std::strerror(errno);
+    return false;
+  }
+  // one byte past the limit tells a file too large (it may have grown since stat)
+  text.assign(kMaxFileBytes + 1, '\0');
+  in.read(&text[0], static_cast<std::streamsize>(text.size()));
+  text.resize(static_cast<std::size_t>(in.gcount()));
+  if (text.size() > kMaxFileBytes) {
+    error = path + ": larger than " + std::to_string(kMaxFileBytes >> 20) + " MiB";
+    return false;
+  }
+  return true;
+}
 
 bool load_strict_yaml(const std::string& path, const std::string& text, YAML::Node& doc, std::string& error) {
   if (!check_text(path, text, error)) return false;

@@ -166,27 +166,43 @@ chaincomp::Counters run(chaincomp::Compensator& comp, chaincomp::Command c, int*
 
 }  // namespace
 
-TEST_CASE("one command with seq 2^63-1 does not lock the stream out: followed again after kRestartRun",
-          "[compensator][stream]") {
+TEST_CASE("one command with seq 2^63-1 does not lock the stream out: refused mid-stream, followed again "
+          "after kRestartRun when it started the stream", "[compensator][stream]") {
   Fixture f;
   chaincomp::Compensator comp(f.entry, f.model, f.config.compensator);
   chaincomp::Target t;
+  chaincomp::Reject why;
   for (int k = 1; k <= 3; ++k) REQUIRE(comp.process(f.command(k), t));
   auto hostile = f.command(4);
   hostile.seq = INT64_MAX;
-  REQUIRE(comp.process(hostile, t));  // valid in itself: published
+  // more than kMaxSeqJump (2^32) ahead: no gap of lost commands, refused, and nothing moves
+  CHECK_FALSE(comp.process(hostile, t, &why));
+  CHECK(why == chaincomp::Reject::kOutOfOrderSeq);
+  CHECK(comp.counters().seq_gaps == 0);
+  for (int k = 4; k < 4 + 200; ++k) REQUIRE(comp.process(f.command(k, 10.0 + 0.01 * k), t));
+  CHECK(comp.counters().stream_restarts == 0);
+  // a seq 2^32 ahead is still a gap (2^32 - 1 commands lost); 2^32 + 1 ahead is not
+  auto far = f.command(204, 10.0 + 0.01 * 204);
+  far.seq = 203 + (std::int64_t(1) << 32);
+  CHECK(comp.process(far, t));
   CHECK(comp.counters().seq_gaps == 1);
-  CHECK(comp.counters().seq_missing == INT64_MAX - 4);  // seq 4 .. 2^63-2 never came
-  // the real stream goes on at seq 4: its first four are behind 2^63-1, the fifth is taken
+  CHECK(comp.counters().seq_missing == (std::int64_t(1) << 32) - 1);
+  far.seq += (std::int64_t(1) << 32) + 1;
+  CHECK_FALSE(comp.process(far, t));
+
+  // 2^63-1 as the first command of all: the stream starts there; the real one, behind it,
+  // is followed from its fifth command
+  chaincomp::Compensator fresh(f.entry, f.model, f.config.compensator);
+  REQUIRE(fresh.process(hostile, t));
   std::vector<bool> accepted;
-  for (int k = 4; k < 4 + 200; ++k) accepted.push_back(comp.process(f.command(k, 10.0 + 0.01 * k), t));
+  for (int k = 4; k < 4 + 200; ++k) accepted.push_back(fresh.process(f.command(k, 10.0 + 0.01 * k), t));
   CHECK(std::count(accepted.begin(), accepted.begin() + 4, true) == 0);
   CHECK(std::count(accepted.begin() + 4, accepted.end(), true) == 196);
   REQUIRE(chaincomp::kRestartRun == 5);
-  const auto& k = comp.counters();
+  const auto& k = fresh.counters();
   CHECK(k.stream_restarts == 1);
   CHECK(k.rejected[static_cast<int>(chaincomp::Reject::kOutOfOrderSeq)] == 4);
-  CHECK(k.seq_gaps == 1);  // the restart is not a gap, nor are the commands after it
+  CHECK(k.seq_gaps == 0);  // the restart is not a gap, nor are the commands after it
   CHECK(t.seq == 203);
 }
 

@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -250,4 +251,62 @@ TEST_CASE("the status message carries the corrections held back, as the compensa
     CHECK(s.clamped == alone.counters().clamped);
   }
   lcm_destroy(lcm);
+}
+
+TEST_CASE("status carries only what the node put there: nodes built over memory filled with different bytes "
+          "publish the same status for the same commands", "[lcm][status]") {
+  const chaincomp::ModelEntry& entry = *chaincomp::find_model("five_axis_ac");
+  alignas(64) static unsigned char model[1 << 14];
+  std::vector<double> params(entry.info->num_params);
+  for (int i = 0; i < entry.info->num_params; ++i) params[i] = entry.info->params[i].nominal;
+  entry.prepare(params.data(), model);
+  chaincomp::DaemonConfig config;
+  std::string error;
+  REQUIRE(chaincomp::load_daemon_config(*entry.info, "", config, error));
+  struct Bytes {
+    std::vector<std::vector<unsigned char>> status;
+  };
+  auto run = [&](unsigned char fill) {
+    lcm_t* lcm = lcm_create("memq://");
+    REQUIRE(lcm != nullptr);
+    Bytes out;
+    lcm_subscribe(lcm, "CHAINCOMP_STATUS", [](const lcm_recv_buf_t* rbuf, const char*, void* user) {
+      const auto* b = static_cast<const unsigned char*>(rbuf->data);
+      static_cast<Bytes*>(user)->status.emplace_back(b, b + rbuf->data_size);
+    }, &out);
+    // the node's memory holds `fill` before it is built: a field it leaves unset shows it
+    alignas(chaincomp::LcmNode) static unsigned char storage[sizeof(chaincomp::LcmNode)];
+    std::memset(storage, fill, sizeof storage);
+    auto* node = new (storage) chaincomp::LcmNode(lcm, entry, model, config, "p.yaml", "0", {});
+    chaincomp_lcm::lcmt_axis_command c{};
+    c.machine = "five_axis_ac";
+    c.num_axes = 5;
+    for (int k = 1; k <= 20; ++k) {
+      c.utime = 1000 * k;
+      c.seq = k == 10 ? 9 : k;   // one duplicate: rejected
+      const double axes[8] = {10.0 + 0.01 * k, -20, -100, 30, -45, 0, 0, 0};
+      std::memcpy(c.axes, axes, sizeof axes);
+      const auto b = encode(c);
+      lcm_publish(lcm, "CHAINCOMP_COMMAND", b.data(), static_cast<unsigned>(b.size()));
+      drain(lcm);
+    }
+    node->publish_status(true);
+    drain(lcm);
+    node->~LcmNode();
+    lcm_destroy(lcm);
+    // what differs from run to run by design: the clock, the instance, the measured latency
+    REQUIRE(out.status.size() == 2);
+    std::vector<unsigned char> last = out.status.back();
+    chaincomp_lcm::lcmt_chaincomp_status s;
+    REQUIRE(s.decode(last.data(), 0, static_cast<int>(last.size())) == static_cast<int>(last.size()));
+    CHECK(s.readings_received == 0);   // no thermal model: zero, not the memory's bytes
+    CHECK(s.params_received == 0);
+    CHECK(s.rejected[static_cast<int>(chaincomp::Reject::kDuplicateSeq)] == 1);
+    s.utime = s.uptime_us = s.instance_id = 0;
+    s.latency_p50_ns = s.latency_p99_ns = s.latency_p999_ns = s.latency_max_ns = 0;
+    std::vector<unsigned char> masked(s.getEncodedSize());
+    REQUIRE(s.encode(masked.data(), 0, static_cast<int>(masked.size())) == static_cast<int>(masked.size()));
+    return masked;
+  };
+  CHECK(run(0xA5) == run(0x5A));
 }

@@ -159,7 +159,7 @@ TEST_CASE("an update applied gives the model prepared from the new values; every
       {with(message(2, {"EXX"}, {1e-3}), [](auto& m) { m.instance_id = 7; }), 100000, Refuse::kOtherInstance},
       {message(2, {}, {}), 100000, Refuse::kBadCount},
       {message(2, {"EXX", "NoSuch"}, {1e-3, 0}), 100000, Refuse::kUnknownName},
-      {message(2, {"X"}, {1.0}), 100000, Refuse::kUnknownName},         // an axis is not a parameter
+      {message(2, {"X"}, {1.0}), 100000, Refuse::kNotAnError},          // an axis: a symbol, not an error
       {message(2, {"G"}, {151.0}), 100000, Refuse::kNotAnError},        // a constant
       {message(2, {"EYX"}, {1e-3}), 100000, Refuse::kNotAnError},       // a table
       {message(2, {"EXX", "EXX"}, {1e-3, 2e-3}), 100000, Refuse::kRepeatedName},

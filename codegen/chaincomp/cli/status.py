@@ -11,6 +11,7 @@ import time
 
 from ..emit.buildtree import _ROOT, import_lcmtypes
 from ..errors import ChaincompError
+from ..escape import terminal
 from ..model.units import UNITS
 from .common import number, to_json
 
@@ -178,6 +179,7 @@ def describe(status, heard_at: float, period: float | None, target, axes, now: f
         "params_updates": {"version": s.params_version, "last_seq": s.params_seq, "received": s.params_received,
                            "refused": dict(zip(PARAMS_REASONS, s.params_refused))},
         "readings": {"received": s.readings_received, "refused": dict(zip(READING_REASONS, s.readings_refused))},
+        "control": {"received": s.control_received, "refused": s.control_refused},
         "latency_ns": {"window": s.window, "p50": s.latency_p50_ns, "p99": s.latency_p99_ns,
                        "p999": s.latency_p999_ns, "max": s.latency_max_ns},
         "recv_buf_bytes": s.recv_buf_bytes, "foreign_instance": f"{s.foreign_instance & 0xFFFFFFFFFFFFFFFF:016x}",
@@ -223,13 +225,15 @@ def render_text(doc: dict) -> str:
         lat = d["latency_ns"]
         lines += [
             "",
-            f"{d['machine']}  instance {d['instance']}  {state}  up {d['uptime_s']:.1f} s  "
+            f"{terminal(d['machine'])}  instance {d['instance']}  {state}  up {d['uptime_s']:.1f} s  "
             f"status {d['status_age_s']:.1f} s ago",
             f"  commands  received {c['received']}  published {c['published']}  rejected {rejected}"
             + (f" ({reasons})" if reasons else "")
             + f"  clamped {c['clamped']} (held back {c['held_back']})  clamped input {c['clamped_input']}",
             f"  stream    seq gaps {c['seq_gaps']} ({c['seq_missing']} missing)  restarts {c['stream_restarts']}  "
-            f"resets {c['resets']}  kernel drops {c['kernel_drops']}",
+            f"resets {c['resets']}  kernel drops {c['kernel_drops']}"
+            + (f"  control messages {d['control']['received']} (refused {d['control']['refused']})"
+               if d["control"]["received"] else ""),
             f"  params    version {d['params_updates']['version']} (last seq {d['params_updates']['last_seq']})  "
             f"updates received {d['params_updates']['received']}  refused "
             f"{sum(d['params_updates']['refused'].values())}"
@@ -247,7 +251,7 @@ def render_text(doc: dict) -> str:
             lines.append("  last command: none heard while listening")
             continue
         units = {"um": "µm", "arcsec": "arcsec", "mm|deg": "mm|deg"}
-        lines.append("  correction " + "  ".join(f"{a['axis']} {a['value']:+.3f} {units[a['unit']]}"
+        lines.append("  correction " + "  ".join(f"{terminal(a['axis'])} {a['value']:+.3f} {units[a['unit']]}"
                                                 for a in t["correction"]))
         flags = f" [{', '.join(t['flags'])}]" if t["flags"] else ""
         lines.append(f"  last command seq {t['seq']}, {t['command_age_s']:.2f} s ago{flags}")

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "chaincomp/model_info.hpp"
+#include "chaincomp/stream_order.hpp"
 
 namespace chaincomp {
 
@@ -52,12 +53,11 @@ struct CompensatorConfig {
   bool start_enabled = true;
 };
 
-// A stream restart: this many commands in a row that are behind the last accepted seq but in
-// order among themselves (seq increasing, utime not decreasing, each step within max_step)
-// are taken as a new stream, the last of them accepted. One message (e.g. seq 2^63-1)
-// cannot lock the stream out, and a CNC that restarts its numbering is followed again
-// after at most this many commands.
-constexpr int kRestartRun = 5;
+// The stream rule (stream_order.hpp): commands in order by seq, at most kMaxSeqJump ahead; a
+// restart run of kRestartRun commands behind (or far ahead of) the last accepted seq, in order
+// among themselves (seq increasing, utime not decreasing, each step within max_step), is a new
+// stream, the last of them accepted. One message (e.g. seq 2^63-1) cannot lock the stream out,
+// and a CNC that restarts its numbering is followed again after at most kRestartRun commands.
 
 struct Command {
   std::int64_t utime = 0, seq = 0;
@@ -125,14 +125,13 @@ class Compensator {
   bool enabled_;
   double ramp_;
   bool have_last_ = false;  // a command has been accepted (ramp time, rate limit)
-  bool seq_known_ = false;  // last_seq_ holds the accepted stream's seq (a reset forgets it)
+  StreamOrder order_{kMaxSeqJump};  // by seq
   bool have_seen_ = false;  // a valid command has been seen (for the step check)
-  std::int64_t last_seq_ = 0, last_utime_ = 0;
+  std::int64_t last_utime_ = 0;
   std::array<double, kMaxAxes> seen_axes_{}, last_correction_{};
   bool have_top_ = false;   // top_seq_ holds the highest seq received (gap counting)
   std::int64_t top_seq_ = 0;
-  int run_length_ = 0;      // commands behind last_seq_ in order among themselves (restart rule)
-  std::int64_t run_seq_ = 0, run_utime_ = 0;
+  std::int64_t run_utime_ = 0;  // the restart run's last command (its own tests: utime, step)
   std::array<double, kMaxAxes> run_axes_{};
   Counters counters_;
 };

@@ -9,6 +9,9 @@
 
 namespace chaincomp {
 
+// The longest channel name LCM publishes on (LCM_MAX_CHANNEL_NAME_LENGTH).
+constexpr std::size_t kMaxChannelName = 63;
+
 struct DaemonConfig {
   // a udpm URL gets `recv_buf_size=` from recv_buf_size (load_daemon_config adds it)
   std::string lcm_url = "udpm://239.255.76.67:7667?ttl=0";

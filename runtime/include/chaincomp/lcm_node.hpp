@@ -27,6 +27,11 @@ bool decode_command(const void* data, std::size_t size, chaincomp_lcm::lcmt_axis
                     Command& out) noexcept;
 // A target into its message (compute_ns left to the caller).
 void to_message(const Target& t, chaincomp_lcm::lcmt_corrected_target& msg) noexcept;
+// A control payload into `out`; false for anything not one of this version (trailing bytes
+// included: one rule with commands, updates and readings).
+bool decode_control(const void* data, std::size_t size, chaincomp_lcm::lcmt_chaincomp_control& out) noexcept;
+// The regular expression LCM's subscribe takes that matches exactly the channel `name`.
+std::string channel_regex(const std::string& name);
 
 struct RealtimeObtained {
   bool mlockall = false, sched_fifo = false, cpu_pinned = false;
@@ -66,7 +71,10 @@ class LcmNode {
   static void on_target(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
   static void on_params(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
   static void on_readings(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
+  lcm_subscription_t* subscribe(const std::string& channel, lcm_msg_handler_t handler);
   void handle_command(const lcm_recv_buf_t* rbuf);
+  // The command stream's time for params updates (now: this node's clock).
+  CommandTime command_time() const;
   void handle_target(const lcm_recv_buf_t* rbuf);
   void find_sockets();
 
@@ -74,10 +82,11 @@ class LcmNode {
   DaemonConfig config_;
   Compensator comp_;
   LatencyWindow latency_;
-  chaincomp_lcm::lcmt_axis_command cmd_msg_;
-  chaincomp_lcm::lcmt_corrected_target out_msg_, heard_msg_;
-  chaincomp_lcm::lcmt_chaincomp_control control_msg_;
-  chaincomp_lcm::lcmt_chaincomp_status status_msg_;
+  // Every message is value-initialised: no field ever carries process memory onto the bus.
+  chaincomp_lcm::lcmt_axis_command cmd_msg_{};
+  chaincomp_lcm::lcmt_corrected_target out_msg_{}, heard_msg_{};
+  chaincomp_lcm::lcmt_chaincomp_control control_msg_{};
+  chaincomp_lcm::lcmt_chaincomp_status status_msg_{};
   std::vector<unsigned char> out_buf_, status_buf_;
   Command command_;
   Target target_;
@@ -85,6 +94,9 @@ class LcmNode {
   long long (*alloc_count_)() = nullptr;
   long long alloc_baseline_ = 0;
   bool steady_ = false;  // the first command has been handled
+  bool command_accepted_ = false;                 // the last accepted command's receipt
+  std::chrono::steady_clock::time_point command_at_;
+  std::int64_t control_received_ = 0, control_refused_ = 0;
   lcm_subscription_t* command_sub_ = nullptr;
   lcm_subscription_t* control_sub_ = nullptr;
   lcm_subscription_t* target_sub_ = nullptr;
@@ -98,8 +110,13 @@ class LcmNode {
   std::string machine_;
   // Targets on the corrected channel: this node's own, heard back, and another instance's
   // for the same machine (two daemons answering one CNC); each other instance is reported
-  // on stderr once (the first kMaxReported of them).
+  // on stderr once (the first kMaxReported of them). Own targets are those it published
+  // and has not heard yet (a ring of their payloads' hashes, oldest first): a forged copy
+  // counts nothing, each published target is heard at most once.
   std::int64_t own_heard_ = 0, foreign_ = 0, foreign_instance_ = 0;
+  static constexpr std::uint64_t kSentRing = 16384;  // a power of two
+  std::vector<std::uint64_t> sent_;
+  std::uint64_t sent_head_ = 0, sent_tail_ = 0;       // unheard: [tail, head)
   static constexpr int kMaxReported = 8;
   std::int64_t reported_[kMaxReported] = {};
   int num_reported_ = 0;

@@ -15,6 +15,7 @@
 
 #include "chaincomp/model_info.hpp"
 #include "chaincomp/params_update.hpp"
+#include "chaincomp/stream_order.hpp"
 
 namespace chaincomp {
 
@@ -63,7 +64,8 @@ enum class ReadingRefuse : int {
   kUndecodable = 0,
   kWrongMachine = 1,
   kBadValue = 2,        // not finite, or outside -100 .. 300 degC
-  kTimeNotIncreasing = 3,  // for a sensor the model reads
+  kTimeNotIncreasing = 3,  // for a sensor the model reads: at or before its last reading, or more than
+                           // kMaxTimeJump after it (the stream rule, stream_order.hpp, per sensor)
 };
 constexpr int kNumReadingRefusals = 4;
 
@@ -76,6 +78,9 @@ class ThermalState {
   // sensor has a reading and the new error values are in `update`, for the updater.
   bool take(const Readings& r, std::string_view machine, ParamsUpdate& update) noexcept;
   void count_undecodable() noexcept { ++received_; ++refused_[0]; }
+  // A new stream (a control message's reset): each sensor's next reading is taken whatever its
+  // time, and its lags settle there (as at a sensor's first reading).
+  void reset() noexcept;
 
   std::int64_t received() const noexcept { return received_; }
   const std::array<std::int64_t, kNumReadingRefusals>& refused() const noexcept { return refused_; }
@@ -86,8 +91,11 @@ class ThermalState {
 
   ThermalModel model_;
   std::vector<double> base_;
-  std::vector<double> last_u_, last_t_;   // per sensor: last reading (degC) and its time (s)
+  std::vector<double> last_u_;            // per sensor: last reading (degC)
+  std::vector<StreamOrder> order_;        // per sensor: its readings' utime (the last one's time)
   std::vector<unsigned char> read_;       // per sensor: has a reading
+  std::vector<unsigned char> settle_;     // per sensor: its next reading settles the lags (first, restart, reset)
+  std::array<StreamOrder::Verdict, kMaxReadings> verdict_{};  // per value of a message
   std::array<std::array<double, kMaxThermalTerms>, kMaxThermalErrors> lag_{};  // per term
   std::array<int, kMaxReadings> slot_{};  // per value of a message: its sensor, or -1
   std::int64_t received_ = 0;

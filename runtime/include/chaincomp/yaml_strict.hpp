@@ -14,6 +14,12 @@
 
 namespace chaincomp {
 
+// The largest input file (yamlsource.MAX_FILE_BYTES).
+constexpr std::size_t kMaxFileBytes = 16u << 20;
+// An input file's text, as yamlsource.read_text reads it: a regular file (not a device, a FIFO
+// or a folder) of at most kMaxFileBytes, read no further; false with `error` = "path: message".
+bool read_input_file(const std::string& path, std::string& text, std::string& error);
+
 // Parses `text` (read from `path`) into `doc`; false with `error` = "path:line: message".
 bool load_strict_yaml(const std::string& path, const std::string& text, YAML::Node& doc, std::string& error);
 

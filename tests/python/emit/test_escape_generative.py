@@ -50,6 +50,18 @@ def test_cpp_comment_is_one_ascii_line_without_splice_or_end(text):
     assert _unescape(c) == text                                   # nothing lost: each escape decodes
 
 
+@settings(max_examples=200, **SETTINGS)
+@given(TEXT)
+def test_terminal_text_holds_no_control_and_loses_nothing(text):
+    """Bus text on a terminal (issue #39 item 5): no character the Unicode database classes as a
+    control (C0, DEL, C1: ECMA-48's control functions), a format or bidi mark, or a line or
+    paragraph separator; every other character kept, and each escape decodes to the original."""
+    import unicodedata
+    t = escape.terminal(text)
+    assert not any(unicodedata.category(ch) in ("Cc", "Cf", "Zl", "Zp", "Cs", "Co", "Cn") for ch in t)
+    assert _unescape(t) == text
+
+
 @settings(max_examples=3, **SETTINGS)
 @given(st.lists(st.binary(max_size=40) | TEXT.map(lambda t: t.encode("utf-8")), min_size=20, max_size=20))
 def test_cpp_string_is_the_bytes_to_the_compiler(tmp_path_factory, strings):

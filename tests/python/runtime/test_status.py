@@ -211,3 +211,20 @@ def test_the_limits_counters():
     # the message carries it on the wire: encoded, decoded, shown
     again = T.lcmt_chaincomp_status.decode(s.encode())
     assert again.held_back == 5 and _doc(again, None)["daemons"][0]["counters"]["held_back"] == 5
+
+
+def test_bus_text_reaches_the_terminal_escaped():
+    # ECMA-48's control functions: C0 (0x00-0x1f), DEL and C1 (0x80-0x9f); with the bidi
+    # overrides (U+202E) they move the cursor, retitle the window or reorder what is shown
+    hostile = "five\x1b]0;owned\x07\x08\r\x9b2J\u202eaxis\\x1b"
+    s = T.lcmt_chaincomp_status.decode(_status(machine=hostile).encode())   # as it comes off the bus
+    text = status.render_text(_doc(s, None))
+    assert not any(ord(c) < 0x20 and c != "\n" or 0x7f <= ord(c) <= 0x9f or c == "\u202e" for c in text)
+    # every character still shown, the backslash as well, so no escape passes for another
+    assert "five\\x1b]0;owned\\x07\\x08\\x0d\\x9b2J\\u202eaxis\\x5cx1b  instance" in text
+
+
+def test_control_messages_are_counted():
+    text = status.render_text(_doc(_status(control_received=7, control_refused=2), None))
+    assert "kernel drops 0  control messages 7 (refused 2)\n" in text
+    assert "control messages" not in status.render_text(_doc(_status(), None))
