@@ -10,13 +10,14 @@ not identically zero vanishes at all of them only by coincidence of measure zero
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..model.machine import Machine, Rotation
-from ..symbolic.numeric import ExactModel
+from ..symbolic.numeric import ExactModel, complete
 
 POSES = 8
 _STEP = 1e-6          # internal units (mm, rad)
@@ -48,9 +49,10 @@ def _poses(machine: Machine) -> dict[str, np.ndarray]:
     return {s.name: s.to_internal(rng.uniform(*s.limits, POSES)) for s in machine.axes}
 
 
-def _moves_tool(model: ExactModel, values: dict, name: str) -> bool:
+def _moves_tool(model: ExactModel, values: dict, name: str) -> bool | None:
     """Whether ``name`` moves the tool point, direction or frame (its x axis: a turn about the
-    tool axis moves only that)."""
+    tool axis moves only that), read at the poses where the model is finite (a NaN gain is no
+    zero gain: _not_real names the expression); None where it is finite at none."""
     up, down = dict(values), dict(values)
     # _STEP, or a step a value of its size can resolve: beyond about 1e6 (an axis of travel 1e11 m
     # at 1e14 mm), 1e14 + 1e-6 is 1e14 and every gain would read zero
@@ -58,15 +60,54 @@ def _moves_tool(model: ExactModel, values: dict, name: str) -> bool:
     up[name] = values[name] + step
     down[name] = values[name] - step
     plus, minus = model.frame(up), model.frame(down)
-    return any(np.max(np.abs((np.asarray(a) - np.asarray(b)) / (2 * step))) > _ZERO
-               for u, v in zip(plus, minus) if u is not None for a, b in zip(u, v))
+    gains = np.array([np.broadcast_to(np.abs((np.asarray(a) - np.asarray(b)) / (2 * step)), (POSES,))
+                      for u, v in zip(plus, minus) if u is not None for a, b in zip(u, v)])
+    finite = np.all(np.isfinite(gains), axis=0)   # the poses where every gain can be read
+    if not finite.any():
+        return None
+    return bool(np.any(gains[:, finite] > _ZERO))
+
+
+def _not_real(machine: Machine, values: dict) -> list[Finding]:
+    """The expressions of the chain and tool point that are not finite and real somewhere
+    within the axis limits (errors zero), at the corners of the limits of their axes or at the
+    sampled poses: sqrt(X) with X in [-100, 100], acos(X/50) with |X| beyond 50, a divisor
+    that vanishes there. The loader checks them at one pose only."""
+    out, seen = [], set()
+    parts = [(el.line, "chain", (el.expr,) if isinstance(el, Rotation) else el.exprs)
+             for el in machine.tool_chain + machine.workpiece_chain]
+    tool = next((i for i, t in enumerate(machine.source_text.splitlines(), 1) if t.startswith("tool:")), 0)
+    for line, fld, exprs in parts + [(tool, "tool.point", machine.point)]:
+        for e in exprs:
+            axes = [s for s in machine.axes if s.name in e.names]
+            if e.source in seen or not axes or len(axes) > 8:
+                continue
+            corners = list(itertools.product(*(s.limits for s in axes)))
+            at = {s.name: values[s.name][0] for s in machine.axes}   # (the others: e does not read them)
+            at.update({s.name: np.concatenate([s.to_internal(np.array([c[k] for c in corners])), values[s.name]])
+                       for k, s in enumerate(axes)})
+            at = complete(machine, {**at, **{s.name: 0.0 for s in machine.errors}})
+            with np.errstate(all="ignore"):
+                v = np.broadcast_to(np.asarray(e.function(np)(at), dtype=float), (len(corners) + POSES,))
+            bad = np.flatnonzero(~np.isfinite(v))
+            if not len(bad):
+                continue
+            seen.add(e.source)
+            i = bad[0]
+            pose = ", ".join(f"{s.name} = {s.from_internal(at[s.name][i]):.6g} {s.unit.name}" for s in axes)
+            what = "not finite" if np.isinf(v[i]) else "not real (or not finite)"
+            out.append(Finding("warning", f"{e.source!r} is {what} at {pose}, within the axis limits (at {len(bad)} "
+                                          f"of the {len(v)} poses lint tries: the limits' corners and {POSES} "
+                                          f"within), so no gain can be read there; write it so that it is real "
+                                          f"over the limits, or narrow them", line, fld))
+    return out
 
 
 def lint(machine: Machine, model: ExactModel | None = None) -> list[Finding]:
     """Warnings about ``machine``, in the order of its symbols."""
     model = model or ExactModel(machine)
     values = {**_poses(machine), **{s.name: np.zeros(POSES) for s in machine.errors}}
-    findings = []
+    findings = _not_real(machine, values)
     what = ("tool frame (point and orientation)" if machine.reference is not None
             else "tool point or direction" if machine.direction else "tool point")
     for s in machine.symbols:
@@ -79,7 +120,7 @@ def lint(machine: Machine, model: ExactModel | None = None) -> list[Finding]:
             findings.append(Finding("warning", f"error {s.name} is marked unobservable but moves the {what} "
                                                f"(line {line})", s.line, f"symbols.{s.name}.unobservable"))
             continue
-        if moves or s.unobservable:
+        if moves or moves is None or s.unobservable:   # None: finite nowhere (_not_real said where)
             continue
         if s.role == "error":
             message = (f"error {s.name} never moves the {what}: its gain is zero at every pose "
