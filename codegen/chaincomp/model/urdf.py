@@ -34,7 +34,9 @@ continuous in deg with limits [-360, 360] (it has none), revolute limits rounded
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import os
 import re
 from dataclasses import dataclass
 from decimal import Decimal
@@ -65,6 +67,7 @@ class PathJoint:
     rpy: tuple          # rad, as floats
     axis: tuple         # direction as written (normalised where the chain uses it)
     limits: tuple | None  # in the axis' unit (deg, mm)
+    inverted: bool = False  # a fixed joint above --base, walked up: its origin's inverse
 
 
 class _Source:
@@ -258,18 +261,30 @@ def kinematic_path(path: str, base: str, tip: str) -> tuple[str, list[PathJoint]
                            f"{joint_el[first].sourceline}) and {name!r}: a closed loop, which a URDF tree "
                            "cannot hold", joint_el[name].sourceline, f"joint {name}.child")
         parent_joint[j.child] = name
-    names, link, seen = [], tip, {tip}
-    while link != base:
-        if link not in parent_joint:
-            raise src.fail(f"--tip {tip!r} is not below --base {base!r}: going up from {tip!r} the tree ends "
-                           f"at {link!r}", links[tip].sourceline, f"link {tip}")
+    names, link, passed = [], tip, [tip]   # the joints and links going up from --tip
+    while link != base and link in parent_joint:
         names.append(parent_joint[link])
         link = joints[parent_joint[link]].parent
-        if link in seen:
+        if link in passed:
             raise src.fail(f"the joints above link {tip!r} form a cycle through link {link!r}",
                            joint_el[names[-1]].sourceline, f"joint {names[-1]}")
-        seen.add(link)
-    if not names:
+        passed.append(link)
+    up: list[str] = []
+    if link != base:
+        # --base may hang off the path by fixed joints (UR's controller frame 'base', a sibling
+        # of the chain under base_link): walked up to the path, each by its origin's inverse
+        at = base
+        while at not in passed:
+            name = parent_joint.get(at)
+            if name is None or joints[name].type != "fixed" or name in up:
+                why = "" if name is None or name in up else \
+                    f", and {base!r} hangs from it by the {joints[name].type} joint {name!r} (only fixed joints may)"
+                raise src.fail(f"--tip {tip!r} is not below --base {base!r}: going up from {tip!r} the tree ends "
+                               f"at {link!r}{why}", links[tip].sourceline, f"link {tip}")
+            up.append(name)
+            at = joints[name].parent
+        names = names[:passed.index(at)]
+    if not names and not up:
         raise src.fail(f"--base and --tip are the same link {base!r}: no joint between them", robot_line)
     # a tree has a root: going up from --base must end at a link that no joint moves, not come
     # back round (a cycle through --base would make every link of it its own ancestor)
@@ -283,7 +298,8 @@ def kinematic_path(path: str, base: str, tip: str) -> tuple[str, list[PathJoint]
                            f"round to link {link!r} (through joint {name!r}, line {joint_el[name].sourceline}): a "
                            "cycle, which a URDF tree cannot hold", joint_el[first].sourceline, f"joint {first}.child")
         above.add(link)
-    out = [_path_joint(src, joints[n], joint_el[n]) for n in reversed(names)]
+    out = [dataclasses.replace(_path_joint(src, joints[n], joint_el[n]), inverted=True) for n in up]
+    out += [_path_joint(src, joints[n], joint_el[n]) for n in reversed(names)]
     return root.get("name") or "robot", out, src.text
 
 
@@ -383,6 +399,16 @@ def _motion(j: PathJoint, motion: str) -> list[str]:
 
 
 def _origin(j: PathJoint) -> list[str]:
+    if j.inverted:   # (T(xyz)·Rz(yaw)·Ry(pitch)·Rx(roll))^-1 = Rx(-roll)·Ry(-pitch)·Rz(-yaw)·T(-xyz)
+        label = f", label: {yaml_scalar(j.name + ' origin, inverted')}"
+        out = []
+        for axis, angle in zip("xyz", j.rpy):
+            if angle:
+                out.append(f"{{rotate: {axis}, angle: {_decimal(-angle)}{label}}}")
+                label = ""
+        if any(j.xyz):
+            out.append(f"{{translate: [{', '.join(_decimal(-v, 1000) for v in j.xyz)}]{label}}}")
+        return out
     label = f", label: {yaml_scalar(j.name + ' origin')}"
     out = []
     if any(j.xyz):
@@ -394,6 +420,16 @@ def _origin(j: PathJoint) -> list[str]:
             out.append(f"{{rotate: {axis}, angle: {_decimal(angle)}{label}}}")
             label = ""
     return out
+
+
+def shown_path(path: str) -> str:
+    """The URDF's path as the header writes it: as given, but an absolute path below the current
+    folder relative to it (the file travels; the user's home folder need not travel with it)."""
+    if os.path.isabs(path):
+        relative = os.path.relpath(path)
+        if relative != os.pardir and not relative.startswith(os.pardir + os.sep):
+            return relative
+    return path
 
 
 def machine_text(urdf_path: str, base: str, tip: str, errors: str = "none", tool_point=(0.0, 0.0, 0.0),
@@ -460,9 +496,9 @@ def machine_text(urdf_path: str, base: str, tip: str, errors: str = "none", tool
                        f"{MAX_CHAIN_ELEMENTS})", joints[0].line)
 
     header = [
-        f"# Imported from the URDF {one_line(urdf_path)} by chaincomp {version} import-urdf",
+        f"# Imported from the URDF {one_line(shown_path(urdf_path))} by chaincomp {version} import-urdf",
         f"# robot {one_line(robot)}, path {one_line(base)} -> {one_line(tip)}: "
-        + ", ".join(f"{one_line(j.name)} ({j.type})" for j in joints),
+        + ", ".join(f"{one_line(j.name)} ({j.type}{', inverted' if j.inverted else ''})" for j in joints),
         f"# errors: {errors}. Lengths in mm (the URDF's metres x 1000, exactly), angles in rad as written;",
         "# revolute limits converted from rad to deg, continuous joints limited to [-360, 360] deg.",
         "# The tool point, direction" + (" and reference" if tool_reference is not None else "")

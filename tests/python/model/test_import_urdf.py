@@ -117,7 +117,9 @@ def test_the_file_lints_clean_round_trips_and_names_its_source(arm, tmp_path):
     assert lint(m) == []
     text = open(path).read()
     urdf, base, tip = ARMS[arm]
-    assert text.startswith(f"# Imported from the URDF {urdf} by chaincomp ")
+    # the path as given, relative to the current folder when the absolute path lies below it
+    shown = os.path.relpath(urdf) if not os.path.relpath(urdf).startswith("..") else urdf
+    assert text.startswith(f"# Imported from the URDF {shown} by chaincomp ")
     assert f"path {base} -> {tip}" in text.splitlines()[1]
     # the same import again is the same file, byte for byte
     again = imported(tmp_path / ".." / tmp_path.name, arm, "all")
@@ -132,6 +134,28 @@ def test_the_file_lints_clean_round_trips_and_names_its_source(arm, tmp_path):
         assert s["unit"] == "deg"
         assert s["limits"] == pytest.approx([math.degrees(float(limit.get("lower"))),
                                              math.degrees(float(limit.get("upper")))], abs=1e-9)
+
+
+def test_a_base_beside_the_chain_by_fixed_joints_is_its_reference(tmp_path, monkeypatch):
+    """UR's controller frame 'base' hangs from base_link by a fixed joint (rpy 0 0 -pi), beside
+    the chain: as --base, the tool0 pose is Pinocchio's in that frame (not in base_link's)."""
+    monkeypatch.chdir(tmp_path)   # the URDF lies outside the current folder: its path as given
+    out = tmp_path / "ur5-base.yaml"
+    code, _, err = run("import-urdf", UR5, "--base", "base", "--tip", "tool0", "--tool-point", ",".join(map(str, TOOL)),
+                       "-o", out)
+    assert code == 0, err
+    assert open(out).readline().startswith(f"# Imported from the URDF {UR5} by")
+    m = load_machine(str(out))
+    model = pin.buildModelFromUrdf(UR5)
+    data = model.createData()
+    q = random_configurations(m, 50, seed=11)
+    point, _ = ExactModel(m).pose(q)
+    worst = max(np.abs(np.array([c[k] for c in point]) - want).max()
+                for k, _, want in pinocchio_tips(model, data, m, q, "base", "tool0"))
+    assert worst < 1e-9, worst
+    # a base hanging from the chain by a moving joint is still refused
+    err = refused(robot(tmp_path)[0], base="c", tip="a")
+    assert "and 'c' hangs from it by the revolute joint 'j2' (only fixed joints may)" in err
 
 
 # ---------------------------------------------------------------- every error mode
