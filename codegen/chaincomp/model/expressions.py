@@ -494,6 +494,7 @@ class _Parser:
         self.tokens = self._tokenize(source)
         self.pos = 0
         self.depth = 0
+        self.inner = 0   # the terms of the parts expanded on their own: calls' arguments, divisors
 
     def fail(self, why: str) -> ExpressionError:
         return ExpressionError(f"cannot parse expression {_shown(self.source)}: {why}")
@@ -555,6 +556,8 @@ class _Parser:
             if op == "/" and fold(f) == 0:   # a divisor only sympy sees is zero: Expr.to_sympy
                 raise ExpressionError(f"division by zero in {_shown(self.source)}")
             items.append((op == "*", f, g, t))
+            if op == "/":
+                self.inner += t
             degree = self._degree(degree + g)
             terms = self._terms(terms * t if op == "*" else terms)
         return _chain("mul", "div", [(up, n) for up, n, _, _ in items]), degree, terms
@@ -590,6 +593,8 @@ class _Parser:
         # (x+y)^(5/2) expands as (x+y)^2*sqrt(x+y), and a negative power its divisor
         whole = math.floor(abs(exp))
         expanded = self._terms(math.comb(t + whole - 1, whole) if whole else 1)
+        if exp < 0:
+            self.inner += expanded
         return ("pow", base, exp), self._degree(d * math.ceil(abs(exp))), expanded if exp > 0 else 1
 
     def _sympy_exponent(self, node) -> Fraction:
@@ -623,13 +628,18 @@ class _Parser:
             return e
         raise self.fail(f"unexpected {text!r}")
 
+    def _argument(self):
+        node, _, terms = self.expr()
+        self.inner += terms
+        return node
+
     def _call(self, name: str):
         self.enter()
         self.take("(")
-        args = [self.expr()[0]]
+        args = [self._argument()]
         while self.peek() == ",":
             self.take()
-            args.append(self.expr()[0])
+            args.append(self._argument())
         self.take(")")
         self.depth -= 1
         want = _ARITY.get(name, 1)
@@ -692,7 +702,7 @@ def parse_tree(text: object, names) -> Expr:
     if p.pos != len(p.tokens):
         raise p.fail(f"unexpected {p.tokens[p.pos][1]!r}")
     e = Expr(node, source)
-    e.terms = terms
+    e.terms = terms + p.inner   # what expanding it all costs: the whole and its parts expanded alone
     return e
 
 
