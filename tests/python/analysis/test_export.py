@@ -18,7 +18,7 @@ import linuxcnc_comp
 from chaincomp.analysis import export as X
 from chaincomp.errors import ChaincompError
 from chaincomp.model.machine import load_machine
-from helpers import machine_path, refused_one_line, run_main, write_file, PARAMS
+from helpers import cli, machine_path, refused_one_line, run_main, write_file, PARAMS
 
 ARCSEC = np.pi / 180 / 3600
 
@@ -281,11 +281,17 @@ def test_a_folder_in_the_way_or_an_input_inside_it_writes_nothing(tmp_path):
 
 
 def test_a_model_undefined_inside_the_limits_is_named(tmp_path):
-    """sqrt(X) on X in [-10, 300]: NaN at negative X, which would read as a residual of nan."""
+    """sqrt(X) on X in [-10, 300]: NaN at negative X, which would read as a residual of nan (lint,
+    as the machine loads, names the expression at X = -10 mm first)."""
     machine = write_file(tmp_path, "root.yaml", OWN.replace("name: own_xyz", "name: root_xyz").replace(
         "limits: [0, 300]", "limits: [-10, 300]").replace("translate: [X + EXX, 0, 0]", "translate: [X + EXX*sqrt(X), 0, 0]"))
-    nothing_written(tmp_path, "export", machine, "--set", "EXX=1um", "--format", "linuxcnc-comp",
-                    "-o", tmp_path / "c", match=r"root_xyz: the tool point with the errors given is not finite at X = -10 mm")
+    before = sorted(os.listdir(tmp_path))
+    proc = cli("export", machine, "--set", "EXX=1um", "--format", "linuxcnc-comp", "-o", tmp_path / "c", check=False)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    warning, error = proc.stderr.splitlines()
+    assert "'X + EXX*sqrt(X)' is not real (or not finite) at X = -10 mm" in warning, warning
+    assert "root_xyz: the tool point with the errors given is not finite at X = -10 mm" in error, error
+    assert sorted(os.listdir(tmp_path)) == before
 
 
 def test_a_table_the_file_cannot_carry_is_refused(tmp_path):
