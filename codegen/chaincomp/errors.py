@@ -20,3 +20,8 @@ class ChaincompError(Exception):
             where = self.file + (f":{self.line}" if self.line else "") + ": "
         what = f"{self.field}: " if self.field else ""
         return where + what + self.message
+
+
+class NoAnswer(ChaincompError):
+    """The input was read and is valid, but gives no answer (a fit that does not converge):
+    exit 4, apart from bad input (2)."""

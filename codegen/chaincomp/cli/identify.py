@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 import sys
 
-from ..errors import ChaincompError
+from ..errors import ChaincompError, NoAnswer
 from ..measure.calibration import _write_loadable, slide_axis
 from ..measure.identify import (COMPONENTS, DIRECTIONS, MAX_SMOOTH, ROTATION, Vary, identify, outside_limits, params_yaml,
                         read_table, to_json, to_text)
@@ -192,7 +192,7 @@ def run(args) -> int:
         hint = (f": a residual this large is most often a column in another unit (the axes are read in their "
                 f"declared units, {units}; x, y, z in {machine.length_unit}) or another machine's measurements"
                 if fit.rms > 1.0 else "")   # 1 mm: no geometric error of a machine is that large
-        raise ChaincompError(f"the fit did not converge in {fit.iterations} Gauss-Newton iterations "
+        raise NoAnswer(f"the fit did not converge in {fit.iterations} Gauss-Newton iterations "
                              f"(rms residual {fit.rms / UNITS[machine.length_unit].to_internal:.4g} "
                              f"{machine.length_unit}); no values given{hint}", args.measurements)
     print(json_text(to_json(fit, args.measurements)) if args.format == "json"

@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import json
 import os
 import sys
 
 import numpy as np
 
 from .. import __version__
-from ..errors import ChaincompError
+from ..errors import ChaincompError, NoAnswer
 from ..escape import one_line
 # Each verb's module, in the order of the top-level help. A command imports only its own verb's
 # module (every module pulls in its own libraries: all of them together cost ~0.4 s per run).
@@ -56,7 +57,8 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
                     "argument of every verb that takes one; 'chaincomp VERB --help' lists its options.",
         epilog="Exit codes: 0 done, 1 'check' found differences, 2 bad input (one line naming the file, "
                "line and field, or the option), 3 internal error (one line; set CHAINCOMP_DEBUG=1 for the "
-               "traceback), 130 interrupted.")
+               "traceback), 4 no answer (a fit that does not converge), 130 interrupted. With --format json "
+               "an error is also one JSON object on stdout: {\"error\": {verb, kind, exit, message}}.")
     parser.add_argument("--version", action="version", version=f"chaincomp {__version__}",
                         help="print the version and exit")
     sub = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
@@ -96,28 +98,36 @@ def main(argv: list[str] | None = None) -> int:
         # check their results and name what is not finite instead
         with np.errstate(all="ignore"):
             return args.run(args) or 0
+    except NoAnswer as exc:
+        return _failed(args, "no answer", f"error: {one_line(exc)}", 4)
     except ChaincompError as exc:
-        print(f"chaincomp {args.verb}: error: {one_line(exc)}", file=sys.stderr)
-        return 2
+        return _failed(args, "bad input", f"error: {one_line(exc)}", 2)
     except KeyboardInterrupt:
-        print(f"chaincomp {args.verb}: interrupted", file=sys.stderr)
-        return 130
+        return _failed(args, "interrupted", "interrupted", 130)
     except BrokenPipeError:
         return 0
     except (MemoryError, RecursionError) as exc:
         if debug:
             raise
         # numpy's "cannot allocate" is a MemoryError too; both mean an input beyond this machine
-        print(f"chaincomp {args.verb}: error: the input is too large or too deeply nested to process "
-              f"({type(exc).__name__}); give smaller grids, counts or files", file=sys.stderr)
-        return 2
+        return _failed(args, "bad input", "error: the input is too large or too deeply nested to process "
+                       f"({type(exc).__name__}); give smaller grids, counts or files", 2)
     except Exception as exc:   # a bug: one line, not a stack, for the user; the stack for developers
         if debug:
             raise
-        print(f"chaincomp {args.verb}: internal error: {type(exc).__name__}: {one_line(exc)} "
-              "(please report this with the command line; CHAINCOMP_DEBUG=1 shows the traceback)",
-              file=sys.stderr)
-        return 3
+        return _failed(args, "internal error", f"internal error: {type(exc).__name__}: {one_line(exc)} "
+                       "(please report this with the command line; CHAINCOMP_DEBUG=1 shows the traceback)", 3)
+
+
+def _failed(args, kind: str, line: str, code: int) -> int:
+    """The one line on stderr; in a JSON mode also one JSON object on stdout, so that a reader of
+    the JSON always gets JSON (docs/reference/errors.md, exit codes)."""
+    print(f"chaincomp {args.verb}: {line}", file=sys.stderr)
+    # (export's JSON switch is --report json: its --format names the controller)
+    if "json" in (getattr(args, "format", None), getattr(args, "report", None)) or getattr(args, "json", False) is True:
+        print(json.dumps({"error": {"verb": args.verb, "kind": kind, "exit": code,
+                                    "message": f"chaincomp {args.verb}: {line}"}}))
+    return code
 
 
 if __name__ == "__main__":

@@ -210,8 +210,11 @@ def test_eval_refuses_a_non_finite_result_naming_it(ws, capsys, json_flag):
     if json_flag:
         assert all(math.isfinite(v) for v in json.loads(out)["position"])
     code, out, err = run(capsys, ["eval", path, "--set", "e=20"] + json_flag)
-    assert code == 2 and out == "" and err.count("\n") == 1
+    assert code == 2 and err.count("\n") == 1
     assert "position[" in err and "not finite" in err
+    # JSON mode: stdout is still JSON, the error's line and exit code
+    assert (json.loads(out)["error"] == {"verb": "eval", "kind": "bad input", "exit": 2, "message": err.strip()}
+            if json_flag else out == "")
 
 
 def test_json_output_is_strict_json(ws, capsys):

@@ -4,6 +4,7 @@ finite), smoothing weights and sigmas beyond their bounds, empty option values."
 
 from __future__ import annotations
 
+import json
 import math
 import os
 
@@ -194,6 +195,14 @@ def test_identify_a_column_in_another_unit_is_named_as_the_likely_cause(tmp_path
     for r in rows:
         r[3] = repr(math.radians(float(r[3])))
     meas = write_file(tmp_path, "meas.csv", "X,Y,Z,B,x,y,z\n" + "".join(",".join(r) + "\n" for r in rows))
-    err = refused_one_line("identify", machine, meas, "--assume-zero", "EXB,EBB", match="the fit did not converge")
+    # a fit without an answer is exit 4, apart from bad input (2); in JSON mode stdout holds the error
+    proc = cli("identify", machine, meas, "--assume-zero", "EXB,EBB", check=False)
+    assert proc.returncode == 4 and proc.stderr.count("\n") == 1, (proc.returncode, proc.stderr)
+    err = proc.stderr
+    assert "the fit did not converge" in err and "Traceback" not in err
+    proc = cli("identify", machine, meas, "--assume-zero", "EXB,EBB", "--format", "json", check=False)
+    got = json.loads(proc.stdout)["error"]
+    assert proc.returncode == 4 and got["exit"] == 4 and got["kind"] == "no answer"
+    assert "the fit did not converge" in got["message"]
     assert ("a residual this large is most often a column in another unit (the axes are read in their declared "
             "units, X in mm, Y in mm, Z in mm, B in deg; x, y, z in mm)") in err
