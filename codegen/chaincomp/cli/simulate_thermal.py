@@ -37,6 +37,12 @@ def add_parser(sub) -> None:
     p.add_argument("--drift-noise", type=number(0, 1e3), default=0.3, metavar="SIGMA",
                    help="standard deviation of each drift reading, um for a length error, arcsec for an angle, "
                         "ppm for a ratio (default 0.3)")
+    p.add_argument("--hall", default="default", metavar="SWINGS",
+                   help="the hall's climate about 20 degC: AMPLITUDE:PERIOD,... (K, s), e.g. 2:86400,1:7200 "
+                        "(default " + ",".join(f"{a:g}:{q:g}" for a, q in T.HALL[1]) + "); phases from --seed")
+    p.add_argument("--sensor-lags", type=number(0, 100, above=True), default=1.0, metavar="SCALE",
+                   help="each simulated sensor's own time constants (of the spindle's heat and of the hall's "
+                        "temperature) times this (default 1)")
     add_seed_argument(p, "random seed of the noise and the hall's swings")
     p.set_defaults(run=run)
 
@@ -55,11 +61,13 @@ def run(args) -> int:
         raise ChaincompError(f"--cycle {duration:g} s at --rate {args.rate:g}: more than {MAX_SAMPLES} readings")
     if duration * args.rate < 9:
         raise ChaincompError(f"--cycle {duration:g} s at --rate {args.rate:g}: fewer than 10 readings")
-    t, temps, drift = T.simulate(model, T.DEFAULT_SENSORS, cycle, args.rate, args.temperature_noise,
-                                 args.drift_noise, args.seed)
+    hall = T.parse_hall(args.hall)
+    t, temps, drift = T.simulate(model, T.sensors_with_lags(args.sensor_lags), cycle, args.rate,
+                                 args.temperature_noise, args.drift_noise, args.seed, hall=hall)
     header = ["time [s]"] + [f"{n} [degC]" for n in temps] + [f"{n} [{model.errors[n].unit.name}]" for n in drift]
     command = ["chaincomp", "simulate-thermal", args.machine, "--model", args.model, "-o", args.output,
-               "--cycle", args.cycle, "--rate", f"{args.rate:g}", "--seed", str(args.seed)]
+               "--cycle", args.cycle, "--rate", f"{args.rate:g}", "--seed", str(args.seed), "--hall", args.hall,
+               "--sensor-lags", f"{args.sensor_lags:g}"]
     lines = [f"# Written by: {one_line(' '.join(shlex.quote(c) for c in command))}",
              f"# {len(t)} readings over {duration:g} s; temperature noise {args.temperature_noise:g} K, drift noise "
              f"{args.drift_noise:g} (um or arcsec)", ",".join(header)]

@@ -25,11 +25,15 @@ def add_parser(sub) -> None:
                                    "(docs/guide/thermal.md).")
     verbs = p.add_subparsers(dest="thermal_verb", metavar="ACTION", required=True)
     f = verbs.add_parser("fit", help="fit gains and time constants to a log, choosing a few of its sensors",
-                         description="For each drift column of the log, choose sensors greedily (each must lower the "
-                                     "drift's residual by Schwarz's criterion and by --min-improvement), fit the "
+                         description="For each drift column of the log, choose sensors one at a time by how well they "
+                                     "predict held-out stretches of the log (blocked cross-validation over 5 "
+                                     "stretches of time; each must improve it by more than its standard error, pass "
+                                     "Schwarz's criterion and lower the residual by --min-improvement), fit the "
                                      "offset, gains and time constants (value = offset + sum gain * (lagged "
-                                     "temperature - reference)), report their standard uncertainties (white noise on "
-                                     "the drift readings assumed) and write the model.")
+                                     "temperature - reference)), drop the terms the log cannot support "
+                                     "(--max-uncertainty), report their standard uncertainties (white noise on "
+                                     "the drift readings assumed), how well each time constant is identified and "
+                                     "what log would pin down what is uncertain, and write the model.")
     add_machine_argument(f)
     f.add_argument("log", metavar="LOG.csv", help=LOG_HELP)
     f.add_argument("-o", "--output", required=True, metavar="MODEL.yaml", help="thermal model to write")
@@ -39,6 +43,10 @@ def add_parser(sub) -> None:
                    help=f"at most this many sensors per error (default 3, at most {T.MAX_TERMS})")
     f.add_argument("--min-improvement", type=number(0, 1), default=0.01, metavar="R",
                    help="a sensor is taken only if it lowers the RMS residual by this fraction (default 0.01)")
+    f.add_argument("--max-uncertainty", type=number(0, 10, above=True), default=T.MAX_RELATIVE_UNCERTAINTY,
+                   metavar="R", help="a term whose gain or time constant has a standard uncertainty above this "
+                   f"fraction of its value, or a time constant longer than the log, is not written (default "
+                   f"{T.MAX_RELATIVE_UNCERTAINTY:g})")
     f.add_argument("--no-lag", action="store_true", help="no time constants: each term follows its sensor at once")
     f.add_argument("--reference", type=number(*T.TEMPERATURE_RANGE), default=T.REFERENCE_TEMPERATURE, metavar="DEGC",
                    help=f"reference temperature (default {T.REFERENCE_TEMPERATURE:g} degC, ISO 1)")
@@ -154,10 +162,12 @@ def run_fit(args) -> int:
         if len(log.t) >= 100_000:   # a long fit: say what it is doing
             print(f"thermal fit: {e} from {len(log.t)} rows, {len(sensors)} sensors", file=sys.stderr)
         f = T.fit(log, e, sensors, args.reference, args.max_sensors, args.min_improvement, not args.no_lag,
-                  progress=lambda text: print(f"thermal fit: {text}", file=sys.stderr))
+                  progress=lambda text: print(f"thermal fit: {text}", file=sys.stderr),
+                  max_relative=args.max_uncertainty)
         if not f.model.terms:
+            why = "".join(f"; {n}" for n in f.notes)
             raise ChaincompError(f"{e}: no sensor explains its drift (RMS {f.rms_before:.4g} "
-                                 f"{log.drift_units[e].name}): nothing to write", args.log)
+                                 f"{log.drift_units[e].name}){why}: nothing to write", args.log)
         model.errors[e] = f.model
         fits[e] = f
     command = ["chaincomp", "thermal", "fit", args.machine, args.log, "-o", args.output]
@@ -176,10 +186,12 @@ def run_fit(args) -> int:
     doc = {"machine": machine.name, "log": args.log, "rows": int(len(log.t)), "reference": args.reference,
            "errors": {e: {"unit": f.model.unit.name, "offset": f.model.offset, "offset_u": f.model.offset_u,
                           "rms_before": f.rms_before, "rms_after": f.rms_after, "max_before": f.max_before,
-                          "max_after": f.max_after,
+                          "max_after": f.max_after, "held_out_rms": f.cv_rms, "span": f.span,
                           "terms": [{"sensor": t.sensor, "gain": t.gain, "gain_u": t.gain_u,
-                                     "time_constant": t.time_constant, "time_constant_u": t.time_constant_u}
-                                    for t in f.model.terms]} for e, f in fits.items()}}
+                                     "time_constant": t.time_constant, "time_constant_u": t.time_constant_u,
+                                     "identifiability": T.identifiability(t, f.span)}
+                                    for t in f.model.terms],
+                          "notes": f.notes, "advice": T.advice(f)} for e, f in fits.items()}}
     check_finite(doc)
     write_file(args.output, text, loads)
     if held_result is not None:
@@ -192,9 +204,12 @@ def run_fit(args) -> int:
         u = f.model.unit.name
         lines.append(f"  {e}: offset {f.model.offset:.4g} ± {f.model.offset_u:.2g} {u}; drift RMS "
                      f"{f.rms_before:.4g} (about its mean) -> {f.rms_after:.4g} {u}, max {f.max_before:.4g} -> {f.max_after:.4g} {u}")
+        lines.append(f"    held out (5 stretches of the log in turn): RMS {f.cv_rms:.4g} {u}")
         for t in f.model.terms:
             lines.append(f"    {t.sensor}: gain {t.gain:.5g} ± {t.gain_u:.2g} {u}/K, time constant "
-                         f"{t.time_constant:.5g} ± {t.time_constant_u:.2g} s")
+                         f"{t.time_constant:.5g} ± {t.time_constant_u:.2g} s: {T.identifiability(t, f.span)}")
+        lines += [f"    note: {n}" for n in f.notes]
+        lines.append(f"    to pin it down: {' '.join(T.advice(f))}")
     if held_result is not None:
         lines += _check_lines(held_result, f"on {args.check} (held out)")
     print("\n".join(lines))

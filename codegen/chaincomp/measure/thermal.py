@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import yaml
@@ -49,6 +49,13 @@ SENSOR = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,31}")
 _HEADER_UNIT = re.compile(r"^(.*?)\s*\[([^\]]*)\]\s*$")
 TEMPERATURE_UNITS = ("degC", "°C")
 SIMULATION_POINTS = 4_000_000   # the truth's time steps at most (then fewer per reading)
+FOLDS = 5                      # blocked cross-validation: contiguous stretches of the log held out
+CV_ITERATIONS = 6              # Levenberg-Marquardt steps per fold, from the whole log's time constants
+CANDIDATES = 3                 # sensors per step refined and cross-validated (the best of the grid)
+COLLINEAR = 0.995              # a candidate's multiple correlation with those chosen, said to be near-collinear
+MAX_RELATIVE_UNCERTAINTY = 0.5 # a term whose gain or time constant is known worse than this is not written
+GOOD_RELATIVE = 0.05           # design advice: what a log should pin each term down to
+KEPT_BYTES = 64 * 1024 * 1024  # lagged temperatures a fit keeps
 BLOCK = 30.0                   # lag: time constants per vectorised block (exp(30) stays far from overflow)
 
 
@@ -369,50 +376,81 @@ class Fit:
     rms_after: float
     max_before: float
     max_after: float
-    steps: list[tuple[str, float]]   # the sensors in the order chosen, with the RMS left after each
+    steps: list[tuple[str, float, float]]   # the sensors in the order chosen: RMS left, held-out RMS after each
+    span: float = 0.0                        # s, the log's
+    notes: list[str] = field(default_factory=list)   # collinear candidates, equal sets, terms dropped
+    cv_rms: float = 0.0                      # held-out RMS of the model chosen (blocked cross-validation)
+
+
+class _Kept(dict):
+    """A log's temperatures with the lags a fit computed kept, newest KEPT_BYTES of them: the fit
+    asks for the same ones many times (each candidate's Jacobian changes one column)."""
+
+    def __init__(self, t: np.ndarray, temps: dict[str, np.ndarray]):
+        super().__init__(temps)
+        self.t = t
+        self.kept: dict[tuple[str, float], np.ndarray] = {}
+
+    def lagged(self, sensor: str, tau: float) -> np.ndarray:
+        y = self.kept.get((sensor, tau))
+        if y is None:
+            y = lag(self.t, self[sensor], tau)
+            while self.kept and (len(self.kept) + 1) * y.nbytes > KEPT_BYTES:
+                del self.kept[next(iter(self.kept))]
+            self.kept[sensor, tau] = y
+        return y
 
 
 def _design(t, temps, chosen, taus, reference) -> np.ndarray:
-    cols = [np.ones(len(t))] + [lag(t, temps[s], tau) - reference for s, tau in zip(chosen, taus)]
+    cols = [np.ones(len(t))] + [(temps.lagged(s, tau) if isinstance(temps, _Kept) else lag(t, temps[s], tau))
+                                - reference for s, tau in zip(chosen, taus)]
     return np.stack(cols, axis=1)
 
 
 def _solve(a: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, float]:
     coef, *_ = np.linalg.lstsq(a, d, rcond=None)
-    r = d - a @ coef
-    return coef, float(r @ r)
+    # einsum, not BLAS: a multithreaded BLAS on a busy machine makes these products 100 times slower
+    r = d - np.einsum("ij,j->i", a, coef)
+    return coef, float(np.einsum("i,i->", r, r))
 
 
-def _refine(t, temps, d, chosen, taus, reference, lo, hi, iterations: int = 40):
+def _refine(t, temps, d, chosen, taus, reference, lo, hi, iterations: int = 40, rows=None):
     """Levenberg-Marquardt on the logarithms of the positive time constants (the gains solved at
-    each step): the time constants and the residual sum of squares."""
+    each step, on ``rows`` of the log only when given): the time constants and the residual sum
+    of squares. The lags run over the whole log: the temperatures are known everywhere."""
+    rows = slice(None) if rows is None else rows
+    d = d[rows]
+
+    def design(ts):
+        return _design(t, temps, chosen, ts, reference)[rows]
+
     free = [i for i, tau in enumerate(taus) if tau > 0]
     taus = list(taus)
-    _, rss = _solve(_design(t, temps, chosen, taus, reference), d)
+    _, rss = _solve(design(taus), d)
     if not free:
         return taus, rss
     mu = 1e-3
     h = 1e-5
     for _ in range(iterations):
-        a = _design(t, temps, chosen, taus, reference)
+        a = design(taus)
         coef, rss = _solve(a, d)
-        r = d - a @ coef
+        r = d - np.einsum("ij,j->i", a, coef)
         jac = np.empty((len(d), len(free)))
         for j, i in enumerate(free):
             up = list(taus)
             up[i] = taus[i] * math.exp(h)
-            a_up = _design(t, temps, chosen, up, reference)
+            a_up = design(up)
             c_up, _ = _solve(a_up, d)
-            jac[:, j] = ((d - a_up @ c_up) - r) / h
-        g = jac.T @ r
-        jtj = jac.T @ jac
+            jac[:, j] = ((d - np.einsum("ij,j->i", a_up, c_up)) - r) / h
+        g = np.einsum("ij,i->j", jac, r)
+        jtj = np.einsum("ij,ik->jk", jac, jac)
         improved = False
         for _ in range(12):
             step = np.linalg.solve(jtj + mu * np.diag(np.diag(jtj) + 1e-12), -g)
             trial = list(taus)
             for j, i in enumerate(free):
                 trial[i] = float(np.clip(taus[i] * math.exp(float(np.clip(step[j], -2, 2))), lo, hi))
-            _, rss_trial = _solve(_design(t, temps, chosen, trial, reference), d)
+            _, rss_trial = _solve(design(trial), d)
             if rss_trial < rss:
                 taus, mu, improved = trial, max(mu / 3, 1e-9), True
                 if rss - rss_trial <= 1e-10 * rss:
@@ -421,8 +459,43 @@ def _refine(t, temps, d, chosen, taus, reference, lo, hi, iterations: int = 40):
             mu *= 4
         if not improved:
             break
-    _, rss = _solve(_design(t, temps, chosen, taus, reference), d)
+    _, rss = _solve(design(taus), d)
     return taus, rss
+
+
+def _held_out(t, temps, d, chosen, taus, reference, lo, hi, folds: int = FOLDS) -> np.ndarray:
+    """Blocked cross-validation: the log cut into ``folds`` contiguous stretches of time; each in
+    turn is held out, the model fitted to the others (gains solved, time constants refined from
+    the whole log's) and the held-out stretch's drift predicted. Per stretch, the mean squared
+    error of that prediction."""
+    n = len(d)
+    edges = np.linspace(0, n, folds + 1).astype(int)
+    out = np.empty(folds)
+    for k in range(folds):
+        train = np.r_[0:edges[k], edges[k + 1]:n]
+        ktaus, _ = _refine(t, temps, d, chosen, taus, reference, lo, hi, iterations=CV_ITERATIONS, rows=train)
+        a = _design(t, temps, chosen, ktaus, reference)
+        coef, _ = _solve(a[train], d[train])
+        r = d[edges[k]:edges[k + 1]] - a[edges[k]:edges[k + 1]] @ coef
+        out[k] = float(np.mean(r ** 2))
+    return out
+
+
+def _paired_se(a: np.ndarray, b: np.ndarray) -> float:
+    """Standard error of the mean of the per-stretch differences of two held-out scores."""
+    return float(np.std(a - b, ddof=1) / math.sqrt(len(a)))
+
+
+def _collinearity(a: np.ndarray, j: int) -> float:
+    """Multiple correlation of column ``j`` of a design (after the offset) with its other columns:
+    1 when the others reproduce it exactly (the log cannot tell its gain from theirs)."""
+    x = a[:, j] - a[:, j].mean()
+    others = np.delete(a, j, axis=1)
+    if others.shape[1] < 2 or not np.any(x):
+        return 0.0
+    coef, *_ = np.linalg.lstsq(others, a[:, j], rcond=None)
+    r = a[:, j] - others @ coef
+    return float(math.sqrt(max(0.0, 1.0 - (r @ r) / (x @ x))))
 
 
 def _uncertainties(t, temps, d, chosen, taus, coef, reference) -> np.ndarray:
@@ -445,62 +518,191 @@ def _uncertainties(t, temps, d, chosen, taus, coef, reference) -> np.ndarray:
     return np.sqrt(np.maximum(np.diag(cov), 0.0))
 
 
+def _model(t, temps, d, error, unit, chosen, taus, reference) -> tuple[ErrorModel, np.ndarray]:
+    """The error model at the given sensors and time constants (gains solved), with its
+    uncertainties, and its residual."""
+    a = _design(t, temps, chosen, taus, reference)
+    coef, _ = _solve(a, d)
+    u = _uncertainties(t, temps, d, chosen, taus, coef, reference)
+    tau_u = iter(u[1 + len(chosen):])
+    em = ErrorModel(error, unit, float(coef[0]), offset_u=float(u[0]))
+    for i, (s, tau) in enumerate(zip(chosen, taus)):
+        em.terms.append(Term(s, float(coef[1 + i]), float(tau), float(u[1 + i]),
+                             float(next(tau_u)) if tau > 0 else 0.0))
+    return em, d - a @ coef
+
+
+def unsupported(term: Term, span: float, max_relative: float) -> str | None:
+    """Why the log cannot support a fitted term, or None: its gain or time constant known to
+    worse than ``max_relative`` of its value (standard uncertainty), or a time constant longer
+    than the log."""
+    if not term.gain_u <= max_relative * abs(term.gain):
+        return f"gain {term.gain:.4g} ± {term.gain_u:.2g}"
+    if term.time_constant > span:
+        return f"time constant {term.time_constant:.4g} s is longer than the log ({span:.4g} s)"
+    if term.time_constant > 0 and not term.time_constant_u <= max_relative * term.time_constant:
+        return f"time constant {term.time_constant:.4g} ± {term.time_constant_u:.2g} s"
+    return None
+
+
+def identifiability(term: Term, span: float) -> str:
+    """How well the log pins down a term's time constant, in words."""
+    if term.time_constant == 0:
+        return "no lag"
+    rel = term.time_constant_u / term.time_constant
+    cover = f"{span / term.time_constant:.3g} time constants in the log"
+    if rel <= 0.05 and term.time_constant <= span / 3:
+        return f"identified (± {100 * rel:.2g} %, {cover})"
+    if rel <= 0.2:
+        return f"weakly identified (± {100 * rel:.2g} %, {cover})"
+    return f"poorly identified (± {100 * rel:.2g} %, {cover})"
+
+
 def fit(log: Log, error: str, sensors: list[str], reference: float = REFERENCE_TEMPERATURE,
-        max_sensors: int = 3, min_improvement: float = 0.1, lags: bool = True, progress=None) -> Fit:
-    """The thermal model of ``error`` from the log: sensors chosen greedily among ``sensors`` while
-    each new one lowers the RMS residual by at least ``min_improvement`` (relative)."""
+        max_sensors: int = 3, min_improvement: float = 0.1, lags: bool = True, progress=None,
+        max_relative: float = MAX_RELATIVE_UNCERTAINTY) -> Fit:
+    """The thermal model of ``error`` from the log. Sensors are added one at a time (each
+    candidate's time constants refined together with those chosen) while the one that predicts
+    held-out stretches of the log best (blocked cross-validation) improves that prediction by
+    more than its standard error, lowers the RMS residual by ``min_improvement`` (relative) and
+    passes Schwarz's criterion. Terms the log cannot support (``unsupported``) are then taken
+    out, one at a time, worst first: a time constant by writing the term without a lag when that
+    fits as well, else the whole term."""
     t, d = log.t, log.drift[error]
-    temps = log.temperatures
-    duration = float(t[-1] - t[0])
+    temps = _Kept(t, log.temperatures)
+    unit = log.drift_units[error]
+    n = len(d)
+    span = float(t[-1] - t[0])
     lo = max(float(np.median(np.diff(t))), 1e-3)
-    hi = min(10 * duration, MAX_TIME_CONSTANT)
+    hi = min(10 * span, MAX_TIME_CONSTANT)
     grid = [0.0] + (list(np.geomspace(lo, hi, 24)) if lags and hi > lo else [])
     rms0 = float(np.sqrt(np.mean((d - d.mean()) ** 2)))
     if not rms0 > 0:
-        raise ChaincompError(f"{error}: the drift is constant ({float(d[0]):g} {log.drift_units[error].name}): "
-                             "nothing to fit", log.path)
+        raise ChaincompError(f"{error}: the drift is constant ({float(d[0]):g} {unit.name}): nothing to fit",
+                             log.path)
+    say = progress or (lambda text: None)
+    notes: list[str] = []
+
+    def note(text: str) -> None:   # for the report (progress tells the steps as they happen)
+        notes.append(text)
+
     # a sensor that does not vary (below any sensor's resolution) explains nothing but rounding
     sensors = [s for s in dict.fromkeys(sensors) if np.ptp(temps[s]) > 1e-6]
     chosen: list[str] = []
     taus: list[float] = []
     rss = float(np.sum((d - d.mean()) ** 2))
+    score = _held_out(t, temps, d, [], [], reference, lo, hi)
     steps = []
     while len(chosen) < min(max_sensors, len(sensors)) and rss > 0:
-        best = None
-        for s in sensors:
+        base = _design(t, temps, chosen, taus, reference)
+        ranked = []
+        for s in sensors:   # each sensor at its best time constant of the grid, the others held
             if s in chosen:
                 continue
-            for tau in grid:
-                _, r = _solve(_design(t, temps, chosen + [s], taus + [tau], reference), d)
-                if best is None or r < best[0]:
-                    best = (r, s, tau)
-        _, s, tau = best
-        new_taus, new_rss = _refine(t, temps, d, chosen + [s], taus + [tau], reference, lo, hi)
-        n = len(d)
-        # Schwarz's criterion (BIC): a sensor adds a gain and a time constant, and must lower
-        # n ln(RSS) by more than 2 ln(n); and it must lower the RMS by min_improvement
-        if n * math.log(rss / max(new_rss, 1e-300 * rss)) <= 2 * math.log(n) or \
+            best = min((_solve(np.column_stack([base, temps.lagged(s, tau) - reference]), d)[1], tau) for tau in grid)
+            ranked.append((best[0], s, best[1]))
+        trials = []
+        for _, s, tau in sorted(ranked)[:CANDIDATES]:
+            new_taus, new_rss = _refine(t, temps, d, chosen + [s], taus + [tau], reference, lo, hi)
+            a = _design(t, temps, chosen + [s], new_taus, reference)
+            trials.append({"sensor": s, "taus": new_taus, "rss": new_rss, "collinear": _collinearity(a, a.shape[1] - 1),
+                           "score": _held_out(t, temps, d, chosen + [s], new_taus, reference, lo, hi)})
+        trials.sort(key=lambda c: c["score"].mean())
+        best = trials[0]
+        found = []   # said of the step if it is taken
+        # the same held-out prediction within its standard error: the simpler is preferred,
+        # a time constant inside the log's span before one beyond it
+        equal = [c for c in trials[1:] if c["score"].mean() - best["score"].mean() <= _paired_se(c["score"], best["score"])]
+        if equal:
+            tied = [best] + equal
+            inside = [c for c in tied if c["taus"][-1] <= span]
+            best = inside[0] if inside else best
+            found.append(f"{', '.join(c['sensor'] for c in tied)} predict held-out stretches equally well (within "
+                         f"the standard error): taking {best['sensor']} (time constant {best['taus'][-1]:.4g} s, "
+                         f"{'inside' if best['taus'][-1] <= span else 'beyond'} the log's span)")
+        if best["collinear"] > COLLINEAR:
+            found.append(f"{best['sensor']} lagged {best['taus'][-1]:.4g} s is near-collinear with "
+                         f"{', '.join(chosen) or 'the offset'} (multiple correlation {best['collinear']:.4f}): the "
+                         "log hardly tells their gains apart")
+        gain = float(np.mean(score - best["score"]))
+        se = _paired_se(score, best["score"])
+        new_rss = best["rss"]
+        # held-out: better by more than its standard error; in-sample: Schwarz's criterion (a
+        # gain and a time constant must lower n ln(RSS) by more than 2 ln(n)) and min_improvement
+        if not gain > se or n * math.log(rss / max(new_rss, 1e-300 * rss)) <= 2 * math.log(n) or \
                 math.sqrt(new_rss) > (1 - min_improvement) * math.sqrt(rss):
+            if chosen and gain > 0:
+                say(f"{error}: {best['sensor']} not taken: held-out RMS {math.sqrt(score.mean()):.4g} -> "
+                    f"{math.sqrt(best['score'].mean()):.4g}, within the standard error or below --min-improvement")
             break
-        chosen, taus, rss = chosen + [s], new_taus, new_rss
-        steps.append((s, math.sqrt(rss / len(d))))
-        if progress:
-            progress(f"{error}: + {s} (time constant {taus[-1]:.4g} s): RMS left {math.sqrt(rss / len(d)):.4g}")
-    a = _design(t, temps, chosen, taus, reference)
-    coef, rss = _solve(a, d)
-    u = _uncertainties(t, temps, d, chosen, taus, coef, reference)
-    tau_u = iter(u[1 + len(chosen):])
-    em = ErrorModel(error, log.drift_units[error], float(coef[0]), offset_u=float(u[0]))
-    for i, (s, tau) in enumerate(zip(chosen, taus)):
-        em.terms.append(Term(s, float(coef[1 + i]), float(tau), float(u[1 + i]),
-                             float(next(tau_u)) if tau > 0 else 0.0))
+        chosen, taus, rss, score = chosen + [best["sensor"]], best["taus"], new_rss, best["score"]
+        notes += found
+        steps.append((best["sensor"], math.sqrt(rss / n), math.sqrt(score.mean())))
+        say(f"{error}: + {best['sensor']} (time constant {taus[-1]:.4g} s): RMS left {math.sqrt(rss / n):.4g}, "
+            f"held-out {math.sqrt(score.mean()):.4g}")
+    while True:   # no term the log cannot support
+        em, residual = _model(t, temps, d, error, unit, chosen, taus, reference)
+        bad = [(i, why) for i, term in enumerate(em.terms) if (why := unsupported(term, span, max_relative))]
+        if not bad:
+            break
+        i, why = max(bad, key=lambda b: _relative(em.terms[b[0]]))
+        term = em.terms[i]
+        if taus[i] > 0 and "gain" not in why:   # the same sensor without a lag, if that fits as well
+            no_lag = taus[:i] + [0.0] + taus[i + 1:]
+            trial, trial_rss = _refine(t, temps, d, chosen, no_lag, reference, lo, hi)
+            trial_em, _ = _model(t, temps, d, error, unit, chosen, trial, reference)
+            if n * math.log(trial_rss / max(float(residual @ residual), 1e-300)) <= math.log(n) and \
+                    unsupported(trial_em.terms[i], span, max_relative) is None:
+                note(f"{term.sensor}: {why}: the log cannot support it; written without a lag (it fits as well)")
+                taus = trial
+                continue
+        note(f"{term.sensor}: {why}: the log cannot support it; term dropped")
+        chosen, taus = chosen[:i] + chosen[i + 1:], taus[:i] + taus[i + 1:]
+        if chosen:
+            taus, _ = _refine(t, temps, d, chosen, taus, reference, lo, hi)
     for term in em.terms:   # what a model file can hold (and the daemon takes)
         if not abs(term.gain) <= MAX_GAIN:
-            raise ChaincompError(f"{error}: the fitted gain on {term.sensor} is {term.gain:.3g} {em.unit.name}/K, beyond "
+            raise ChaincompError(f"{error}: the fitted gain on {term.sensor} is {term.gain:.3g} {unit.name}/K, beyond "
                                  f"{MAX_GAIN:g}: the sensor hardly varies over the log", log.path)
-    residual = d - a @ coef
+    cv = _held_out(t, temps, d, chosen, taus, reference, lo, hi) if chosen else score
     return Fit(em, rms0, float(np.sqrt(np.mean(residual ** 2))), float(np.max(np.abs(d - d.mean()))),
-               float(np.max(np.abs(residual))), steps)
+               float(np.max(np.abs(residual))), steps, span, notes, math.sqrt(float(cv.mean())))
+
+
+def _relative(term: Term) -> float:
+    """A term's worst relative standard uncertainty (gain or time constant)."""
+    rel = term.gain_u / abs(term.gain) if term.gain else math.inf
+    if term.time_constant > 0:
+        rel = max(rel, term.time_constant_u / term.time_constant)
+    return rel
+
+
+def advice(f: Fit) -> list[str]:
+    """What log would pin down what this fit leaves uncertain: from each term's relative
+    uncertainties and time constant against the log's span. Uncertainties shrink about as one
+    over the square root of the informative log's length."""
+    out = []
+    for term in f.model.terms:
+        rel = _relative(term)
+        if term.time_constant > f.span / 3:
+            out.append(f"{term.sensor}'s time constant ({term.time_constant:.4g} s) is more than a third of the log "
+                       f"({f.span:.4g} s): a log of at least 5 time constants ({5 * term.time_constant / 3600:.3g} h), "
+                       "e.g. a cool-down that long after a step in spindle duty, would pin it down.")
+        elif rel > GOOD_RELATIVE:
+            longer = (rel / GOOD_RELATIVE) ** 2
+            out.append(f"{term.sensor} is known to ± {100 * rel:.2g} %: about {longer:.2g} times this log "
+                       f"({longer * f.span / 3600:.3g} h) of the same kind, or a step in spindle duty held "
+                       f"{5 * max(term.time_constant, 1.0) / 3600:.3g} h and a cool-down as long, would bring it "
+                       f"to ± {100 * GOOD_RELATIVE:.0f} %.")
+    if any("dropped" in n for n in f.notes):
+        out.append("A term was dropped: a longer cool-down (5 times the slowest time constant the machine may "
+                   "have), or a step in spindle duty that moves its sensor apart from the others, would show "
+                   "whether it is there.")
+    if any("near-collinear" in n or "equally well" in n for n in f.notes):
+        out.append("Sensors that move together are told apart by a log in which they do not: another day's "
+                   "hall climate, or a spindle duty step followed by a long stop.")
+    return out or [f"The log pins down every term to ± {100 * GOOD_RELATIVE:.0f} % or better."]
+
 
 
 # ----------------------------------------------------------------------------- simulation
@@ -527,6 +729,7 @@ CYCLES = {
     "varied": [(0.7, 7200), (0.0, 3600), (1.0, 5400), (0.2, 3600), (0.0, 7200)],
 }
 # the hall: 20 degC and a sum of slow swings (K amplitude, s period), phases drawn from the seed
+# (simulate-thermal --hall sets others)
 HALL = (20.0, [(1.0, 86400.0), (0.6, 14400.0), (0.4, 5400.0), (0.2, 2700.0)])
 
 
@@ -547,8 +750,33 @@ def parse_cycle(text: str) -> list[tuple[float, float]]:
     return out
 
 
+def parse_hall(text: str) -> list[tuple[float, float]]:
+    """The hall's swings: 'default' or AMPLITUDE:PERIOD,... (K, s), e.g. 2:86400,1:7200."""
+    if text == "default":
+        return HALL[1]
+    out = []
+    for part in text.split(","):
+        bits = part.split(":")
+        if len(bits) != 2 or not all(_DECIMAL.fullmatch(b.strip()) for b in bits):
+            raise ChaincompError(f"--hall: expected default or AMPLITUDE:PERIOD,... (K, s), e.g. 2:86400,1:7200, "
+                                 f"got {part!r}")
+        amplitude, period = float(bits[0]), float(bits[1])
+        if not 0 <= amplitude <= 20 or not 60 <= period <= 1e7:
+            raise ChaincompError(f"--hall: {part!r}: the amplitude is from 0 to 20 K, the period from 60 to 1e7 s")
+        out.append((amplitude, period))
+    return out
+
+
+def sensors_with_lags(scale: float) -> list[Sensor]:
+    """The simulated sensors with each of their own time constants times ``scale`` (another
+    machine's structure: the true model's lags are not scaled)."""
+    return [replace(s, time_constant=s.time_constant * scale, ambient_lag=s.ambient_lag * scale)
+            for s in DEFAULT_SENSORS]
+
+
 def simulate(model: ThermalModel, sensors: list[Sensor], cycle: list[tuple[float, float]], rate: float,
-             temperature_noise: float, drift_noise: float, seed: int, start: float = 0.0):
+             temperature_noise: float, drift_noise: float, seed: int, start: float = 0.0,
+             hall: list[tuple[float, float]] | None = None):
     """Times, temperatures and drift (each error in its model's unit) of a machine following
     ``model``, run through ``cycle``. The truth is computed on a step 10 times finer than the
     log's (fewer on a long log: at most SIMULATION_POINTS) and then sampled, so that a fit does
@@ -562,7 +790,7 @@ def simulate(model: ThermalModel, sensors: list[Sensor], cycle: list[tuple[float
     duty = np.array([d for d, _ in cycle] + [cycle[-1][0]])[np.clip(np.searchsorted(edges, tf, side="right") - 1,
                                                                    0, len(cycle))]
     rng = np.random.default_rng(seed)
-    mean, swings = HALL
+    mean, swings = HALL[0], HALL[1] if hall is None else hall
     hall = mean + sum(a * np.sin(2 * np.pi * tf / p + rng.uniform(0, 2 * np.pi)) for a, p in swings)
     truth = {}
     for s in sensors:
