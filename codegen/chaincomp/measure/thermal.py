@@ -55,6 +55,7 @@ CANDIDATES = 3                 # sensors per step refined and cross-validated (t
 COLLINEAR = 0.995              # a candidate's multiple correlation with those chosen, said to be near-collinear
 MAX_RELATIVE_UNCERTAINTY = 0.5 # a term whose gain or time constant is known worse than this is not written
 GOOD_RELATIVE = 0.05           # design advice: what a log should pin each term down to
+NOISE_DRAWS = 100              # draws of the sensors' reading noise, for the uncertainties
 KEPT_BYTES = 64 * 1024 * 1024  # lagged temperatures a fit keeps
 BLOCK = 30.0                   # lag: time constants per vectorised block (exp(30) stays far from overflow)
 
@@ -498,9 +499,20 @@ def _collinearity(a: np.ndarray, j: int) -> float:
     return float(math.sqrt(max(0.0, 1.0 - (r @ r) / (x @ x))))
 
 
+def reading_noise(u: np.ndarray) -> float:
+    """A sensor's reading noise (standard deviation, K) from its second differences, which a
+    temperature's own curvature between readings hardly moves (the median: robust to a step)."""
+    d2 = np.diff(np.asarray(u, float), 2)
+    if len(d2) < 3:
+        return 0.0
+    return 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6)
+
+
 def _uncertainties(t, temps, d, chosen, taus, coef, reference) -> np.ndarray:
     """Standard uncertainties of (offset, gains, time constants) from the Jacobian of the full
-    model at the solution, for white noise on the drift readings."""
+    model at the solution: white noise on the drift readings, plus each chosen sensor's reading
+    noise carried through its lag (NOISE_DRAWS draws of it, linearised: the first reading's
+    noise stays in a long lag for hours, as large as the drift's noise averaged over them)."""
     a = _design(t, temps, chosen, taus, reference)
     r = d - a @ coef
     cols = [a[:, 0]] + [a[:, 1 + i] for i in range(len(chosen))]
@@ -512,9 +524,17 @@ def _uncertainties(t, temps, d, chosen, taus, coef, reference) -> np.ndarray:
     dof = max(len(d) - jac.shape[1], 1)
     s2 = float(r @ r) / dof
     try:
-        cov = s2 * np.linalg.inv(jac.T @ jac)
+        inverse = np.linalg.inv(jac.T @ jac)
     except np.linalg.LinAlgError:
         return np.full(jac.shape[1], math.inf)
+    cov = s2 * inverse
+    sigma = [reading_noise(temps[s]) for s in chosen]
+    if chosen and any(sigma):
+        rng = np.random.default_rng(0)   # the same uncertainties on every run
+        project = inverse @ jac.T
+        shifts = np.array([project @ sum(coef[1 + i] * lag(t, rng.normal(0.0, sigma[i], len(t)), taus[i])
+                                         for i in range(len(chosen))) for _ in range(NOISE_DRAWS)])
+        cov = cov + shifts.T @ shifts / NOISE_DRAWS
     return np.sqrt(np.maximum(np.diag(cov), 0.0))
 
 
@@ -612,7 +632,8 @@ def fit(log: Log, error: str, sensors: list[str], reference: float = REFERENCE_T
         found = []   # said of the step if it is taken
         # the same held-out prediction within its standard error: the simpler is preferred,
         # a time constant inside the log's span before one beyond it
-        equal = [c for c in trials[1:] if c["score"].mean() - best["score"].mean() <= _paired_se(c["score"], best["score"])]
+        equal = [c for c in trials[1:]
+                 if c["score"].mean() - best["score"].mean() <= _paired_se(c["score"], best["score"])]
         if equal:
             tied = [best] + equal
             inside = [c for c in tied if c["taus"][-1] <= span]
