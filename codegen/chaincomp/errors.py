@@ -25,3 +25,8 @@ class ChaincompError(Exception):
 class NoAnswer(ChaincompError):
     """The input was read and is valid, but gives no answer (a fit that does not converge):
     exit 4, apart from bad input (2)."""
+
+
+class OutsideLimit(ChaincompError):
+    """A result outside a limit the user set (identify --strict: a fit that does not fit):
+    exit 1."""

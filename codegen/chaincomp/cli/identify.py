@@ -5,10 +5,10 @@ from __future__ import annotations
 import re
 import sys
 
-from ..errors import ChaincompError, NoAnswer
+from ..errors import ChaincompError, NoAnswer, OutsideLimit
 from ..measure.calibration import _write_loadable, slide_axis
-from ..measure.identify import (COMPONENTS, DIRECTIONS, MAX_SMOOTH, ROTATION, Vary, identify, outside_limits, params_yaml,
-                        read_table, to_json, to_text)
+from ..measure.identify import (COMPONENTS, DIRECTIONS, MAX_SMOOTH, ROTATION, Vary, identify, misfit, outside_limits,
+                        params_yaml, read_table, to_json, to_text)
 from ..measure.protocol import check_errors
 from ..model.display import add_units_argument
 from ..model.machine import Symbol
@@ -168,6 +168,10 @@ def add_parser(sub) -> None:
     p.add_argument("-o", "--output", metavar="params.yaml",
                    help="write the identified values as a params file (for eval and chaincompd); "
                         "never one of the inputs")
+    p.add_argument("--strict", action="store_true",
+                   help="with --sigma, refuse (exit 1, nothing written) a fit whose chi2/dof lies beyond its "
+                        "99.9%% quantile (residuals larger than the uncertainties allow), which otherwise "
+                        "is a warning naming the set-ups with the largest residuals")
     add_units_argument(p)
     add_format_argument(p, what="report format")
     p.set_defaults(run=run)
@@ -195,6 +199,11 @@ def run(args) -> int:
         raise NoAnswer(f"the fit did not converge in {fit.iterations} Gauss-Newton iterations "
                              f"(rms residual {fit.rms / UNITS[machine.length_unit].to_internal:.4g} "
                              f"{machine.length_unit}); no values given{hint}", args.measurements)
+    problem = misfit(fit)
+    if problem is not None:
+        if args.strict:
+            raise OutsideLimit(f"{problem}; --strict: no values given", args.measurements)
+        print(f"chaincomp identify: warning: {problem}", file=sys.stderr)
     print(json_text(to_json(fit, args.measurements)) if args.format == "json"
           else to_text(fit, args.measurements, args.units))
     if args.output:

@@ -12,7 +12,7 @@ import sys
 import numpy as np
 
 from .. import __version__
-from ..errors import ChaincompError, NoAnswer
+from ..errors import ChaincompError, NoAnswer, OutsideLimit
 from ..escape import one_line
 # Each verb's module, in the order of the top-level help. A command imports only its own verb's
 # module (every module pulls in its own libraries: all of them together cost ~0.4 s per run).
@@ -98,6 +98,8 @@ def main(argv: list[str] | None = None) -> int:
         # check their results and name what is not finite instead
         with np.errstate(all="ignore"):
             return args.run(args) or 0
+    except OutsideLimit as exc:
+        return _failed(args, "outside limit", f"error: {one_line(exc)}", 1)
     except NoAnswer as exc:
         return _failed(args, "no answer", f"error: {one_line(exc)}", 4)
     except ChaincompError as exc:

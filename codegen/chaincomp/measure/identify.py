@@ -605,6 +605,42 @@ class Fit:
     smooth: float = 0.0
     notes: list[str] = field(default_factory=list)
     rms_orientation: float = math.nan      # rms of the orientation residual's components (rad; nan: not measured)
+    worst: list[tuple[int, float]] = field(default_factory=list)   # (CSV line, |weighted residual|), largest first
+
+
+MISFIT_PROBABILITY = 0.999   # chi2/dof beyond this quantile of its distribution: the fit does not fit
+
+
+def chi2_quantile(probability: float, dof: float) -> float:
+    """The chi-square distribution's quantile: x with P(X <= x) = probability for ``dof``
+    degrees of freedom, from the regularized incomplete gamma function (mpmath), by bisection."""
+    import mpmath
+
+    def upper(x):  # P(X > x)
+        return float(mpmath.gammainc(dof / 2, 0, x / 2, regularized=True))
+    lo, hi = 0.0, max(1.0, dof)
+    while upper(hi) < probability:
+        hi *= 2
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if upper(mid) < probability else (lo, mid)
+        if hi - lo <= 1e-12 * hi:
+            break
+    return 0.5 * (lo + hi)
+
+
+def misfit(fit: Fit) -> str | None:
+    """With --sigma, a chi2/dof beyond its MISFIT_PROBABILITY quantile says the residuals are larger
+    than the given uncertainties allow: the words saying so and naming the worst set-ups; else None."""
+    if fit.chi2 is None or not fit.dof > 0:
+        return None
+    limit = chi2_quantile(MISFIT_PROBABILITY, fit.dof) / fit.dof
+    if fit.chi2 <= limit:
+        return None
+    worst = ", ".join(f"line {line} ({r:.3g} sigma)" for line, r in fit.worst)
+    return (f"chi2/dof {fit.chi2:.3g} is beyond its {MISFIT_PROBABILITY:.1%} quantile for {fit.dof:.4g} degrees of "
+            f"freedom ({limit:.3g}): the residuals are larger than --sigma allows (a sigma too small, outliers, "
+            f"or an error the model lacks); the largest residuals: {worst}")
 
 
 def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_iterations: int = 50,
@@ -752,12 +788,16 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     def rms(sel):
         return math.sqrt(float(np.mean(raw[sel] ** 2))) if sel.any() else math.nan
 
+    # each set-up's weighted residual (its coordinates in y = obs[mask] are row-major), largest first
+    per_setup = np.sqrt(np.bincount(np.nonzero(mask)[0], weights=r ** 2, minlength=len(table.lines)))
+    worst = [(table.lines[i], float(per_setup[i])) for i in np.argsort(-per_setup, kind="stable")[:3]]
+
     fit = Fit(machine, free, [s.name for s in machine.errors if s.name in assume_zero],
               {names[j]: float(p[j]) for j in ident}, {names[j]: float(std[j]) for j in ident},
               unidentifiable, suggested, rank, float(sv[0] / sv[-1]), corr,
               rms(kinds == 0), m, len(table.lines), dof, iterations, converged, measured,
               params, varies, ranges, minimal, redundant, carried, sig,
-              rss / dof if sig else None, rms(kinds == 1), smooth, notes, rms(kinds == 2))
+              rss / dof if sig else None, rms(kinds == 1), smooth, notes, rms(kinds == 2), worst)
     if not all(math.isfinite(v) for v in [*fit.estimates.values(), *fit.uncertainties.values(),
                                           fit.condition, dof]):
         raise nonfinite
@@ -960,7 +1000,7 @@ def to_json(fit: Fit, source: str) -> dict:
         "direction_unit": "rad",
         "rms_orientation_residual": None if math.isnan(fit.rms_orientation) else fit.rms_orientation,
         "sigma": {c: {"value": v, "unit": "mm" if c in COMPONENTS else "rad"} for c, v in fit.sigma.items()},
-        "chi2_per_dof": fit.chi2, "smooth": fit.smooth, "notes": fit.notes,
+        "chi2_per_dof": fit.chi2, "misfit": misfit(fit), "smooth": fit.smooth, "notes": fit.notes,
         "degrees_of_freedom": fit.dof, "iterations": fit.iterations, "converged": fit.converged,
     }
 

@@ -19,6 +19,7 @@ import pytest
 
 from chaincomp import load_machine, load_params
 from chaincomp.cli.main import main
+from chaincomp.measure.identify import chi2_quantile
 
 from arm_models import block, rx, ry, rz, tr
 from helpers import machine_path
@@ -277,6 +278,41 @@ def test_noisy_five_axis_estimates_within_their_uncertainty(tmp_path, capsys, fi
     for name in kept:
         u = declared_value(m, doc, name, "uncertainty")
         assert 0 < u and abs(declared_value(m, doc, name) - truth[name]) <= 4.5 * u, name
+
+
+def test_chi2_quantile_against_the_table():
+    """The 99.9 % points of chi-square (NIST/SEMATECH e-Handbook, table 1.3.6.7.4)."""
+    for dof, table in ((1, 10.828), (5, 20.515), (10, 29.588), (30, 59.703), (100, 149.449)):
+        assert chi2_quantile(0.999, dof) == pytest.approx(table, abs=1e-3)
+
+
+def test_a_fit_that_does_not_fit_is_named(tmp_path, capsys, five_setups):
+    """1 um of noise: with --sigma 1um chi2/dof is about 1 and nothing is said; told 0.2 um, chi2/dof
+    is about 25, beyond its 99.9 % quantile: a warning (and the JSON's misfit) naming the set-ups with
+    the largest residuals, and under --strict exit 1 with nothing written. One set-up 30 um off is
+    named first."""
+    m, declared, axes, (_, _, kept) = five_setups
+    rng = np.random.default_rng(15)
+    truth = injected(m, rng, kept)
+    coords = five_axis_points(axes, in_internal(m, truth)) + 1e-3 * rng.standard_normal((40, 3))
+    write_csv(tmp_path / "meas.csv", m, declared, coords)
+    zero = ["--assume-zero", ",".join(s.name for s in m.errors if s.name not in kept)]
+    rc, out, err = cli(capsys, "identify", FIVE, tmp_path / "meas.csv", *zero, "--sigma", "1um", "--format", "json")
+    assert rc == 0 and "warning" not in err and json.loads(out)["misfit"] is None, err
+    rc, out, err = cli(capsys, "identify", FIVE, tmp_path / "meas.csv", *zero, "--sigma", "0.2um", "--format", "json")
+    doc = json.loads(out)
+    assert rc == 0 and 15 < doc["chi2_per_dof"] < 40 and "beyond its 99.9% quantile" in doc["misfit"]
+    assert err.count("warning: chi2/dof") == 1 and "the largest residuals: line " in err
+    rc, out, err = cli(capsys, "identify", FIVE, tmp_path / "meas.csv", *zero, "--sigma", "0.2um", "--strict",
+                       "-o", tmp_path / "p.yaml")
+    assert rc == 1 and "--strict: no values given" in err and not (tmp_path / "p.yaml").exists()
+    # an outlier: one set-up 30 um off in x is the first named
+    coords[7, 0] += 0.030
+    write_csv(tmp_path / "meas.csv", m, declared, coords)
+    rc, out, err = cli(capsys, "identify", FIVE, tmp_path / "meas.csv", *zero, "--sigma", "1um")
+    lines = (tmp_path / "meas.csv").read_text().splitlines()
+    row7 = next(i for i, text in enumerate(lines) if not text.startswith("#")) + 2 + 7  # header, then rows
+    assert rc == 0 and f"the largest residuals: line {row7} (" in err, err
 
 
 # ----------------------------------------------------------------- a three-axis machine
