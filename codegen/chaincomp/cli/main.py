@@ -55,7 +55,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
         description="Geometric error models of machine tools: derive, evaluate and generate "
                     "compensation code from a machine description. The machine file is the first "
                     "argument of every verb that takes one; 'chaincomp VERB --help' lists its options.",
-        epilog="Exit codes: 0 done, 1 'check' found differences, 2 bad input (one line naming the file, "
+        epilog="Exit codes: 0 done, 1 a result outside a limit ('check' found differences, identify --strict), 2 bad input (one line naming the file, "
                "line and field, or the option), 3 internal error (one line; set CHAINCOMP_DEBUG=1 for the "
                "traceback), 4 no answer (a fit that does not converge), 130 interrupted. With --format json "
                "an error is also one JSON object on stdout: {\"error\": {verb, kind, exit, message}}.")
