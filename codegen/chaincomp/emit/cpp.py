@@ -15,6 +15,7 @@ import sympy as sp
 from sympy.printing.cxx import CXX17CodePrinter
 
 from ..escape import cpp_comment, cpp_string
+from ..model.expressions import sin_cos
 from ..model.machine import ROT_PLANE, Machine, Rotation
 from ..model.units import UNITS
 from ..symbolic.derive import EXPANDED_TERMS_LIMIT, derive
@@ -80,7 +81,7 @@ def exact_pose(machine: Machine, with_errors: bool = True) -> list[sp.Expr]:
     for el in reversed(machine.chain):
         if isinstance(el, Rotation):
             angle = el.angle.xreplace(zero)
-            c, s = sp.cos(angle), sp.sin(angle)
+            s, c = sin_cos(angle)
             i, j = ROT_PLANE[el.axis]
             for v in [p] + dirs:
                 v[i], v[j] = c * v[i] - s * v[j], s * v[i] + c * v[j]

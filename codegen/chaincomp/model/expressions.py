@@ -211,7 +211,46 @@ def _to_sympy(node, table: dict, source: str):
         if args[1] == 0:
             raise ExpressionError(f"division by zero in {_shown(source)}")
         return args[0] / args[1]
-    return getattr(sp, op)(*args)
+    return numeric_constant(getattr(sp, op)(*args))
+
+
+# Digits of a function of a constant evaluated to a number (numeric_constant): past a double's 17.
+CONSTANT_DIGITS = 20
+
+
+def numeric_constant(e):
+    """``e`` as a number (sp.Float of CONSTANT_DIGITS digits) when it is a constant that sympy
+    can only keep as a function application: sin(157079632679/100000000000), cos(3/10),
+    atan(2). Kept exact, each such value became a new generator of the derivation's
+    coefficients, the product of every rotation by a decimal angle (a URDF's 1.5707963268, a
+    calibrated 3.1408) expanded over them and a 7-axis arm did not derive in 300 s (#41).
+    What sympy knows in closed form stays exact: sin(pi/2) = 1, cos(pi/4) = sqrt(2)/2, so a
+    rotation by pi/2 still swaps two axes exactly."""
+    import sympy as sp
+    if e.is_number and not e.is_Number and e.has(sp.Function):
+        return sp.Float(e.evalf(CONSTANT_DIGITS), CONSTANT_DIGITS)
+    return e
+
+
+# A numeric sine or cosine of a rotation below this is 0 (and the other +-1): sin_cos.
+QUARTER_TURN_TOLERANCE = 1e-9
+
+
+def sin_cos(angle):
+    """The sine and cosine of a rotation's angle (sympy): exact where sympy knows them (of a
+    symbol, of pi/2, pi/6), numbers where the angle is a constant sympy does not (numeric_constant).
+    A numeric one below QUARTER_TURN_TOLERANCE is 0 and the other +-1: a URDF's quarter turn
+    written 1.57079632679 (cos 4.9e-12) or 1.570796327 (UR: cos -2e-10) turns as pi/2 does,
+    which moves a point 1 m away by under 1 nm; kept, the tiny factor crossed every
+    component into the other and a Kinova's order-1 derivation held 58 213 terms, not 832.
+    A calibrated angle (a joint roll of 3.1408: sine 8e-4) keeps its value."""
+    import sympy as sp
+    s, c = numeric_constant(sp.sin(angle)), numeric_constant(sp.cos(angle))
+    if s.is_Float and abs(s) < QUARTER_TURN_TOLERANCE:
+        return sp.Integer(0), sp.Integer(1 if c > 0 else -1)
+    if c.is_Float and abs(c) < QUARTER_TURN_TOLERANCE:
+        return sp.Integer(1 if s > 0 else -1), sp.Integer(0)
+    return s, c
 
 
 class Expr:

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import sympy as sp
 
+from ..model.expressions import sin_cos
 from ..model.machine import ROT_PLANE, Machine, Rotation
 from . import series as S
 from .orientation import ROWS as ORIENTATION_ROWS, rotation_vector_series
@@ -134,7 +135,8 @@ def derive(machine: Machine, order: int = 1, htm: bool = False, progress: bool =
             theta0 = el.angle.xreplace(zero)
             delta = taylor(el.angle - theta0)
             delta.pop((), None)
-            steps.append(("rot", el.axis, atoms.atomize(sp.cos(theta0)), atoms.atomize(sp.sin(theta0)), delta))
+            sin0, cos0 = sin_cos(theta0)
+            steps.append(("rot", el.axis, atoms.atomize(cos0), atoms.atomize(sin0), delta))
         else:
             steps.append(("trans", [taylor(v) for v in el.vector]))
     point0 = [taylor(v) for v in machine.tool_point]

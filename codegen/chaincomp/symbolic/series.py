@@ -34,7 +34,7 @@ class Atoms:
         self.atoms: dict[sp.Expr, sp.Symbol] = {}
 
     def atomize(self, expr: sp.Expr) -> sp.Expr:
-        if expr.is_Rational or expr.is_Symbol:
+        if expr.is_Number or expr.is_Symbol:   # a Float too: the ring's rationals take it
             return expr
         if expr.is_Add:
             return sp.Add(*[self.atomize(a) for a in expr.args])
