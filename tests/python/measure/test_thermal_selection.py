@@ -128,3 +128,20 @@ def test_the_hall_and_the_sensor_lags_of_simulate_thermal(tmp_path):
         assert res.returncode == 2 and words in res.stderr and "--hall" in res.stderr, res.stderr
     assert not (tmp_path / "no.csv").exists()
     assert math.isclose(T.sensors_with_lags(3)[1].ambient_lag, 3 * T.DEFAULT_SENSORS[1].ambient_lag)
+
+
+def test_when_every_term_is_unsupported_nothing_is_written(tmp_path):
+    m = machine_path("vmc_xyz")
+    true = _truth(tmp_path / "true.yaml", {"EZZ": [("T_spindle", -1.0, 600.0)]})
+    log = tmp_path / "short.csv"
+    cli("simulate-thermal", m, "--model", true, "-o", log, "--cycle", "0:600,1:6600", "--rate", "0.2")
+    out = tmp_path / "never.yaml"
+    res = run_in_process("thermal", "fit", m, log, "-o", out, "--max-uncertainty", "0.0001")
+    # the fit's progress lines come first on stderr; the error is the last line, and the only one
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert [line for line in lines if "error:" in line] == lines[-1:]
+    for words in (f"chaincomp thermal fit: error: {log}: EZZ: no sensor explains its drift", "T_spindle: gain",
+                  "term dropped", "nothing to write"):
+        assert words in lines[-1], (words, lines[-1])
+    assert not out.exists()
