@@ -227,7 +227,7 @@ def numeric_constant(e):
     What sympy knows in closed form stays exact: sin(pi/2) = 1, cos(pi/4) = sqrt(2)/2, so a
     rotation by pi/2 still swaps two axes exactly."""
     import sympy as sp
-    if e.is_number and not e.is_Number and e.has(sp.Function):
+    if e.is_number and not e.is_Number and e.has(sp.Function) and e.is_real:   # acos(2): refused as not real
         return sp.Float(e.evalf(CONSTANT_DIGITS), CONSTANT_DIGITS)
     return e
 
