@@ -9,7 +9,7 @@ _chaincomp() {
         case "${COMP_WORDS[i]}" in -*) ;; *) verb="${COMP_WORDS[i]}"; break;; esac
     done
     if [[ -z $verb ]]; then
-        words='derive eval generate testvectors protocol identify simulate-measurements simulate-log replay plot check report budget simulate-calibration build lint iso230-2 laser-to-params status import-urdf ballbar export thermal simulate-thermal -h --help --version'
+        words='derive eval generate testvectors protocol identify simulate-measurements simulate-log replay plot check report budget simulate-calibration build lint iso230-2 laser-to-params status import-urdf export-urdf ballbar export thermal simulate-thermal -h --help --version'
     else
         case "$verb" in
         derive)
@@ -41,7 +41,7 @@ _chaincomp() {
           case "$prev" in
             --units) words='people internal';;
             --format) words='text json';;
-            *) words='-h --help --assume-zero --sigma --minimal --prefer --vary --smooth -o --output --units --format --json'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --assume-zero --sigma --minimal --prefer --vary --smooth -o --output --strict --units --format --json'; [[ $cur == -* ]] || return 0;;
           esac;;
         simulate-measurements)
           case "$prev" in
@@ -120,6 +120,11 @@ _chaincomp() {
             --format) words='text json';;
             *) words='-h --help --base --tip --errors --tool-point --tool-direction --tool-reference --name -o --output --format --json'; [[ $cur == -* ]] || return 0;;
           esac;;
+        export-urdf)
+          case "$prev" in
+            --format) words='text json';;
+            *) words='-h --help --base --tip --params -o --output --format --json'; [[ $cur == -* ]] || return 0;;
+          esac;;
         ballbar)
           case "$prev" in
             --plane) words='XY YZ ZX';;
@@ -139,11 +144,11 @@ _chaincomp() {
             --format) words='text json';;
             --format) words='siemens isg';;
             --report) words='text json';;
-            *) words='-h --help -o --output --errors --sensors --max-sensors --min-improvement --no-lag --reference --drift --check --format --json --reference-position --report'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help -o --output --errors --sensors --max-sensors --min-improvement --max-uncertainty --no-lag --reference --drift --check --format --json --reference-position --report'; [[ $cur == -* ]] || return 0;;
           esac;;
         simulate-thermal)
           case "$prev" in
-            *) words='-h --help --model -o --output --cycle --rate --temperature-noise --drift-noise --seed'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --model -o --output --cycle --rate --temperature-noise --drift-noise --hall --sensor-lags --seed'; [[ $cur == -* ]] || return 0;;
           esac;;
         *) return 0;;
         esac

@@ -81,6 +81,9 @@ CASES = [
          lambda i: ["laser-to-params", RUNS, "--machine", FIVE, "--error", "EXX"], "l.yaml"),
     Case("import-urdf", "import-urdf", "--output", lambda i: ["import-urdf", i["urdf"], "--base", "base", "--tip", "tip"],
          "u.yaml"),
+    Case("export-urdf", "export-urdf", "--output",
+         lambda i: ["export-urdf", i["urdf_machine"], i["urdf"], "--base", "base", "--tip", "tip",
+                    "--params", i["urdf_params"]], "c.urdf"),
     Case("ballbar-o", "ballbar", "--output",
          lambda i: ["ballbar", VMC, "--set", "EXX=1", "--plane", "XY", "--radius", "10"], "trace.csv"),
     Case("ballbar-fit-o", "ballbar", "--output", lambda i: ["ballbar", VMC, "--fit", i["trace"]], "fit.yaml"),
@@ -143,13 +146,19 @@ def inputs(base):
     d = os.path.join(base, "inputs")
     os.mkdir(d)
     i = {"meas": f"{d}/meas.csv", "log": f"{d}/a.lcmlog", "trace": f"{d}/trace.csv", "thermal_log": f"{d}/th.csv",
-         "urdf": f"{d}/r.urdf", "library": f"{d}/vmc_xyz.so"}
+         "urdf": f"{d}/r.urdf", "library": f"{d}/vmc_xyz.so", "urdf_machine": f"{d}/u.yaml",
+         "urdf_params": f"{d}/u-params.yaml"}
     cli("simulate-measurements", VMC, "--setups", "random:20", "-o", i["meas"])
     cli("simulate-log", VMC, "--seconds", "0.01", "-o", i["log"])
     cli("ballbar", VMC, "--set", "EXX=1", "--plane", "XY", "--radius", "10", "-o", i["trace"])
     cli("simulate-thermal", VMC, "--model", VMC_THERMAL, "--rate", "0.01", "-o", i["thermal_log"])
     with open(i["urdf"], "w") as f:
         f.write(URDF)
+    cli("import-urdf", i["urdf"], "--base", "base", "--tip", "tip", "--errors", "all", "-o", i["urdf_machine"])
+    from chaincomp.model.machine import load_machine
+    m = load_machine(i["urdf_machine"])
+    with open(i["urdf_params"], "w") as f:
+        f.write(f"machine: {m.name}\nvalues:\n" + "".join(f"  {e.name}: 3 {e.unit.name}\n" for e in m.errors))
     with open(i["library"], "wb") as f:
         f.write(b"\x7fELF stands for the library chaincomp build compiles\n")
     for p in i.values():
@@ -237,8 +246,12 @@ def test_a_named_pipe_is_written_into(base, inputs, no_compile, case):
     reader.start()
     before = s.snapshot()
     proc = cli(*s.argv(inputs), check=False)
+    reader.join(1)
     if reader.is_alive():   # never opened for writing: release the reader
-        os.close(os.open(s.target, os.O_WRONLY | os.O_NONBLOCK))
+        try:
+            os.close(os.open(s.target, os.O_WRONLY | os.O_NONBLOCK))
+        except OSError:     # ENXIO: no reader any more, it has just read to the end
+            pass
     reader.join(10)
     assert proc.returncode == 0, proc.stderr
     assert stat.S_ISFIFO(os.lstat(s.target).st_mode), "the pipe was replaced"
