@@ -14,8 +14,9 @@ first reading (the machine soaked at its start temperature):
 
 ``fit`` finds the offset, gains and time constants from a log of temperatures and measured
 drift (variable projection: the gains by least squares at given time constants, the time
-constants by Levenberg-Marquardt on their logarithms), choosing a small subset of the logged
-sensors greedily; ``simulate`` writes such a log from a known model."""
+constants by Levenberg-Marquardt on their logarithms), adding the logged sensors one at a time
+by how well they predict held-out stretches of the log, and writing no term the log cannot
+support; ``simulate`` writes such a log from a known model."""
 
 from __future__ import annotations
 
