@@ -130,7 +130,7 @@ def lint(machine: Machine, model: ExactModel | None = None) -> list[Finding]:
         else:
             message = f"axis {s.name} never moves the {what} (line {line})"
         findings.append(Finding("warning", message, s.line, f"symbols.{s.name}"))
-    return _limit_units(machine) + findings + _parallel_axes(machine)
+    return _limit_units(machine) + findings + _parallel_axes(machine) + _exact_irrational_angles(machine)
 
 
 # limits in rad written for an axis declared in deg (or the other way round): pi/2, pi, 2 pi
@@ -198,4 +198,32 @@ def _parallel_in_branch(machine: Machine, joints: dict, at: dict) -> list[Findin
                                       f"rad, line {line}): its d error {name} is ill-conditioned; drop it and add "
                                       f"Hayati's {{beta: 0, errors: auto}} after joint {first}",
                            machine.symbol(name).line, f"symbols.{name}"))
+    return out
+
+
+def _exact_irrational_angles(machine: Machine) -> list[Finding]:
+    """A rotation by a constant whose sine and cosine sympy keeps as exact irrationals (pi/4:
+    sqrt(2)/2; pi/6: sqrt(3)/2). The derivation carries them as atoms, which the fast printer
+    of derive and report does not take: they print through sympy, Franka's Panda (its hand
+    turned by -pi/4) at order 2 in 35 s instead of 2 s. A decimal angle, or one whose sine and
+    cosine are rational (pi/2, pi), is a number (expressions.sin_cos)."""
+    import sympy as sp
+
+    from ..model.expressions import sin_cos
+    zero = {s.sym: sp.Integer(0) for s in machine.errors}
+    out = []
+    for el in machine.tool_chain + machine.workpiece_chain:
+        if not isinstance(el, Rotation):
+            continue
+        angle = el.angle.xreplace(zero)
+        if not angle.is_number:
+            continue
+        exact = [v for v in sin_cos(angle) if not (v.is_Rational or v.is_Float)]
+        if exact:
+            out.append(Finding("warning", f"the rotation by {el.expr.source} has the exact sine and cosine "
+                                          f"{', '.join(map(sp.sstr, sin_cos(angle)))}: derive and report print "
+                                          "formulas holding them through sympy, tens of times slower (Franka's Panda "
+                                          "with pi/4 at order 2: 35 s, with 0.785398163397448: 2 s); write the "
+                                          "angle as a decimal if its exact form does not matter",
+                               el.line, "chain"))
     return out
