@@ -55,7 +55,8 @@ void Compensator::count_gap(std::int64_t seq) noexcept {
 
 // The stream rule (stream_order.hpp) on seq; a command continues a restart run when its utime
 // does not go back and each axis steps within max_step from the run's last command.
-bool Compensator::seq_ok(const Command& in, const std::array<double, kMaxAxes>& cmd, Reject* why) noexcept {
+bool Compensator::seq_ok(const Command& in, const std::array<double, kMaxAxes>& cmd, bool& restarting,
+                         Reject* why) noexcept {
   bool continues = in.utime >= run_utime_;
   for (int i = 0; i < n_; ++i) continues = continues && std::abs(cmd[i] - run_axes_[i]) <= config_.axes[i].max_step;
   const StreamOrder::Verdict v = order_.judge(in.seq, continues);
@@ -65,7 +66,7 @@ bool Compensator::seq_ok(const Command& in, const std::array<double, kMaxAxes>& 
   run_axes_ = cmd;
   if (v == StreamOrder::Verdict::kSame) return reject(Reject::kDuplicateSeq, why);
   if (v != StreamOrder::Verdict::kRestart) return reject(Reject::kOutOfOrderSeq, why);
-  ++counters_.stream_restarts;
+  restarting = true;   // counted when the command is taken
   top_seq_ = in.seq;
   seen_axes_ = before;  // the run's own last step is the one the step check sees
   have_seen_ = true;
@@ -127,7 +128,8 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
       flags |= kFlagClampedInput;
     }
   }
-  if (!seq_ok(in, cmd, why)) return false;
+  bool restarting = false;
+  if (!seq_ok(in, cmd, restarting, why)) return false;
   // A jump is measured from the previous valid command, accepted or not: a lone spike is
   // rejected (and the command after it), while a stream that really moved on after a gap
   // is followed again from its second command instead of being rejected for ever.
@@ -246,6 +248,7 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
 
   have_last_ = true;
   order_.accept(in.seq);
+  if (restarting) ++counters_.stream_restarts;
   last_utime_ = in.utime;
   last_correction_ = correction;
   return true;

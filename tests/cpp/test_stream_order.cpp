@@ -119,6 +119,15 @@ TEST_CASE("the stream rule: a jump back, a huge jump forward, the extremes, a re
   CHECK(take(o, INT64_MIN + 4));
   CHECK(take(o, INT64_MIN + 5));
   (void)top;
+  // a restart refused by another check (another sensor of its message, a command's step): the
+  // run holds, and the next message in order is taken
+  o.reset();
+  CHECK(take(o, 100));
+  for (int k = 1; k <= 4; ++k) CHECK(o.judge(k) == V::kBehind);
+  CHECK(o.judge(5) == V::kRestart);   // not accepted
+  CHECK(o.judge(6) == V::kRestart);
+  o.accept(6);
+  CHECK(o.judge(7) == V::kNext);
   CHECK(chaincomp::ahead_by(INT64_MIN, INT64_MAX) == UINT64_MAX);
   CHECK(chaincomp::ahead_by(INT64_MAX, INT64_MIN) == 0);
 }

@@ -44,7 +44,8 @@ def main(random_count: int) -> int:
         "step_too_large": [h.command(seq + 1, path[1] + np.array([6.0, 0, 0, 0, 0]))],
         "duplicate_seq": [h.command(seq, path[1])],
         "out_of_order_seq": [h.command(seq - 1, path[1])],
-        "undecodable": [b"", b"\x00" * 3, b"not an lcm message at all"],
+        # (a valid command with one byte more: refused whole, as updates and readings are)
+        "undecodable": [b"", b"\x00" * 3, b"not an lcm message at all", h.command(seq + 1, path[1]) + b"\x00"],
     }
     for reason, payloads in bad.items():
         for p in payloads:

@@ -30,14 +30,17 @@ def require_namespace() -> None:
 
 
 def start_daemon(machine: str, params: str, config: str, preload: bool = False,
-                 model: str | None = None, extra: tuple[str, ...] = ()) -> subprocess.Popen:
-    """chaincompd, once it says ready; the lines of a model build (and warnings) before that
-    are printed (the warnings kept in proc.warnings); its instance id is proc.instance."""
+                 model: str | None = None, extra: tuple[str, ...] = (),
+                 wrapper: tuple[str, ...] = ()) -> subprocess.Popen:
+    """chaincompd (under `wrapper`, e.g. valgrind, when given), once it says ready; the lines
+    of a model build (and warnings) before that are printed (the warnings kept in
+    proc.warnings); its instance id is proc.instance."""
     env = dict(os.environ)
     if preload:
         env["LD_PRELOAD"] = os.path.join(BUILD, "runtime", "libchaincomp_alloc_counter.so")
     cmd = [os.path.join(BUILD, "bin", "chaincompd"), "--machine", machine, "--params", params, "--config", config]
-    proc = subprocess.Popen(cmd + (["--model", model] if model else []) + list(extra), stderr=subprocess.PIPE,
+    proc = subprocess.Popen(list(wrapper) + cmd + (["--model", model] if model else []) + list(extra),
+                            stderr=subprocess.PIPE,
                             text=True, env=env)
     line = proc.stderr.readline()
     proc.warnings = []

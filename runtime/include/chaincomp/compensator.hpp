@@ -110,7 +110,7 @@ class Compensator {
 
  private:
   bool reject(Reject r, Reject* why) noexcept;
-  bool seq_ok(const Command& in, const std::array<double, kMaxAxes>& cmd, Reject* why) noexcept;
+  bool seq_ok(const Command& in, const std::array<double, kMaxAxes>& cmd, bool& restarting, Reject* why) noexcept;
   void count_gap(std::int64_t seq) noexcept;
   void residual_at(const double* q, const std::array<double, kMaxAxes>& target, double* residual) const noexcept;
 

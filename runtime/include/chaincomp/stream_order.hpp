@@ -6,11 +6,12 @@
 //   - any other key (equal, behind, or more than max_jump ahead) is refused, except that
 //     kRestartRun such messages in a row, each 1 .. max_jump ahead of the one before it
 //     (and `continues`, the stream's own test, e.g. a command's step), are a new stream:
-//     the last of them is taken.
+//     the fifth is taken, or the first after it that passes the stream's other checks.
 // Keys are any int64: differences are taken in unsigned arithmetic, never overflowing.
 // Header-only and allocation-free (the realtime component compiles it too).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 
 namespace chaincomp {
@@ -43,12 +44,11 @@ class StreamOrder {
       return Verdict::kNext;
     }
     const std::uint64_t step = ahead_by(run_key_, key);
-    run_ = (run_ > 0 && continues && step >= 1 && step <= max_jump_) ? run_ + 1 : 1;
+    run_ = (run_ > 0 && continues && step >= 1 && step <= max_jump_) ? std::min(run_ + 1, kRestartRun) : 1;
     run_key_ = key;
-    if (run_ >= kRestartRun) {
-      run_ = 0;
-      return Verdict::kRestart;
-    }
+    // (the run lasts until a message is taken: one refused by another check, or by another
+    // sensor of its message, does not cost the stream five more)
+    if (run_ == kRestartRun) return Verdict::kRestart;
     return key == last_ ? Verdict::kSame : key < last_ ? Verdict::kBehind : Verdict::kTooFarAhead;
   }
   static constexpr bool taken(Verdict v) noexcept { return v == Verdict::kNext || v == Verdict::kRestart; }
