@@ -333,6 +333,8 @@ def from_sympy(expr, source: str = "") -> Expr:
     def node(e):
         if e.is_Rational:
             return ("num", Fraction(int(e.p), int(e.q)))
+        if e.is_Float:   # a function of constants made a number (numeric_constant)
+            return ("num", float(e))
         if e.is_Symbol:
             return ("sym", e.name)
         if e is sp.pi:

@@ -136,3 +136,18 @@ def test_decimal_angles_derive_as_fast_as_exact_pi_and_equal_pinocchio(arm, tmp_
     # series.chop drops terms below 1e-9 of the largest in their coefficient: 1 nm on a metre
     assert worst < 1e-6, worst
     print(f"{arm}: nominal tool point against Pinocchio within {worst:.1e} mm")
+
+
+def test_a_function_of_constants_is_a_number_and_exact_values_stay_exact():
+    """sin(0.3) is the float math.sin gives (not the symbol sin(3/10)), and a tree rebuilt from
+    that sympy form (the loader's symbolic check) evaluates to the same; cos(pi/3) stays 1/2 and
+    a quarter turn's sine 1, exactly; 1.57079632679 (cos 4.9e-12) turns as pi/2."""
+    from chaincomp.model.expressions import from_sympy, parse_tree, sin_cos
+    e = parse_tree("X*sin(0.3) + cos(pi/3)", {"X"}).to_sympy()
+    X = sp.Symbol("X", real=True)
+    assert e.coeff(X).is_Float and abs(float(e.coeff(X)) - math.sin(0.3)) < 1e-16
+    assert e.subs(X, 0) == sp.Rational(1, 2)
+    assert from_sympy(e).value({"X": 2.0}) == pytest.approx(2 * math.sin(0.3) + 0.5, rel=1e-15)
+    assert sin_cos(sp.pi / 2) == (1, 0)
+    assert sin_cos(sp.Rational(157079632679, 10 ** 11)) == (1, 0)
+    assert sin_cos(sp.Rational(31408, 10000))[0] == pytest.approx(math.sin(3.1408), rel=1e-15)
