@@ -79,7 +79,8 @@ bool decode_command(const void* data, std::size_t size, chaincomp_lcm::lcmt_axis
 }
 
 bool decode_control(const void* data, std::size_t size, chaincomp_lcm::lcmt_chaincomp_control& out) noexcept {
-  return size <= static_cast<std::size_t>(INT32_MAX) && out.decode(data, 0, static_cast<int>(size)) == static_cast<int>(size);
+  return size <= static_cast<std::size_t>(INT32_MAX) &&
+         out.decode(data, 0, static_cast<int>(size)) == static_cast<int>(size);
 }
 
 std::string channel_regex(const std::string& name) {
