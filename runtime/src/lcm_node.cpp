@@ -83,6 +83,15 @@ bool decode_control(const void* data, std::size_t size, chaincomp_lcm::lcmt_chai
          out.decode(data, 0, static_cast<int>(size)) == static_cast<int>(size);
 }
 
+void apply_control(const chaincomp_lcm::lcmt_chaincomp_control& c, Compensator& comp, ParamsUpdater* updater,
+                   ThermalState* thermal) noexcept {
+  comp.set_enabled(c.enable);
+  if (!c.reset) return;
+  comp.reset();
+  if (updater) updater->reset();
+  if (thermal) thermal->reset();
+}
+
 std::string channel_regex(const std::string& name) {
   // LCM compiles "^name$" with GLib's (PCRE) regex: a backslash makes any punctuation literal
   std::string out;
@@ -291,12 +300,7 @@ void LcmNode::on_control(const lcm_recv_buf_t* rbuf, const char*, void* user) {
     ++self->control_refused_;
     return;
   }
-  self->comp_.set_enabled(self->control_msg_.enable);
-  if (self->control_msg_.reset) {  // a new stream for every input: commands, updates, readings
-    self->comp_.reset();
-    if (self->updater_) self->updater_->reset();
-    if (self->thermal_) self->thermal_->reset();
-  }
+  apply_control(self->control_msg_, self->comp_, self->updater_, self->thermal_);
 }
 
 void LcmNode::handle_command(const lcm_recv_buf_t* rbuf) {

@@ -143,6 +143,7 @@ int main(int argc, char** argv) {
     return fail(error);
   chaincomp::ThermalState thermal(thermal_model, loaded.params);
   chaincomp::Readings readings;
+  chaincomp_lcm::lcmt_chaincomp_control control{};
   std::int64_t daemon_instance = 0;
   chaincomp_lcm::lcmt_chaincomp_status status_scratch;
   chaincomp_lcm::lcmt_corrected_target target_scratch;
@@ -226,6 +227,11 @@ int main(int argc, char** argv) {
       } else if (thermal.take(readings, entry->info->name, update)) {
         updater.apply_values(update, command_time(ev.timestamp));
       }
+      continue;
+    }
+    if (ev.channel == config.control_channel) {   // enable and reset, as the daemon applies them
+      if (chaincomp::decode_control(ev.data, ev.datalen, control))
+        chaincomp::apply_control(control, comp, &updater, thermal_path.empty() ? nullptr : &thermal);
       continue;
     }
     if (ev.channel == config.params_channel) {

@@ -30,6 +30,11 @@ void to_message(const Target& t, chaincomp_lcm::lcmt_corrected_target& msg) noex
 // A control payload into `out`; false for anything not one of this version (trailing bytes
 // included: one rule with commands, updates and readings).
 bool decode_control(const void* data, std::size_t size, chaincomp_lcm::lcmt_chaincomp_control& out) noexcept;
+// A decoded control message applied, by the daemon and by replay alike: `enable` always; a
+// reset starts a new stream on every input (commands, and the updater's and the thermal
+// model's when given).
+void apply_control(const chaincomp_lcm::lcmt_chaincomp_control& c, Compensator& comp, ParamsUpdater* updater,
+                   ThermalState* thermal) noexcept;
 // The regular expression LCM's subscribe takes that matches exactly the channel `name`.
 std::string channel_regex(const std::string& name);
 

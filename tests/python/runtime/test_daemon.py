@@ -225,3 +225,36 @@ def test_replay_follows_the_stream_rule(tmp_path):
     assert refused == [100, 201, 202, 203, 204], refused
     assert {results[i] for i in refused} == {"out_of_order_seq"}
     assert "seq gaps 0 (0 commands missing), stream restarts 1" in proc.stderr
+
+
+def test_replay_applies_the_logs_control_messages(tmp_path):
+    """A reset in the log starts a new stream in replay as in the daemon (docs/guide/daemon.md):
+    the CNC's seq 1 after it is taken at once; a control message with a trailing byte is not
+    applied (the same reset, one byte longer, leaves seq 1 behind: four refused, then a restart)."""
+    sys.path.insert(0, os.path.join(ROOT, "build", "lcmtypes"))
+    import lcm
+    from chaincomp_lcm import lcmt_axis_command, lcmt_chaincomp_control
+
+    def run(trailing: bytes):
+        log = tmp_path / "control.lcmlog"
+        out = lcm.EventLog(str(log), "w", overwrite=True)
+        ctl = lcmt_chaincomp_control()
+        ctl.utime, ctl.enable, ctl.reset = 0, True, True
+        for i, seq in enumerate(list(range(1, 51)) + [None] + list(range(1, 21))):
+            if seq is None:
+                out.write_event(1000 * (i + 1), "CHAINCOMP_CONTROL", ctl.encode() + trailing)
+                continue
+            msg = lcmt_axis_command()
+            msg.utime, msg.seq, msg.machine, msg.num_axes = 1000 * (i + 1), seq, "five_axis_ac", 5
+            msg.axes = [10.0 + 0.01 * i, -20.0, -100.0, 30.0, -45.0, 0.0, 0.0, 0.0]
+            out.write_event(1000 * (i + 1), "CHAINCOMP_COMMAND", msg.encode())
+        out.close()
+        csv = tmp_path / "out.csv"
+        proc = subprocess.run([os.path.join(ROOT, "build", "bin", "chaincomp_replay"), "--machine",
+                               machine_path("five_axis_ac"), "--params", PARAMS, "--in", str(log), "--csv", str(csv)],
+                              capture_output=True, text=True, timeout=60)
+        assert proc.returncode == 0, proc.stderr
+        return [line.split(",")[3] for line in csv.read_text().splitlines()[1:]]
+
+    assert run(b"") == ["ok"] * 70
+    assert run(b"\x00") == ["ok"] * 50 + ["out_of_order_seq"] * 4 + ["ok"] * 16
