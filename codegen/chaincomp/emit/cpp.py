@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from fractions import Fraction
 
 import sympy as sp
 from sympy.printing.cxx import CXX17CodePrinter
@@ -44,6 +45,8 @@ class _Printer(CXX17CodePrinter):
         return super()._print_Pow(expr)
 
     def _print_Rational(self, expr):
+        if max(abs(expr.p), expr.q) > 2 ** 1000:   # products of numeric sines (sin_cos): the quotient, rounded once
+            return f"{float(Fraction(int(expr.p), int(expr.q)))!r}"
         return f"({float(expr.p)!r}/{float(expr.q)!r})"
 
     def _print_Integer(self, expr):

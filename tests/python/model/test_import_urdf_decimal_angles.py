@@ -152,3 +152,13 @@ def test_a_function_of_constants_is_a_number_and_exact_values_stay_exact():
     assert sin_cos(sp.pi / 2) == (1, 0)
     assert sin_cos(sp.Rational(157079632679, 10 ** 11)) == (1, 0)
     assert sin_cos(sp.Rational(31408, 10000))[0] == pytest.approx(math.sin(3.1408), rel=1e-15)
+
+
+def test_a_coefficient_beyond_a_doubles_range_in_its_parts_is_written_as_its_quotient():
+    """A product of many numeric sines holds a rational whose numerator and denominator each
+    exceed a double (10^400 / 3·10^399): the generated code writes the quotient (as Python's
+    Fraction rounds it), not p.0/q.0 (the conversion overflowed, exit 3)."""
+    from chaincomp.emit.cpp import ccode
+    x = sp.Symbol("x")
+    text = ccode(sp.Rational(10 ** 400 + 1, 3 * 10 ** 399) * x)
+    assert float(text.split("*")[0].strip("()")) == float(Fraction(10 ** 400 + 1, 3 * 10 ** 399))
