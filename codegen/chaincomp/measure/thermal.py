@@ -52,7 +52,7 @@ TEMPERATURE_UNITS = ("degC", "°C")
 SIMULATION_POINTS = 4_000_000   # the truth's time steps at most (then fewer per reading)
 FOLDS = 5                      # blocked cross-validation: contiguous stretches of the log held out
 CV_ITERATIONS = 6              # Levenberg-Marquardt steps per fold, from the whole log's time constants
-CANDIDATES = 3                 # sensors per step refined and cross-validated (the best of the grid)
+CANDIDATES = 3                 # sensors per step cross-validated (the best of the grid the log supports)
 COLLINEAR = 0.995              # a candidate's multiple correlation with those chosen, said to be near-collinear
 MAX_RELATIVE_UNCERTAINTY = 0.5 # a term whose gain or time constant is known worse than this is not written
 GOOD_RELATIVE = 0.05           # design advice: what a log should pin each term down to
@@ -509,7 +509,7 @@ def reading_noise(u: np.ndarray) -> float:
     return 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6)
 
 
-def _uncertainties(t, temps, d, chosen, taus, coef, reference) -> np.ndarray:
+def _uncertainties(t, temps, d, chosen, taus, coef, reference, draws: int = NOISE_DRAWS) -> np.ndarray:
     """Standard uncertainties of (offset, gains, time constants) from the Jacobian of the full
     model at the solution: white noise on the drift readings, plus each chosen sensor's reading
     noise carried through its lag (NOISE_DRAWS draws of it, linearised: the first reading's
@@ -530,21 +530,22 @@ def _uncertainties(t, temps, d, chosen, taus, coef, reference) -> np.ndarray:
         return np.full(jac.shape[1], math.inf)
     cov = s2 * inverse
     sigma = [reading_noise(temps[s]) for s in chosen]
-    if chosen and any(sigma):
+    if chosen and any(sigma) and draws:
         rng = np.random.default_rng(0)   # the same uncertainties on every run
         project = inverse @ jac.T
         shifts = np.array([project @ sum(coef[1 + i] * lag(t, rng.normal(0.0, sigma[i], len(t)), taus[i])
-                                         for i in range(len(chosen))) for _ in range(NOISE_DRAWS)])
-        cov = cov + shifts.T @ shifts / NOISE_DRAWS
+                                         for i in range(len(chosen))) for _ in range(draws)])
+        cov = cov + shifts.T @ shifts / draws
     return np.sqrt(np.maximum(np.diag(cov), 0.0))
 
 
-def _model(t, temps, d, error, unit, chosen, taus, reference) -> tuple[ErrorModel, np.ndarray]:
+def _model(t, temps, d, error, unit, chosen, taus, reference,
+           draws: int = NOISE_DRAWS) -> tuple[ErrorModel, np.ndarray]:
     """The error model at the given sensors and time constants (gains solved), with its
     uncertainties, and its residual."""
     a = _design(t, temps, chosen, taus, reference)
     coef, _ = _solve(a, d)
-    u = _uncertainties(t, temps, d, chosen, taus, coef, reference)
+    u = _uncertainties(t, temps, d, chosen, taus, coef, reference, draws)
     tau_u = iter(u[1 + len(chosen):])
     em = ErrorModel(error, unit, float(coef[0]), offset_u=float(u[0]))
     for i, (s, tau) in enumerate(zip(chosen, taus)):
@@ -623,25 +624,43 @@ def fit(log: Log, error: str, sensors: list[str], reference: float = REFERENCE_T
             best = min((_solve(np.column_stack([base, temps.lagged(s, tau) - reference]), d)[1], tau) for tau in grid)
             ranked.append((best[0], s, best[1]))
         trials = []
-        for _, s, tau in sorted(ranked)[:CANDIDATES]:
+        refused = []
+        for _, s, tau in sorted(ranked):
+            if len(trials) == CANDIDATES:
+                break
             new_taus, new_rss = _refine(t, temps, d, chosen + [s], taus + [tau], reference, lo, hi)
+            # a candidate that would make a term the log cannot support is not one (it would be
+            # dropped, and a slow ramp beyond the log would crowd out a sensor it can support);
+            # the drift's noise alone here, the sensors' comes in the final uncertainties
+            trial, _ = _model(t, temps, d, error, unit, chosen + [s], new_taus, reference, draws=0)
+            why = next((f"{term.sensor}: {w}" for term in trial.terms if (w := unsupported(term, span, max_relative))),
+                       None)
+            if why:
+                refused.append(f"{s} ({why})")
+                if not trials:   # the log's first choice: the report says why it is not taken
+                    note(f"{s} not taken, the log cannot support it ({why})")
+                continue
             a = _design(t, temps, chosen + [s], new_taus, reference)
             trials.append({"sensor": s, "taus": new_taus, "rss": new_rss, "collinear": _collinearity(a, a.shape[1] - 1),
+                           "worst": max(_relative(term) for term in trial.terms),
                            "score": _held_out(t, temps, d, chosen + [s], new_taus, reference, lo, hi)})
+        if refused:
+            say(f"{error}: not candidates, the log could not support them: {'; '.join(refused)}")
+        if not trials:
+            break
         trials.sort(key=lambda c: c["score"].mean())
         best = trials[0]
         found = []   # said of the step if it is taken
-        # the same held-out prediction within its standard error: the simpler is preferred,
-        # a time constant inside the log's span before one beyond it
+        # the same held-out prediction within its standard error: the set the log supports best
+        # is preferred (every candidate's time constants are inside the log's span already)
         equal = [c for c in trials[1:]
                  if c["score"].mean() - best["score"].mean() <= _paired_se(c["score"], best["score"])]
         if equal:
             tied = [best] + equal
-            inside = [c for c in tied if c["taus"][-1] <= span]
-            best = inside[0] if inside else best
+            best = min(tied, key=lambda c: c["worst"])
             found.append(f"{', '.join(c['sensor'] for c in tied)} predict held-out stretches equally well (within "
-                         f"the standard error): taking {best['sensor']} (time constant {best['taus'][-1]:.4g} s, "
-                         f"{'inside' if best['taus'][-1] <= span else 'beyond'} the log's span)")
+                         f"the standard error): taking {best['sensor']}, whose terms the log pins down best "
+                         f"(± {100 * best['worst']:.2g} % at worst)")
         if best["collinear"] > COLLINEAR:
             found.append(f"{best['sensor']} lagged {best['taus'][-1]:.4g} s is near-collinear with "
                          f"{', '.join(chosen) or 'the offset'} (multiple correlation {best['collinear']:.4f}): the "
@@ -716,10 +735,10 @@ def advice(f: Fit) -> list[str]:
                        f"({longer * f.span / 3600:.3g} h) of the same kind, or a step in spindle duty held "
                        f"{5 * max(term.time_constant, 1.0) / 3600:.3g} h and a cool-down as long, would bring it "
                        f"to ± {100 * GOOD_RELATIVE:.0f} %.")
-    if any("dropped" in n for n in f.notes):
-        out.append("A term was dropped: a longer cool-down (5 times the slowest time constant the machine may "
-                   "have), or a step in spindle duty that moves its sensor apart from the others, would show "
-                   "whether it is there.")
+    if any("cannot support" in n for n in f.notes):
+        out.append("A term the log cannot support was left out: a longer cool-down (5 times the slowest time "
+                   "constant the machine may have), or a step in spindle duty that moves its sensor apart from the "
+                   "others, would show whether it is there.")
     if any("near-collinear" in n or "equally well" in n for n in f.notes):
         out.append("Sensors that move together are told apart by a log in which they do not: another day's "
                    "hall climate, or a spindle duty step followed by a long stop.")
