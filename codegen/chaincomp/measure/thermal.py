@@ -637,7 +637,9 @@ def fit(log: Log, error: str, sensors: list[str], reference: float = REFERENCE_T
                        None)
             if why:
                 refused.append(f"{s} ({why})")
-                if not trials:   # the log's first choice: the report says why it is not taken
+                # the log's first choice, and one that would lower the residual as a sensor taken
+                # must: the report says why it is not taken (not of every sensor that explains noise)
+                if not trials and _lowers(rss, new_rss, n, min_improvement):
                     note(f"{s} not taken, the log cannot support it ({why})")
                 continue
             a = _design(t, temps, chosen + [s], new_taus, reference)
@@ -668,10 +670,8 @@ def fit(log: Log, error: str, sensors: list[str], reference: float = REFERENCE_T
         gain = float(np.mean(score - best["score"]))
         se = _paired_se(score, best["score"])
         new_rss = best["rss"]
-        # held-out: better by more than its standard error; in-sample: Schwarz's criterion (a
-        # gain and a time constant must lower n ln(RSS) by more than 2 ln(n)) and min_improvement
-        if not gain > se or n * math.log(rss / max(new_rss, 1e-300 * rss)) <= 2 * math.log(n) or \
-                math.sqrt(new_rss) > (1 - min_improvement) * math.sqrt(rss):
+        # held-out: better by more than its standard error; in-sample: Schwarz's and min_improvement
+        if not gain > se or not _lowers(rss, new_rss, n, min_improvement):
             if chosen and gain > 0:
                 say(f"{error}: {best['sensor']} not taken: held-out RMS {math.sqrt(score.mean()):.4g} -> "
                     f"{math.sqrt(best['score'].mean()):.4g}, within the standard error or below --min-improvement")
@@ -708,6 +708,14 @@ def fit(log: Log, error: str, sensors: list[str], reference: float = REFERENCE_T
     cv = _held_out(t, temps, d, chosen, taus, reference, lo, hi) if chosen else score
     return Fit(em, rms0, float(np.sqrt(np.mean(residual ** 2))), float(np.max(np.abs(d - d.mean()))),
                float(np.max(np.abs(residual))), steps, span, notes, math.sqrt(float(cv.mean())))
+
+
+def _lowers(rss: float, new_rss: float, n: int, min_improvement: float) -> bool:
+    """Whether a sensor lowers the residual as one taken must: by Schwarz's criterion (a gain and
+    a time constant must lower n ln(RSS) by more than 2 ln(n)) and by ``min_improvement`` of
+    the RMS."""
+    return n * math.log(rss / max(new_rss, 1e-300 * rss)) > 2 * math.log(n) and \
+        math.sqrt(new_rss) <= (1 - min_improvement) * math.sqrt(rss)
 
 
 def _relative(term: Term) -> float:
