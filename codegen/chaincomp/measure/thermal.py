@@ -644,7 +644,6 @@ def fit(log: Log, error: str, sensors: list[str], reference: float = REFERENCE_T
                 continue
             a = _design(t, temps, chosen + [s], new_taus, reference)
             trials.append({"sensor": s, "taus": new_taus, "rss": new_rss, "collinear": _collinearity(a, a.shape[1] - 1),
-                           "worst": max(_relative(term) for term in trial.terms),
                            "score": _held_out(t, temps, d, chosen + [s], new_taus, reference, lo, hi)})
         if refused:
             say(f"{error}: not candidates, the log could not support them: {'; '.join(refused)}")
@@ -653,16 +652,14 @@ def fit(log: Log, error: str, sensors: list[str], reference: float = REFERENCE_T
         trials.sort(key=lambda c: c["score"].mean())
         best = trials[0]
         found = []   # said of the step if it is taken
-        # the same held-out prediction within its standard error: the set the log supports best
-        # is preferred (every candidate's time constants are inside the log's span already)
-        equal = [c for c in trials[1:]
-                 if c["score"].mean() - best["score"].mean() <= _paired_se(c["score"], best["score"])]
+        # the same held-out prediction within the score's standard error: said. Every candidate
+        # has as many terms as the others, its time constants inside the log's span, and the log
+        # supports it: none is simpler, and the best score is taken
+        se_best = float(np.std(best["score"], ddof=1) / math.sqrt(len(best["score"])))
+        equal = [c for c in trials[1:] if c["score"].mean() - best["score"].mean() <= se_best]
         if equal:
-            tied = [best] + equal
-            best = min(tied, key=lambda c: c["worst"])
-            found.append(f"{', '.join(c['sensor'] for c in tied)} predict held-out stretches equally well (within "
-                         f"the standard error): taking {best['sensor']}, whose terms the log pins down best "
-                         f"(± {100 * best['worst']:.2g} % at worst)")
+            found.append(f"{', '.join(c['sensor'] for c in [best] + equal)} predict held-out stretches equally "
+                         f"well (within the score's standard error): taking {best['sensor']}, the best of them")
         if best["collinear"] > COLLINEAR:
             found.append(f"{best['sensor']} lagged {best['taus'][-1]:.4g} s is near-collinear with "
                          f"{', '.join(chosen) or 'the offset'} (multiple correlation {best['collinear']:.4f}): the "

@@ -140,3 +140,26 @@ def test_when_every_term_is_unsupported_nothing_is_written(tmp_path):
                   "T_spindle not taken, the log cannot support it (T_spindle: gain", "nothing to write"):
         assert words in lines[-1], (words, lines[-1])
     assert not out.exists()
+
+
+def test_two_sensors_that_read_the_same_are_said_to_predict_equally():
+    # two sensors on the same part (their own noise only): the log cannot tell which the drift follows
+    rng = np.random.default_rng(4)
+    t = np.arange(0.0, 20000.0, 5.0)
+    part = 20.0 + 5.0 * (1 - np.exp(-t / 3000.0)) + 0.5 * np.sin(2 * np.pi * t / 7000.0)
+    temps = {"T_a": part + rng.normal(0, 0.02, len(t)), "T_b": part + rng.normal(0, 0.02, len(t))}
+    drift = 2.0 * (T.lag(t, part, 600.0) - 20.0) + rng.normal(0, 0.2, len(t))
+    log = T.Log("two.csv", t, temps, {"EZZ": drift}, {"EZZ": T.U.unit("um")}, {})
+    f = T.fit(log, "EZZ", ["T_a", "T_b"], min_improvement=0.01)
+    assert len(f.model.terms) == 1 and f.model.terms[0].gain == pytest.approx(2.0, rel=0.05)
+    assert any("T_a" in n and "T_b" in n and "equally well" in n for n in f.notes), f.notes
+
+
+def test_collinearity_is_the_multiple_correlation_with_the_other_columns():
+    rng = np.random.default_rng(5)
+    x, y = rng.normal(size=500), rng.normal(size=500)
+    ones = np.ones(500)
+    # y + 3x: 3x explains 90 % of its variance about the mean (correlation sqrt(0.9)); y alone: none
+    assert T._collinearity(np.column_stack([ones, x, 3 * x + y]), 2) == pytest.approx(math.sqrt(0.9), abs=0.02)
+    assert T._collinearity(np.column_stack([ones, x, y]), 2) < 0.15
+    assert T._collinearity(np.column_stack([ones, x, 2 * x + 1]), 2) == pytest.approx(1.0)
