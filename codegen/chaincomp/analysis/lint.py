@@ -206,15 +206,24 @@ def _exact_irrational_angles(machine: Machine) -> list[Finding]:
     sqrt(2)/2; pi/6: sqrt(3)/2). The derivation carries them as atoms, which the fast printer
     of derive and report does not take: they print through sympy, Franka's Panda (its hand
     turned by -pi/4) at order 2 in 35 s instead of 2 s. A decimal angle, or one whose sine and
-    cosine are rational (pi/2, pi), is a number (expressions.sin_cos)."""
+    cosine are rational (pi/2, pi), is a number (expressions.sin_cos). Quarter turns are passed
+    over by their value first, so that a load (eval) need not import sympy."""
+    errors = {s.name for s in machine.errors}
+    at_zero = dict.fromkeys(errors, 0.0)
+
+    def quarter_turn(el) -> bool:
+        k = el.expr.value(at_zero) / (math.pi / 2)
+        return abs(k - round(k)) <= 1e-12 * max(1.0, abs(k))
+    rotations = [el for el in machine.tool_chain + machine.workpiece_chain
+                 if isinstance(el, Rotation) and el.expr.names <= errors and not quarter_turn(el)]
+    if not rotations:
+        return []
     import sympy as sp
 
     from ..model.expressions import sin_cos
     zero = {s.sym: sp.Integer(0) for s in machine.errors}
     out = []
-    for el in machine.tool_chain + machine.workpiece_chain:
-        if not isinstance(el, Rotation):
-            continue
+    for el in rotations:
         angle = el.angle.xreplace(zero)
         if not angle.is_number:
             continue

@@ -6,6 +6,7 @@ what is wrong, without a traceback. The expected line is computed here from wher
 landed in the text, never copied from the program's output.
 """
 
+import json
 import subprocess
 
 import pytest
@@ -77,7 +78,9 @@ def check(proc: subprocess.CompletedProcess, where: str, field: str | None, word
     assert proc.returncode == 2, f"exit {proc.returncode}\nstderr:\n{err}"
     assert "Traceback" not in err, err
     assert len(err.strip().splitlines()) == 1, f"expected one line on stderr:\n{err}"
-    assert proc.stdout == "", proc.stdout
+    # nothing on stdout but, in a JSON mode, the error as JSON (the same line)
+    if proc.stdout:
+        assert json.loads(proc.stdout)["error"]["message"] == err.strip(), proc.stdout
     expected = where + (f" {field}: " if field else "")
     assert expected in err, f"expected {expected!r} in:\n{err}"
     assert word in err, f"expected {word!r} in:\n{err}"
