@@ -170,10 +170,11 @@ def _home(machine: Machine) -> dict:
 
 
 def check_directions(machine: Machine, letters: dict[str, Symbol], f: IsgFile) -> None:
-    """X, Y and Z must move the tool along +x, +y and +z relative to the workpiece, and A, B, C
-    turn about x, y and z (ISO 841), within 45 degrees at _home: else the file's EXX would be
-    another axis' error, or its sign the opposite. A rotary axis the file names no error of
-    (an inclined head's) only gets a note: ISG describes it by VXA.. (296423819)."""
+    """X, Y and Z must move the tool along +x, +y and +z relative to the workpiece (within 45
+    degrees at _home), and A, B, C whose errors are in the file turn about x, y and z (ISO 841):
+    else the file's EXX would be another axis' error, or its sign the opposite. A rotary axis the
+    file names no error of (an inclined one: inclined_axes) only gets a note: ISG describes it by
+    VXA.. (296423819); one along another coordinate axis is refused (a letter to change)."""
     used = {n[-1] for n in f.names.values()} | {b.argument for b in f.blocks if b.argument}
     q = _home(machine)
     exact = X.ExactModel(machine)
@@ -191,9 +192,9 @@ def check_directions(machine: Machine, letters: dict[str, Symbol], f: IsgFile) -
         if c in ROTARY:
             w = rotation_axis(machine, a.name, q)
             c_axis = "xyz"[ROTARY.index(c)]
-            if abs(w["xyz".index(c_axis)]) >= 0.7071:
+            if abs(w["xyz".index(c_axis)]) >= np.cos(ALONG):
                 continue
-            if c not in used:
+            if c not in used:   # inclined (its errors left out by inclined_axes), or without errors
                 f.notes.append(f"{a.name} turns about ({w[0]:+.3f}, {w[1]:+.3f}, {w[2]:+.3f}), not about {c_axis}: "
                                f"no error of it is in the file; ISG describes such an axis by V{'XYZ'[0]}{c}, "
                                f"V{'XYZ'[1]}{c}, V{'XYZ'[2]}{c} (its modified orientation, 296423819)")
@@ -201,6 +202,29 @@ def check_directions(machine: Machine, letters: dict[str, Symbol], f: IsgFile) -
             raise ChaincompError(f"--format {FORMAT}: {c} must turn about {c_axis} (ISO 841), but {a.name} of "
                                  f"{machine.name} turns about ({w[0]:+.3f}, {w[1]:+.3f}, {w[2]:+.3f}): name "
                                  f"the rotary axes with --iso-axes")
+
+
+ALONG = 1e-9   # rad: a rotary axis within this of x, y or z turns about that axis
+
+
+def inclined_axes(machine: Machine, letters: dict[str, Symbol]) -> dict[str, str]:
+    """The rotary letters whose axis is inclined (a nutating table's B at 45 degrees), each with
+    why its errors stay out of the file: ISO 230-1 names the location errors (EX0B ..) of an axis
+    along x, y or z, and an ISG file holds no others. One rule at every angle: along its letter's
+    axis the errors go in, inclined they are left out (and reported with what they leave)."""
+    q = _home(machine)
+    out = {}
+    for c, a in letters.items():
+        if c not in ROTARY:
+            continue
+        w = rotation_axis(machine, a.name, q)
+        k = "xyz".index("xyz"[ROTARY.index(c)])
+        off = float(np.arccos(min(1.0, abs(w[k]))))
+        if off > ALONG and max(abs(w)) < np.cos(ALONG):
+            out[c] = (f"{a.name} turns about ({w[0]:+.4f}, {w[1]:+.4f}, {w[2]:+.4f}), {np.degrees(off):.3f} degrees "
+                      f"from {'xyz'[k]}: ISO 230-1's location errors are those of an axis along x, y or z, and "
+                      "the ISG file has no others (an inclined axis is V" + c + " in ISG's terms, 296423819)")
+    return out
 
 
 def rotation_axis(machine: Machine, axis: str, q: dict) -> np.ndarray:
@@ -261,11 +285,15 @@ def build(machine: Machine, values: dict, letters: dict[str, Symbol], entries: i
         raise ChaincompError(f"--workpiece-axes {workpiece_axes}: expected 0 to {len(chain) - 1} (P-VOLC-00008: "
                              f"fewer than the {len(chain)} axes of the chain)")
     names, left = {}, {}
+    inclined = inclined_axes(machine, letters)
     for e in machine.errors:
         v = values.get(e.name, 0.0)
         if not X._nonzero(v):
             continue
         name, why = isg_name(machine, e, letters)
+        axis = name[-1] if name else ""
+        if name is not None and axis in inclined:
+            name, why = None, inclined[axis]
         if name is None:
             left[e.name] = why
         else:

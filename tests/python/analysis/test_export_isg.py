@@ -316,3 +316,57 @@ Z X EXX EYX EZX EAX EBX ECX
     assert b.at("EXX", Z=50.0, X=5.0) == pytest.approx((0.02 + 0.00 + 0.01 + 0.03) / 4)
     assert b.at("EYX", Z=100.0, X=10.0) == pytest.approx(-0.09)
     assert b.at("EZX", Z=0.0, X=2.5) == pytest.approx(0.07 + 0.25 * (0.01 - 0.07))
+
+
+NUTATING = """\
+name: nutating
+description: X, Y, Z slides and a B table turning about an axis n from z in the yz plane (a nutating table)
+length_unit: mm
+rotation_sense: right_hand
+symbols:
+  - {{name: X, role: axis, unit: mm, limits: [0, 300], meaning: X}}
+  - {{name: Y, role: axis, unit: mm, limits: [0, 200], meaning: Y}}
+  - {{name: Z, role: axis, unit: mm, limits: [-100, 0], meaning: Z}}
+  - {{name: B, role: axis, unit: deg, limits: [-90, 90], meaning: the inclined table}}
+  - {{name: n, role: constant, unit: deg, nominal: {n}, meaning: the table axis' angle from {frm}}}
+  - {{name: EXX, role: error, unit: um, meaning: X positioning}}
+  - {{name: EX0B, role: error, unit: um, meaning: B's line in x}}
+  - {{name: EB0B, role: error, unit: arcsec, meaning: B's zero}}
+chain:
+  - {{rotate: x, angle: {tilt}}}
+  - {{translate: [EX0B, 0, 0]}}
+  - {{rotate: {about}, angle: -(B + EB0B)}}
+  - {{translate: [-EX0B, 0, 0]}}
+  - {{rotate: x, angle: -({tilt})}}
+  - {{translate: [X + EXX, Y, Z]}}
+tool:
+  point: [0, 0, 0]
+  direction: [0, 0, 1]
+"""
+
+
+@pytest.mark.parametrize("n", [0, 44, 45, 46, 90])
+def test_one_rule_for_a_rotary_axis_at_any_inclination(capsys, tmp_path, n):
+    """B's errors go into the file only where B turns about y (ISO 841's B): at 0 degrees from y
+    they are carried; inclined at 44, 45 or 46 degrees (a nutating table) they are left out, each
+    with the angle and why, and a note; about z (90 degrees) the letter is wrong: refused, naming
+    --iso-axes. (Before: 45 degrees was written as a B about y, 44 refused.)"""
+    text = NUTATING.format(n=n, frm="y", tilt="n - pi/2", about="z")   # the axis z turned by n - 90 deg about x
+    machine = write_file(tmp_path, "nutating.yaml", text)
+    params = write_file(tmp_path, "p.yaml", "machine: nutating\nvalues:\n  EXX: 3 um\n  EX0B: 5 um\n"
+                                            "  EB0B: 8 arcsec\n")
+    argv = ("export", machine, "--params", params, "--format", "isg-volcomp", "-o", tmp_path / "isg", "--grid", "3",
+            "--no-breakdown", "--report", "json")
+    code, stdout, err = run_main(capsys, *argv)
+    if n == 90:
+        assert code == 2 and "must turn about y" in err and "--iso-axes" in err
+        return
+    assert code == 0, err
+    doc = json.loads(stdout)["isg"]
+    assert doc["names"]["EXX"] == "EXX"
+    if n == 0:
+        assert doc["names"]["EX0B"] == "X0B" and "EX0B" not in doc["left_out"]
+    else:
+        for e in ("EX0B", "EB0B"):
+            why = doc["left_out"][e]
+            assert e not in doc["names"] and f"{n:.3f} degrees from y" in why and "ISO 230-1" in why
