@@ -77,7 +77,9 @@ TEST_CASE("the stream rule takes what a 128-bit model of it takes, for any int64
         switch (random() % 6) {
           case 0: key = extremes[random() % 7]; break;                       // a hostile key
           case 1: key = static_cast<std::int64_t>(random()); break;          // anywhere
-          case 2: key -= static_cast<std::int64_t>(random() % 4); break;     // back or the same
+          case 2:                                                            // back or the same
+            if (key >= INT64_MIN + 4) key -= static_cast<std::int64_t>(random() % 4);
+            break;
           default:                                                           // on, by 1..4
             if (key <= INT64_MAX - 4) key += 1 + static_cast<std::int64_t>(random() % 4);
         }

@@ -179,6 +179,15 @@ def _real_symbols(names) -> dict:
     return {n: sp.Symbol(n, real=True) for n in names}
 
 
+def _size(number) -> float:
+    """The larger of a number's numerator and denominator (a rational), or of its magnitude and
+    inverse (a float: a function of constants made a number), at least 1: what a power multiplies."""
+    if number.is_Rational:
+        return float(max(abs(number.p), number.q, 1))
+    value = abs(float(number))
+    return max(value, 1.0 / value if value else 1.0, 1.0)
+
+
 def _to_sympy(node, table: dict, source: str):
     """The sympy expression of ``node``, built by the same operations in the same order as
     the text reads, with sympy's own view of what is zero (x/(a - a) divides by zero)."""
@@ -197,7 +206,7 @@ def _to_sympy(node, table: dict, source: str):
         base, exp = _to_sympy(node[1], table, source), sp.Rational(node[2].numerator, node[2].denominator)
         if base == 0 and exp < 0:
             raise ExpressionError(f"division by zero in {_shown(source)}")
-        if base.is_Number and abs(exp) * math.log10(max(abs(base.p), base.q, 1)) > math.log10(MAX_MAGNITUDE):
+        if base.is_Number and abs(exp) * math.log10(_size(base)) > math.log10(MAX_MAGNITUDE):
             raise ExpressionError(f"{_shown(source)} holds a number larger than {MAX_MAGNITUDE:g}")
         return base ** exp
     args = [_to_sympy(a, table, source) for a in node[1:]]

@@ -155,7 +155,8 @@ def tool_points(path: str, commanded, corrected, values: dict):
 def check_corrections(program, path, poses, values):
     for q in poses:
         out = correct(program, q, values)
-        assert out["status"] == "ok" and out["commanded"] == [float(x) for x in q], out
+        # the point is corrected; three slides cannot correct a tilt, which is reported (residual)
+        assert out["status"] in ("ok", "residual") and out["commanded"] == [float(x) for x in q], out
         nominal, uncorrected, corrected = tool_points(path, q, out["corrected"], values)
         before, after = math.dist(uncorrected, nominal), math.dist(corrected, nominal)
         assert before > 2e-3, (q, before)     # the errors move the tool by microns: a real test

@@ -154,8 +154,11 @@ def test_the_tree_builds_the_sympy_expression_and_its_values(text, at, e, f):
     except ExpressionError:   # a divisor sympy sees is zero (x/(e - e)): the oracle has zoo there
         assert want is None or want.has(sp.zoo, sp.nan)
         return
-    assert got == want
     values = {**at, "e": e, "f": f}
+    if got != want:   # a function of constants is a number now (expressions.numeric_constant)
+        assert want is not None and got.free_symbols <= want.free_symbols, (text, got, want)
+        a, b = _sympy_value(got, values), _sympy_value(want, values)
+        assert a is None or b is None or _close(a, b), (text, got, want, a, b)
     truth = _sympy_value(got, values)
     if truth is None:
         return
