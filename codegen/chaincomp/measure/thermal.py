@@ -784,15 +784,22 @@ def parse_cycle(text: str) -> list[tuple[float, float]]:
     if text in CYCLES:
         return CYCLES[text]
     out = []
-    for part in text.split(","):
-        bits = part.split(":")
-        if len(bits) != 2 or not all(_DECIMAL.fullmatch(b.strip()) for b in bits):
-            raise ChaincompError(f"--cycle: expected {' or '.join(CYCLES)} or DUTY:SECONDS,..., e.g. 1:3600,0:1800, "
-                                 f"got {part!r}")
-        duty, seconds = float(bits[0]), float(bits[1])
+    expected = f"{' or '.join(CYCLES)} or DUTY:SECONDS,..., e.g. 1:3600,0:1800"
+    for part, (duty, seconds) in _pairs(text, "--cycle", expected):
         if not 0 <= duty <= 1 or not 0 < seconds <= 1e6:
             raise ChaincompError(f"--cycle: {part!r}: the duty is from 0 to 1, the time from 0 to 1e6 s")
         out.append((duty, seconds))
+    return out
+
+
+def _pairs(text: str, option: str, expected: str) -> list[tuple[str, tuple[float, float]]]:
+    """The items of 'A:B,C:D' as (the item as written, (A, B)), each two plain decimals."""
+    out = []
+    for part in text.split(","):
+        bits = part.split(":")
+        if len(bits) != 2 or not all(_DECIMAL.fullmatch(b.strip()) for b in bits):
+            raise ChaincompError(f"{option}: expected {expected}, got {part!r}")
+        out.append((part, (float(bits[0]), float(bits[1]))))
     return out
 
 
@@ -801,12 +808,8 @@ def parse_hall(text: str) -> list[tuple[float, float]]:
     if text == "default":
         return HALL[1]
     out = []
-    for part in text.split(","):
-        bits = part.split(":")
-        if len(bits) != 2 or not all(_DECIMAL.fullmatch(b.strip()) for b in bits):
-            raise ChaincompError(f"--hall: expected default or AMPLITUDE:PERIOD,... (K, s), e.g. 2:86400,1:7200, "
-                                 f"got {part!r}")
-        amplitude, period = float(bits[0]), float(bits[1])
+    expected = "default or AMPLITUDE:PERIOD,... (K, s), e.g. 2:86400,1:7200"
+    for part, (amplitude, period) in _pairs(text, "--hall", expected):
         if not 0 <= amplitude <= 20 or not 60 <= period <= 1e7:
             raise ChaincompError(f"--hall: {part!r}: the amplitude is from 0 to 20 K, the period from 60 to 1e7 s")
         out.append((amplitude, period))
