@@ -17,12 +17,13 @@ import math
 
 import numpy as np
 
+from .machine import ROT_PLANE
 from .urdf import MOVING, PathJoint, kinematic_path
 
 
 def _rot(axis: str, a: float) -> np.ndarray:
     c, s = math.cos(a), math.sin(a)
-    i, j = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}[axis]
+    i, j = ROT_PLANE[axis]   # the plane it turns, in its positive sense (as the models do)
     r = np.eye(3)
     r[i, i], r[i, j], r[j, i], r[j, j] = c, -s, s, c
     return r
