@@ -103,11 +103,8 @@ void Compensator::residual_at(const double* q, const std::array<double, kMaxAxes
   residual[1] = orientation_residual(zt, cross3(zt, V(nominal + 6)), V(actual + 3), V(actual + 6)).norm();
 }
 
-// The error a residual stands for, weighted as compensate() weighs it.
-static double weighted_error(const double* residual) noexcept {
-  const double d = kDirectionWeight * residual[1];
-  return residual[0] * residual[0] + d * d;
-}
+// The error a residual (point, direction) stands for, weighted as compensate() weighs it.
+static double weighted_error(const double* residual) noexcept { return objective(residual[0], residual[1]); }
 
 bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept {
   ++counters_.received;

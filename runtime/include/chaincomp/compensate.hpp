@@ -44,6 +44,12 @@ inline const char* status_name(Status s) noexcept {
 constexpr double kPointTolerance = 1e-7;      // mm: 0.1 nm
 constexpr double kDirectionTolerance = 1e-9;  // rad
 constexpr double kDirectionWeight = 100.0;    // mm per rad: a direction error counts as at 100 mm
+
+// The objective compensation minimises (docs/guide/daemon.md, "The objective"): the point error
+// (mm) squared plus the direction (orientation) error (rad) weighted as at kDirectionWeight.
+constexpr double objective(double point, double direction) noexcept {
+  return point * point + kDirectionWeight * kDirectionWeight * direction * direction;
+}
 // Largest correction compensate() will make, per axis kind: geometric errors need µm and
 // arcsec; more means a singular configuration (e.g. the tool axis along the C axis), where
 // the correction is bounded and the rest reported as residual.
@@ -620,11 +626,8 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
   const bool ok = out.residual_point <= kPointTolerance && out.residual_direction <= kDirectionTolerance;
   clean = !damped && !clamped;
   if (ok) return Status::kOk;
-  // Never worse than no correction, by the objective the steps minimise (docs/guide/daemon.md,
-  // "The objective"): where the command itself scores no worse, it is the answer.
-  auto objective = [](double point, double direction) {
-    return point * point + kDirectionWeight * kDirectionWeight * direction * direction;
-  };
+  // Never worse than no correction, by the objective the steps minimise: where the command
+  // itself scores no worse, it is the answer.
   double none_point = 0, none_direction = 0;
   pose_at_command();
   pose_error(none_point, none_direction);
