@@ -197,17 +197,19 @@ def test_replay_equals_daemon_bit_for_bit(tmp_path):
     assert "targets differing: 0" in out
 
 
-def test_replay_follows_the_stream_rule(tmp_path):
-    """The replay binary runs the daemon's compensator: a log with one seq 2^63-1 (more than
-    2^32 ahead: refused, the stream goes on) and then a CNC that restarts at 1 (followed again
-    after 5 commands), as the daemon does."""
+def _replay_results(tmp_path, seqs, control=b""):
+    """chaincomp_replay over a log of five_axis_ac commands with these seqs (1 ms apart, X moving
+    10 um a command), ``control`` (an encoded control message) in place of each None: the result
+    column of each command, and replay's stderr."""
     sys.path.insert(0, os.path.join(ROOT, "build", "lcmtypes"))
     import lcm
     from chaincomp_lcm import lcmt_axis_command
-    log = tmp_path / "hostile.lcmlog"
+    log = tmp_path / "replayed.lcmlog"
     out = lcm.EventLog(str(log), "w", overwrite=True)
-    seqs = list(range(1, 101)) + [2**63 - 1] + list(range(101, 201)) + list(range(1, 51))
     for i, seq in enumerate(seqs):
+        if seq is None:
+            out.write_event(1000 * (i + 1), "CHAINCOMP_CONTROL", control)
+            continue
         msg = lcmt_axis_command()
         msg.utime, msg.seq, msg.machine, msg.num_axes = 1000 * (i + 1), seq, "five_axis_ac", 5
         msg.axes = [10.0 + 0.01 * i, -20.0, -100.0, 30.0, -45.0, 0.0, 0.0, 0.0]
@@ -218,13 +220,20 @@ def test_replay_follows_the_stream_rule(tmp_path):
                            machine_path("five_axis_ac"), "--params", PARAMS, "--in", str(log), "--csv", str(csv)],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
-    rows = [line.split(",") for line in csv.read_text().splitlines()[1:]]
-    results = [r[3] for r in rows]
+    return [line.split(",")[3] for line in csv.read_text().splitlines()[1:]], proc.stderr
+
+
+def test_replay_follows_the_stream_rule(tmp_path):
+    """The replay binary runs the daemon's compensator: a log with one seq 2^63-1 (more than
+    2^32 ahead: refused, the stream goes on) and then a CNC that restarts at 1 (followed again
+    after 5 commands), as the daemon does."""
+    seqs = list(range(1, 101)) + [2**63 - 1] + list(range(101, 201)) + list(range(1, 51))
+    results, stderr = _replay_results(tmp_path, seqs)
     refused = [i for i, r in enumerate(results) if r != "ok"]
     # 2^63-1 refused and no gap; behind 200: seq 1..4 refused, 5 taken
     assert refused == [100, 201, 202, 203, 204], refused
     assert {results[i] for i in refused} == {"out_of_order_seq"}
-    assert "seq gaps 0 (0 commands missing), stream restarts 1" in proc.stderr
+    assert "seq gaps 0 (0 commands missing), stream restarts 1" in stderr
 
 
 def test_replay_applies_the_logs_control_messages(tmp_path):
@@ -232,29 +241,10 @@ def test_replay_applies_the_logs_control_messages(tmp_path):
     the CNC's seq 1 after it is taken at once; a control message with a trailing byte is not
     applied (the same reset, one byte longer, leaves seq 1 behind: four refused, then a restart)."""
     sys.path.insert(0, os.path.join(ROOT, "build", "lcmtypes"))
-    import lcm
-    from chaincomp_lcm import lcmt_axis_command, lcmt_chaincomp_control
-
-    def run(trailing: bytes):
-        log = tmp_path / "control.lcmlog"
-        out = lcm.EventLog(str(log), "w", overwrite=True)
-        ctl = lcmt_chaincomp_control()
-        ctl.utime, ctl.enable, ctl.reset = 0, True, True
-        for i, seq in enumerate(list(range(1, 51)) + [None] + list(range(1, 21))):
-            if seq is None:
-                out.write_event(1000 * (i + 1), "CHAINCOMP_CONTROL", ctl.encode() + trailing)
-                continue
-            msg = lcmt_axis_command()
-            msg.utime, msg.seq, msg.machine, msg.num_axes = 1000 * (i + 1), seq, "five_axis_ac", 5
-            msg.axes = [10.0 + 0.01 * i, -20.0, -100.0, 30.0, -45.0, 0.0, 0.0, 0.0]
-            out.write_event(1000 * (i + 1), "CHAINCOMP_COMMAND", msg.encode())
-        out.close()
-        csv = tmp_path / "out.csv"
-        proc = subprocess.run([os.path.join(ROOT, "build", "bin", "chaincomp_replay"), "--machine",
-                               machine_path("five_axis_ac"), "--params", PARAMS, "--in", str(log), "--csv", str(csv)],
-                              capture_output=True, text=True, timeout=60)
-        assert proc.returncode == 0, proc.stderr
-        return [line.split(",")[3] for line in csv.read_text().splitlines()[1:]]
-
-    assert run(b"") == ["ok"] * 70
-    assert run(b"\x00") == ["ok"] * 50 + ["out_of_order_seq"] * 4 + ["ok"] * 16
+    from chaincomp_lcm import lcmt_chaincomp_control
+    ctl = lcmt_chaincomp_control()
+    ctl.utime, ctl.enable, ctl.reset = 0, True, True
+    seqs = list(range(1, 51)) + [None] + list(range(1, 21))
+    assert _replay_results(tmp_path, seqs, ctl.encode())[0] == ["ok"] * 70
+    assert _replay_results(tmp_path, seqs, ctl.encode() + b"\x00")[0] == \
+        ["ok"] * 50 + ["out_of_order_seq"] * 4 + ["ok"] * 16
