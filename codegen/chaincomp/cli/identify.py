@@ -7,7 +7,7 @@ import sys
 
 from ..errors import ChaincompError, NoAnswer, OutsideLimit
 from ..measure.calibration import _write_loadable, slide_axis
-from ..measure.identify import (COMPONENTS, DIRECTIONS, MAX_SMOOTH, ROTATION, Vary, identify, misfit, outside_limits,
+from ..measure.identify import (COMPONENTS, DIRECTIONS, MAX_SMOOTH, ROTATION, Vary, identify, outside_limits,
                         params_yaml, read_table, to_json, to_text)
 from ..measure.protocol import check_errors
 from ..model.display import add_units_argument
@@ -199,11 +199,10 @@ def run(args) -> int:
         raise NoAnswer(f"the fit did not converge in {fit.iterations} Gauss-Newton iterations "
                              f"(rms residual {fit.rms / UNITS[machine.length_unit].to_internal:.4g} "
                              f"{machine.length_unit}); no values given{hint}", args.measurements)
-    problem = misfit(fit)
-    if problem is not None:
+    if fit.misfit is not None:
         if args.strict:
-            raise OutsideLimit(f"{problem}; --strict: no values given", args.measurements)
-        print(f"chaincomp identify: warning: {problem}", file=sys.stderr)
+            raise OutsideLimit(f"{fit.misfit}; --strict: no values given", args.measurements)
+        print(f"chaincomp identify: warning: {fit.misfit}", file=sys.stderr)
     print(json_text(to_json(fit, args.measurements)) if args.format == "json"
           else to_text(fit, args.measurements, args.units))
     if args.output:

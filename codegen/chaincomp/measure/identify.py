@@ -606,6 +606,7 @@ class Fit:
     notes: list[str] = field(default_factory=list)
     rms_orientation: float = math.nan      # rms of the orientation residual's components (rad; nan: not measured)
     worst: list[tuple[int, float]] = field(default_factory=list)   # (CSV line, |weighted residual|), largest first
+    misfit: str | None = None              # with sigma: why chi2/dof says the fit does not fit (misfit())
 
 
 MISFIT_PROBABILITY = 0.999   # chi2/dof beyond this quantile of its distribution: the fit does not fit
@@ -803,6 +804,7 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
         raise nonfinite
     if not dof > 0:
         raise ChaincompError(f"no redundancy: {data} leave no degrees of freedom", table.file)
+    fit.misfit = misfit(fit)
     return fit
 
 
@@ -1000,7 +1002,7 @@ def to_json(fit: Fit, source: str) -> dict:
         "direction_unit": "rad",
         "rms_orientation_residual": None if math.isnan(fit.rms_orientation) else fit.rms_orientation,
         "sigma": {c: {"value": v, "unit": "mm" if c in COMPONENTS else "rad"} for c, v in fit.sigma.items()},
-        "chi2_per_dof": fit.chi2, "misfit": misfit(fit), "smooth": fit.smooth, "notes": fit.notes,
+        "chi2_per_dof": fit.chi2, "misfit": fit.misfit, "smooth": fit.smooth, "notes": fit.notes,
         "degrees_of_freedom": fit.dof, "iterations": fit.iterations, "converged": fit.converged,
     }
 
