@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import math
 import re
 import sys
 
 from ..errors import ChaincompError, NoAnswer, OutsideLimit
 from ..measure.calibration import _write_loadable, slide_axis
-from ..measure.identify import (COMPONENTS, DIRECTIONS, MAX_SMOOTH, ROTATION, Vary, identify, outside_limits,
-                        params_yaml, read_table, to_json, to_text)
+from ..measure.identify import (COMPONENTS, DIRECTIONS, HUBER_K, MAX_SMOOTH, ROTATION, Vary, identify,
+                        outside_limits, params_yaml, read_table, to_json, to_text)
 from ..measure.protocol import check_errors
 from ..model.display import add_units_argument
 from ..model.machine import Symbol
@@ -120,6 +121,21 @@ def vary_spec(machine, raw: str) -> Vary:
     fail(f"unknown form {kind!r}: expected {VARY_FORMS}")
 
 
+def loss_spec(raw: str) -> float | None:
+    """'squares' -> None; 'huber' -> HUBER_K; 'huber:K' -> K (0.1 to 100 standard uncertainties)."""
+    name, colon, k = (t.strip() for t in raw.partition(":"))
+    if name == "squares" and not colon:
+        return None
+    if name != "huber":
+        raise ChaincompError(f"--loss {raw}: expected squares, huber or huber:K")
+    if not colon:
+        return HUBER_K
+    value = float(k) if re.fullmatch(r"[0-9]+(\.[0-9]*)?|\.[0-9]+", k) else math.nan
+    if not 0.1 <= value <= 100:
+        raise ChaincompError(f"--loss {raw}: K is a number of standard uncertainties, 0.1 to 100 (huber:1.5)")
+    return value
+
+
 def add_parser(sub) -> None:
     p = sub.add_parser("identify", help="fit error values to measured tool-tip coordinates",
                        description="Least-squares fit of the machine's error values to tool-tip "
@@ -172,6 +188,10 @@ def add_parser(sub) -> None:
                    help="with --sigma, refuse (exit 1, nothing written) a fit whose chi2/dof lies beyond its "
                         "99.9%% quantile (residuals larger than the uncertainties allow), which otherwise "
                         "is a warning naming the set-ups with the largest residuals")
+    p.add_argument("--loss", default="squares", metavar="squares|huber[:K]",
+                   help="squares (default) or Huber's robust loss, quadratic within K standard uncertainties and "
+                        f"linear beyond (K default {HUBER_K}; iteratively reweighted): outliers are down-weighted "
+                        "and listed with their standardized residuals")
     add_units_argument(p)
     add_format_argument(p, what="report format")
     p.set_defaults(run=run)
@@ -186,11 +206,13 @@ def run(args) -> int:
     sigma = sigma_spec(machine, args.sigma) if args.sigma is not None else None
     prefer = check_errors(machine, names(",".join(args.prefer)), "--prefer")
     vary = [vary_spec(machine, v) for v in args.vary]
+    huber = loss_spec(args.loss)
     table = read_table(args.measurements, machine)
     for text in outside_limits(machine, table):
         print(f"chaincomp identify: warning: {text}", file=sys.stderr)
     fit = identify(machine, table, assume, sigma, vary=vary, smooth=args.smooth, minimal=args.minimal,
-                   prefer=prefer, progress=lambda text: print(f"chaincomp identify: {text}", file=sys.stderr))
+                   prefer=prefer, progress=lambda text: print(f"chaincomp identify: {text}", file=sys.stderr),
+                   huber=huber)
     if not fit.converged:
         units = ", ".join(f"{s.name} in {s.unit.name}" for s in machine.axes)
         hint = (f": a residual this large is most often a column in another unit (the axes are read in their "

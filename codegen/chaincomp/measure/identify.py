@@ -607,6 +607,19 @@ class Fit:
     rms_orientation: float = math.nan      # rms of the orientation residual's components (rad; nan: not measured)
     worst: list[tuple[int, float]] = field(default_factory=list)   # (CSV line, |weighted residual|), largest first
     misfit: str | None = None              # with sigma: why chi2/dof says the fit does not fit (misfit())
+    huber: float | None = None             # Huber's k (in standard uncertainties), None: least squares
+    outliers: list[tuple[int, str, float, float]] = field(default_factory=list)  # Huber: (line, column, u, weight)
+
+
+HUBER_K = 1.345   # Huber's k: 95 % efficiency at normal residuals (Huber 1981; Holland & Welsch 1977)
+MAD_SCALE = 1.4826  # median |r| of normal residuals times this is their standard deviation
+
+
+def huber_weights(u: np.ndarray, k: float) -> np.ndarray:
+    """IRLS weights of Huber's loss at standardized residuals u: 1 within k, k/|u| beyond
+    (rho(u) = u^2/2 within k, k|u| - k^2/2 beyond; weight = rho'(u)/u)."""
+    a = np.abs(u)
+    return np.where(a <= k, 1.0, k / np.maximum(a, 1e-300))
 
 
 MISFIT_PROBABILITY = 0.999   # chi2/dof beyond this quantile of its distribution: the fit does not fit
@@ -646,7 +659,7 @@ def misfit(fit: Fit) -> str | None:
 
 def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_iterations: int = 50,
              model: ExactModel | None = None, vary=(), smooth: float = 0.0, minimal: bool = False,
-             prefer=(), progress=None) -> Fit:
+             prefer=(), progress=None, huber: float | None = None) -> Fit:
     """Fit the errors of ``machine`` (all but ``assume_zero``) to the measured tool points,
     directions and orientations.
 
@@ -657,7 +670,10 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
     ``smooth``: the weight of their tables' second differences (declared unit). ``minimal``:
     fit a minimal identifiable set, every other parameter held at zero; ``prefer``: errors to take
     into that set (and keep out of the suggested assume-zero set) first; ``progress``: called with
-    a line of text at each stage of a large fit (parameters x coordinates above PROGRESS_SIZE). ``model``: the machine's
+    a line of text at each stage of a large fit (parameters x coordinates above PROGRESS_SIZE); ``huber``:
+    Huber's k, for a robust fit by iteratively reweighted least squares (each coordinate's weight
+    recomputed from its standardized residual at every Gauss-Newton step: by --sigma, or without it
+    by 1.4826 x the median absolute weighted residual). ``model``: the machine's
     ExactModel, to reuse its compiled functions across fits. Raises ChaincompError when the data
     identify nothing, leave no redundancy to estimate the uncertainty (without ``sigma``), or
     give non-finite values."""
@@ -750,12 +766,21 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
         raise ChaincompError(f"no redundancy: {data} for {_count(rank, 'independent unknown')}, nothing "
                              f"left to estimate the uncertainty from; measure more, or give --sigma", table.file)
 
+    robust = np.ones(m)                                   # Huber's weights per coordinate (IRLS); 1: squares
+
+    def reweighted(r: np.ndarray, j: np.ndarray):
+        """The rows of the data times the square root of Huber's weights at these residuals."""
+        if huber is not None:
+            scale = 1.0 if sig else MAD_SCALE * float(np.median(np.abs(r[:m])))
+            robust[:] = huber_weights(r[:m] / max(scale, 1e-300), huber)
+        f = np.concatenate([np.sqrt(robust), np.ones(len(r) - m)])
+        return f * r, f[:, None] * j
+
     iterations, converged = 0, False
     yw = np.linalg.norm(w * y)
     z = np.zeros(rank)                                    # p = basis @ z throughout (p starts at 0)
     for iterations in range(1, max_iterations + 1):
-        r = residual(p)
-        jz = jacobian(p) @ basis
+        r, jz = reweighted(residual(p), jacobian(p) @ basis)
         dz = np.linalg.lstsq(jz, r, rcond=None)[0]
         z = z + dz
         p = basis @ z
@@ -764,8 +789,10 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
         if np.linalg.norm(dz) <= 1e-10 * np.linalg.norm(z) or np.linalg.norm(jz @ dz) <= 1e-14 * yw:
             converged = True
             break
-    r = residual(p)[:m]
-    jz = jacobian(p) @ basis
+    full = residual(p)
+    unweighted = full[:m]                                 # weighted by 1/sigma only
+    r, jz = reweighted(full, jacobian(p) @ basis)
+    r = r[:m]
     rss = float(r @ r)
     _, sv, vz = np.linalg.svd(jz, full_matrices=False)
     inv = (vz.T / sv ** 2) @ vz                           # (jz' jz)^-1: jz has full column rank
@@ -804,6 +831,12 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
         raise nonfinite
     if not dof > 0:
         raise ChaincompError(f"no redundancy: {data} leave no degrees of freedom", table.file)
+    if huber is not None:
+        fit.huber = huber
+        scale = 1.0 if sig else MAD_SCALE * float(np.median(np.abs(unweighted)))   # as reweighted() took it
+        rows_, cols_ = np.nonzero(mask)
+        fit.outliers = sorted(((table.lines[rows_[i]], OBSERVED[cols_[i]], float(unweighted[i] / scale),
+                                float(robust[i])) for i in np.flatnonzero(robust < 1)), key=lambda o: -abs(o[2]))
     fit.misfit = misfit(fit)
     return fit
 
@@ -1004,6 +1037,9 @@ def to_json(fit: Fit, source: str) -> dict:
         "sigma": {c: {"value": v, "unit": "mm" if c in COMPONENTS else "rad"} for c, v in fit.sigma.items()},
         "chi2_per_dof": fit.chi2, "misfit": fit.misfit, "smooth": fit.smooth, "notes": fit.notes,
         "degrees_of_freedom": fit.dof, "iterations": fit.iterations, "converged": fit.converged,
+        "loss": "squares" if fit.huber is None else {"huber": fit.huber},
+        "outliers": [{"line": line, "column": c, "standardized_residual": u, "weight": wt}
+                     for line, c, u, wt in fit.outliers],
     }
 
 
@@ -1079,8 +1115,21 @@ def to_text(fit: Fit, source: str, units: str = DEFAULT_UNITS) -> str:
         lines.append("to give every other parameter a value, fit a minimal set (--minimal)"
                      + (f", or assume these zero as well (one choice of many): --assume-zero "
                         + ",".join(fit.assumed_zero + constants) if len(constants) == len(fit.suggested_zero) else ""))
+    if fit.huber is not None:
+        lines.append(_outliers(fit))
     lines += [f"note: {note}" for note in fit.notes]
     return "\n".join(lines)
+
+
+def _outliers(fit: Fit) -> str:
+    """'Huber loss (k = 1.345): 3 of 150 coordinates down-weighted: line 14 y -41.2 sigma (weight 0.033), ...'."""
+    head = f"Huber loss (k = {fit.huber:g}): {len(fit.outliers)} of {fit.observations} " \
+           f"coordinates down-weighted (weight below 1; residuals in standard uncertainties)"
+    shown = [f"line {line} {c} {u:+.3g} sigma (weight {wt:.3g})" for line, c, u, wt in fit.outliers[:_SHOWN]]
+    more = len(fit.outliers) - _SHOWN
+    return head + (": " + ", ".join(shown) + (f" and {more} more (JSON has them all)" if more > 0 else "")
+                   if shown else "")
+
 
 
 def _num(v: float) -> str:
