@@ -6,6 +6,7 @@ import math
 import re
 import sys
 
+from ..analysis.calibration_report import write_report
 from ..errors import ChaincompError, NoAnswer, OutsideLimit
 from ..measure.calibration import _write_loadable, slide_axis
 from ..measure.identify import (COMPONENTS, DIRECTIONS, HUBER_K, MAX_SMOOTH, ROTATION, Vary, identify,
@@ -16,6 +17,7 @@ from ..model.machine import Symbol
 from ..model.params import parse_value
 from ..model.units import UNITS
 from ..model.varying import MAX_POLYNOMIAL_COEFFICIENTS, MAX_TABLE_KNOTS
+from .calibration_report import calibration_of, check_report
 from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, check_output, load,
                      names, number, number_list, refuse_empty, to_json as json_text)
 
@@ -192,6 +194,10 @@ def add_parser(sub) -> None:
                    help="squares (default) or Huber's robust loss, quadratic within K standard uncertainties and "
                         f"linear beyond (K default {HUBER_K}; iteratively reweighted): outliers are down-weighted "
                         "and listed with their standardized residuals")
+    p.add_argument("--report", metavar="FILE.html",
+                   help="also write a calibration report: one self-contained HTML file (set-up, the set-ups "
+                        "measured, residuals before and after, dispersion, values with uncertainties and "
+                        "correlations, what could not be seen, figures); never one of the inputs")
     add_units_argument(p)
     add_format_argument(p, what="report format")
     p.set_defaults(run=run)
@@ -202,6 +208,7 @@ def run(args) -> int:
                  *(("--assume-zero", v) for v in args.assume_zero), *(("--vary", v) for v in args.vary))
     machine = load(args.machine)
     check_output(args.output, args.measurements, args.machine)
+    check_report(args.report, args.output, args.measurements, args.machine)
     assume = check_errors(machine, names(",".join(args.assume_zero)), "--assume-zero")
     sigma = sigma_spec(machine, args.sigma) if args.sigma is not None else None
     prefer = check_errors(machine, names(",".join(args.prefer)), "--prefer")
@@ -231,4 +238,12 @@ def run(args) -> int:
         _write_loadable(args.output, params_yaml(fit, args.measurements), machine)
         if args.format == "text":
             print(f"wrote {args.output}")
+    if args.report:
+        setup = [("machine file", args.machine), ("measurements", args.measurements),
+                 ("sigma", args.sigma or "estimated from the residuals"),
+                 ("assumed zero", ", ".join(assume) or "none"), ("fitted as varying", ", ".join(args.vary) or "none"),
+                 ("minimal set", "yes" if args.minimal else "no"), ("params written", args.output or "none")]
+        write_report(args.report, calibration_of(fit, table, setup, args.units))
+        if args.format == "text":
+            print(f"wrote {args.report}")
     return 0

@@ -607,6 +607,11 @@ class Fit:
     rms_orientation: float = math.nan      # rms of the orientation residual's components (rad; nan: not measured)
     worst: list[tuple[int, float]] = field(default_factory=list)   # (CSV line, |weighted residual|), largest first
     misfit: str | None = None              # with sigma: why chi2/dof says the fit does not fit (misfit())
+    # (set-ups, 9) measured minus model in the order of Table.observations, internal units, NaN where
+    # not measured: with every fitted error zero, and at the estimates (the calibration report's numbers)
+    residuals_before: np.ndarray | None = None
+    residuals_after: np.ndarray | None = None
+    correlation: np.ndarray | None = None  # of the estimates, in their order
     huber: float | None = None             # Huber's k (in standard uncertainties), None: least squares
     outliers: list[tuple[int, str, float, float]] = field(default_factory=list)  # Huber: (line, column, u, weight)
 
@@ -838,6 +843,12 @@ def identify(machine: Machine, table: Table, assume_zero=(), sigma=None, max_ite
         fit.outliers = sorted(((table.lines[rows_[i]], OBSERVED[cols_[i]], float(unweighted[i] / scale),
                                 float(robust[i])) for i in np.flatnonzero(robust < 1)), key=lambda o: -abs(o[2]))
     fit.misfit = misfit(fit)
+    fit.residuals_before, fit.residuals_after = np.full(obs.shape, math.nan), np.full(obs.shape, math.nan)
+    fit.residuals_before[mask] = y - predict(np.zeros((1, n)))[0]
+    fit.residuals_after[mask] = raw
+    s_ident = std[ident]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        fit.correlation = np.nan_to_num(cov[np.ix_(ident, ident)] / np.outer(s_ident, s_ident))
     return fit
 
 

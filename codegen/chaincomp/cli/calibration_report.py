@@ -1,0 +1,91 @@
+"""identify's fit as the numbers of a calibration report (analysis.calibration_report): what a
+verb that fits a machine's errors hands to ``--report FILE.html``."""
+
+from __future__ import annotations
+
+import datetime
+import math
+import os
+
+import numpy as np
+
+from ..analysis.calibration_report import Calibration, Dispersion, Residual, Value
+from ..errors import ChaincompError
+from ..measure.identify import COMPONENTS, OBSERVED, Fit, Table, _shown
+from ..model.display import display_unit
+from .common import check_output
+
+
+def check_report(path: str | None, *inputs: str | None) -> None:
+    """--report FILE.html: never an input, and named as what it is (a browser opens it by the name)."""
+    if path is None:
+        return
+    check_output(path, *inputs, option="--report")
+    if os.path.splitext(path)[1].lower() not in (".html", ".htm"):
+        raise ChaincompError(f"--report {path}: the file name must end in .html")
+
+
+def now() -> str:
+    return datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+
+
+def calibration_of(fit: Fit, table: Table, setup: list[tuple[str, str]], units: str) -> Calibration:
+    """The report's numbers of an identify fit: per set-up the size of the tool point's residual
+    (or, with no point measured, of the direction's or orientation's) before the fit (every
+    fitted error zero) and after it; per measured coordinate of that kind its rms residual over
+    the set-ups (the dispersion)."""
+    m = fit.machine
+    point = any(c in fit.measured for c in COMPONENTS)
+    kind = "length" if point else "angle"
+    unit = display_unit(kind, units)
+    cols = [k for k, c in enumerate(OBSERVED) if c in fit.measured and (c in COMPONENTS) == point]
+    shown = [OBSERVED[k] for k in cols]
+
+    def size(r: np.ndarray) -> np.ndarray:          # per set-up, nan where none of cols was measured
+        part = r[:, cols]
+        with np.errstate(invalid="ignore"):
+            return np.where(np.isnan(part).all(axis=1), math.nan, np.sqrt(np.nansum(part ** 2, axis=1))) \
+                / unit.to_internal
+
+    def rms(r: np.ndarray) -> float:
+        v = r[~np.isnan(r)]
+        return math.sqrt(float(np.mean(v ** 2))) / unit.to_internal if v.size else math.nan
+
+    before, after = size(fit.residuals_before), size(fit.residuals_after)
+    residuals = [Residual(f"line {line}", float(b), float(a)) for line, b, a in zip(table.lines, before, after)]
+    dispersion = [Dispersion(c, rms(fit.residuals_before[:, k]), rms(fit.residuals_after[:, k]))
+                  for c, k in zip(shown, cols)]
+    byname = {p.name: p for p in fit.params}
+    values = []
+    for name, v in fit.estimates.items():
+        factor, u = _shown(fit, byname[name], units)
+        values.append(Value(name, v / factor, fit.uncertainties[name] / factor, u))
+    plan_columns = ["CSV line"] + [f"{a.name} [{a.unit.name}]" for a in m.axes] + ["measured"]
+    plan = [[str(line)] + [f"{a.from_internal(table.axes[a.name][i]):.6g}" for a in m.axes]
+            + [", ".join(c for k, c in enumerate(OBSERVED) if not math.isnan(fit.residuals_before[i, k]))]
+            for i, line in enumerate(table.lines)]
+    not_seen = [(n, "assumed zero (--assume-zero): not fitted") for n in fit.assumed_zero]
+    not_seen += list(fit.unidentifiable.items()) + list(fit.redundant.items())
+    summary = [("set-ups", str(fit.setups)),
+               ("coordinates measured", f"{fit.observations} ({', '.join(fit.measured)})"),
+               ("errors fitted", f"{len(fit.fitted)} ({len(fit.params)} parameters), "
+                                 f"{len(fit.estimates)} given a value"),
+               ("rank, condition number", f"{fit.rank}, {fit.condition:.4g} (Jacobian columns scaled to unit norm)"),
+               ("rms residual after the fit", f"{rms(fit.residuals_after[:, cols]):.4g} {unit.name} "
+                                              f"({', '.join(shown)})"),
+               ("degrees of freedom", f"{fit.dof:.4g}"),
+               ("Gauss-Newton", f"{'converged' if fit.converged else 'NOT converged'} after {fit.iterations} "
+                                "iterations on the exact model")]
+    if fit.chi2 is not None:
+        summary.append(("chi2/dof", f"{fit.chi2:.3g}"))
+    warnings = ([fit.misfit] if fit.misfit else []) + [f"note: {n}" for n in fit.notes]
+    if fit.suggested_zero:
+        warnings.append("Some errors could not be given a value: fit a minimal set (--minimal) or assume these "
+                        "zero as well: " + ", ".join(fit.suggested_zero))
+    return Calibration(
+        "chaincomp identify", m.name, now(), setup, plan_columns, plan, unit.name, residuals,
+        f"Each measured {'tool-point coordinate' if point else 'direction component'}'s rms residual over the "
+        "set-ups, before and after the fit (a probing fit reports the spread of the sphere centres per rotary "
+        "axis here, as KinematicsOpt's measured and optimised dispersion).",
+        dispersion, values, fit.correlation.tolist() if fit.correlation is not None else None, not_seen,
+        summary, warnings)
