@@ -34,10 +34,12 @@ std::int64_t ns_since(Clock::time_point t0) {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t0).count();
 }
 
-std::int64_t wall_us() {
-  return std::chrono::duration_cast<std::chrono::microseconds>(
+std::int64_t wall_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
              std::chrono::system_clock::now().time_since_epoch()).count();
 }
+
+std::int64_t wall_us() { return wall_ns() / 1000; }
 
 // Where the machine name's length field is: in a command after fingerprint, utime and seq;
 // in a target after fingerprint, utime, seq, num_axes, axes, correction, the residuals,
@@ -119,7 +121,8 @@ void to_message(const Target& t, chaincomp_lcm::lcmt_corrected_target& o) noexce
 
 LcmNode::LcmNode(lcm_t* lcm, const ModelEntry& entry, const void* model, const DaemonConfig& config,
                  const std::string& params_file, const std::string& params_hash, RealtimeObtained rt)
-    : lcm_(lcm), config_(config), comp_(entry, model, config.compensator), latency_(config.latency_window) {
+    : lcm_(lcm), config_(config), comp_(entry, model, config.compensator), latency_(config.latency_window),
+      receipt_(config.latency_window) {
   std::random_device random;
   while (instance_id_ == 0) {
     instance_id_ = static_cast<std::int64_t>(((std::uint64_t(random()) << 32) | random()) >> 1);
@@ -140,16 +143,14 @@ LcmNode::LcmNode(lcm_t* lcm, const ModelEntry& entry, const void* model, const D
   s.mlockall_ok = rt.mlockall;
   s.sched_fifo_ok = rt.sched_fifo;
   s.cpu_pinned_ok = rt.cpu_pinned;
+  s.queue_capacity = kQueueCapacity;
+  s.control_queue_capacity = kControlQueueCapacity;
   status_buf_.resize(s.getEncodedSize() + 64);
   sent_.assign(kSentRing, 0);
-  command_sub_ = subscribe(config_.command_channel, &LcmNode::on_command);
-  control_sub_ = subscribe(config_.control_channel, &LcmNode::on_control);
-  // LCM drops a subscription's messages beyond its queue capacity (default 30): a short
-  // stall of the loop at 10 kHz would lose commands. The socket buffer bounds it anyway.
-  lcm_subscription_set_queue_capacity(command_sub_, kQueueCapacity);
+  command_sub_ = subscribe(config_.command_channel, &LcmNode::on_command, kQueueCapacity);
+  control_sub_ = subscribe(config_.control_channel, &LcmNode::on_control, kControlQueueCapacity);
   // Targets on the bus: its own heard back, and another daemon's for this machine.
-  target_sub_ = subscribe(config_.corrected_channel, &LcmNode::on_target);
-  lcm_subscription_set_queue_capacity(target_sub_, kQueueCapacity);
+  target_sub_ = subscribe(config_.corrected_channel, &LcmNode::on_target, kQueueCapacity);
   find_sockets();
   // An LD_PRELOAD allocation counter, when present, measures the steady state.
   alloc_count_ = reinterpret_cast<long long (*)()>(dlsym(RTLD_DEFAULT, "chaincomp_alloc_count"));
@@ -158,8 +159,17 @@ LcmNode::LcmNode(lcm_t* lcm, const ModelEntry& entry, const void* model, const D
   publish_status(false);
 }
 
-lcm_subscription_t* LcmNode::subscribe(const std::string& channel, lcm_msg_handler_t handler) {
-  return lcm_subscribe(lcm_, channel_regex(channel).c_str(), handler, this);
+lcm_subscription_t* LcmNode::subscribe(const std::string& channel, lcm_msg_handler_t handler, int capacity) {
+  lcm_subscription_t* sub = lcm_subscribe(lcm_, channel_regex(channel).c_str(), handler, this);
+  lcm_subscription_set_queue_capacity(sub, capacity);
+  return sub;
+}
+
+bool LcmNode::queue_was_full(lcm_subscription_t* sub, int capacity) {
+  // LCM counts the message being handled out of the queue before calling its handler: capacity - 1
+  // left (or more: arrived since) means it was full (or one short of it) at some moment since the
+  // last message was taken, and nothing but taking one empties it.
+  return lcm_subscription_get_queue_size(sub) >= capacity - 1;
 }
 
 CommandTime LcmNode::command_time() const {
@@ -180,8 +190,7 @@ LcmNode::~LcmNode() {
 
 void LcmNode::accept_temperatures(ThermalState& thermal) {
   thermal_ = &thermal;
-  readings_sub_ = subscribe(config_.temperatures_channel, &LcmNode::on_readings);
-  lcm_subscription_set_queue_capacity(readings_sub_, kQueueCapacity);
+  readings_sub_ = subscribe(config_.temperatures_channel, &LcmNode::on_readings, kQueueCapacity);
 }
 
 void LcmNode::on_readings(const lcm_recv_buf_t* rbuf, const char*, void* user) {
@@ -196,9 +205,8 @@ void LcmNode::on_readings(const lcm_recv_buf_t* rbuf, const char*, void* user) {
 
 void LcmNode::accept_params_updates(ParamsUpdater& updater) {
   updater_ = &updater;
-  params_sub_ = subscribe(config_.params_channel, &LcmNode::on_params);
   // a flood is refused one by one (min_interval), never dropped unseen by a short queue
-  lcm_subscription_set_queue_capacity(params_sub_, kQueueCapacity);
+  params_sub_ = subscribe(config_.params_channel, &LcmNode::on_params, kQueueCapacity);
 }
 
 void LcmNode::on_params(const lcm_recv_buf_t* rbuf, const char*, void* user) {
@@ -296,6 +304,7 @@ void LcmNode::on_command(const lcm_recv_buf_t* rbuf, const char*, void* user) {
 void LcmNode::on_control(const lcm_recv_buf_t* rbuf, const char*, void* user) {
   auto* self = static_cast<LcmNode*>(user);
   ++self->control_received_;
+  if (queue_was_full(self->control_sub_, kControlQueueCapacity)) ++self->control_queue_full_;
   if (!decode_control(rbuf->data, rbuf->data_size, self->control_msg_)) {
     ++self->control_refused_;
     return;
@@ -305,11 +314,23 @@ void LcmNode::on_control(const lcm_recv_buf_t* rbuf, const char*, void* user) {
 
 void LcmNode::handle_command(const lcm_recv_buf_t* rbuf) {
   const auto t0 = Clock::now();
+  // Commands LCM discarded at a full queue show as a gap before the first one it kept after
+  // them; the moment it was full is seen by a command at most kQueueCapacity - 1 ahead of that
+  // gap (the queue held it and those before it), so a gap that near a full queue is the queue's.
+  if (queue_was_full(command_sub_, kQueueCapacity)) {
+    ++queue_full_;
+    full_at_ = handled_;
+  }
+  const bool near_full = full_at_ >= 0 && handled_ - full_at_ <= kQueueCapacity;
+  ++handled_;
   if (!decode_command(rbuf->data, rbuf->data_size, cmd_msg_, command_)) {
     comp_.count_undecodable();
     return;
   }
-  if (comp_.process(command_, target_)) {
+  const std::int64_t missing_before = comp_.counters().seq_missing;
+  const bool answered = comp_.process(command_, target_);
+  if (near_full) queue_dropped_ += comp_.counters().seq_missing - missing_before;
+  if (answered) {
     auto& o = out_msg_;
     to_message(target_, o);
     o.compute_ns = ns_since(t0);
@@ -318,6 +339,9 @@ void LcmNode::handle_command(const lcm_recv_buf_t* rbuf) {
       comp_.count_published();
       sent_[sent_head_++ & (kSentRing - 1)] = fnv1a64(out_buf_.data(), static_cast<std::size_t>(n));
       if (sent_head_ - sent_tail_ > kSentRing) sent_tail_ = sent_head_ - kSentRing;  // the oldest: lost
+      receipt_.record(wall_ns() - rbuf->recv_utime * 1000);
+    } else {
+      ++unpublished_;
     }
     latency_.record(ns_since(t0));
     command_accepted_ = true;
@@ -359,6 +383,13 @@ void LcmNode::publish_status(bool final) {
   s.foreign_targets = foreign_;
   s.foreign_instance = foreign_instance_;
   s.held_back = k.held_back;
+  s.targets_full = k.targets_full;
+  s.targets_partial = k.targets_partial;
+  s.targets_uncorrected = k.targets_uncorrected;
+  s.targets_worse = k.targets_worse;
+  s.objective_before = k.objective_before;
+  s.objective_after = k.objective_after;
+  s.direction_weight = comp_.direction_weight();
   if (updater_) {
     s.params_version = updater_->version();
     s.params_seq = updater_->last_seq();
@@ -371,6 +402,14 @@ void LcmNode::publish_status(bool final) {
   }
   s.control_received = control_received_;
   s.control_refused = control_refused_;
+  s.unpublished = unpublished_;
+  s.queue_full = queue_full_;
+  s.queue_dropped = queue_dropped_;
+  s.control_queue_full = control_queue_full_;
+  const auto waited = receipt_.summary();
+  s.receipt_p50_ns = waited.p50;
+  s.receipt_p99_ns = waited.p99;
+  s.receipt_max_ns = waited.max;
   const int n = s.encode(status_buf_.data(), 0, static_cast<int>(status_buf_.size()));
   if (n > 0) lcm_publish(lcm_, config_.status_channel.c_str(), status_buf_.data(), n);
 }

@@ -67,8 +67,11 @@ class LcmNode {
 
   // The longest machine name a command may carry (lcm-gen's decoder trusts the length).
   static constexpr int kMaxMachineName = 255;
-  // Commands LCM may queue while the loop is busy.
-  static constexpr int kQueueCapacity = 10000;
+  // LCM's user-space queue of each subscription (messages; LCM's default is 30): what may wait
+  // while the loop is busy, one second of commands at 10 kHz. LCM discards what arrives at a
+  // full queue without counting it: a queue found full is counted (docs/guide/daemon.md).
+  static constexpr int kQueueCapacity = 10000;         // commands, params updates, readings, targets
+  static constexpr int kControlQueueCapacity = 1000;   // control messages
 
  private:
   static void on_command(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
@@ -76,7 +79,9 @@ class LcmNode {
   static void on_target(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
   static void on_params(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
   static void on_readings(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
-  lcm_subscription_t* subscribe(const std::string& channel, lcm_msg_handler_t handler);
+  lcm_subscription_t* subscribe(const std::string& channel, lcm_msg_handler_t handler, int capacity);
+  // Whether the subscription's queue held `capacity` messages before this one was taken from it.
+  static bool queue_was_full(lcm_subscription_t* sub, int capacity);
   void handle_command(const lcm_recv_buf_t* rbuf);
   // The command stream's time for params updates (now: this node's clock).
   CommandTime command_time() const;
@@ -86,7 +91,8 @@ class LcmNode {
   lcm_t* lcm_;
   DaemonConfig config_;
   Compensator comp_;
-  LatencyWindow latency_;
+  LatencyWindow latency_;   // compute: the handler's start to the target published
+  LatencyWindow receipt_;   // waiting too: LCM's receive stamp to the target published
   // Every message is value-initialised: no field ever carries process memory onto the bus.
   chaincomp_lcm::lcmt_axis_command cmd_msg_{};
   chaincomp_lcm::lcmt_corrected_target out_msg_{}, heard_msg_{};
@@ -101,7 +107,10 @@ class LcmNode {
   bool steady_ = false;  // the first command has been handled
   bool command_accepted_ = false;                 // the last accepted command's receipt
   std::chrono::steady_clock::time_point command_at_;
-  std::int64_t control_received_ = 0, control_refused_ = 0;
+  std::int64_t control_received_ = 0, control_refused_ = 0, control_queue_full_ = 0;
+  // Commands: answered but not sent; handled with the queue full; missing while it was.
+  std::int64_t unpublished_ = 0, queue_full_ = 0, queue_dropped_ = 0;
+  std::int64_t handled_ = 0, full_at_ = -1;  // commands handled; the last found with the queue full
   lcm_subscription_t* command_sub_ = nullptr;
   lcm_subscription_t* control_sub_ = nullptr;
   lcm_subscription_t* target_sub_ = nullptr;
