@@ -171,7 +171,7 @@ def build_plot(b: B.Budget, pick: list[str], component: str | None, params: str 
     ax.set_ylabel("error source")
     at = ", ".join(f"{n} = {v:g} {b.machine.symbol(n).unit.name}"
                    for n, v in B._axes_at(b, cb.worst_index).items())
-    ax.set_title(f"contributions at the worst point\n({at})", fontsize="medium")
+    ax.set_title("contributions at the worst point\n" + F.lines(f"({at})", 48), fontsize="medium")
     held = ", ".join(f"{n} = {v:g} {b.machine.symbol(n).unit.name}" for n, v in b.grid.fixed.items())
     tol = f"tolerances {os.path.basename(tolerances)}" if tolerances else "--params values as bounds"
     fig.suptitle(F.title(b.machine, f"budget of {component}; worst {float(cb.worst.max()) * scale:.3g} {unit}, "

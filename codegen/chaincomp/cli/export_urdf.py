@@ -12,7 +12,7 @@ import numpy as np
 from ..errors import ChaincompError
 from ..model.machine import load_machine
 from ..model.params import load_params
-from ..model.urdf import machine_text
+from ..model.urdf import BLOCK_SYMBOLS, machine_text
 from ..model.urdf_out import calibrated_urdf
 from ..output import write_file
 from ..symbolic.numeric import ExactModel
@@ -56,6 +56,10 @@ def run(args) -> int:
     if varying:
         raise ChaincompError(f"{', '.join(varying)}: a table or polynomial cannot go into a URDF origin "
                              "(constants only)", args.params)
+    # the tool and base blocks (import-urdf --errors ...,tool,base) have no joint origin to go into: the
+    # registration is the instrument's frame, the tool mount chaincomp's tool (left out, and said so)
+    blocks = [n for n in BLOCK_SYMBOLS if values.get(n)]
+    values = {k: (0.0 if k in blocks else v) for k, v in values.items()}
     data = calibrated_urdf(args.urdf, args.base, args.tip, values)
     point, direction, reference = _tool(machine)
     with tempfile.TemporaryDirectory() as tmp:
@@ -86,10 +90,12 @@ def run(args) -> int:
                              f"{TOLERANCE_RAD:g} rad): is MACHINE.yaml imported from this URDF, --base and --tip?",
                              args.machine)
     write_file(args.output, data)
-    summary = {"output": args.output, "poses": POSES, "max_point_mm": point_off, "max_direction_rad": turn_off}
+    summary = {"output": args.output, "poses": POSES, "max_point_mm": point_off, "max_direction_rad": turn_off,
+               "left_out": blocks}
     if args.format == "json":
         print(json.dumps(summary))
     else:
         print(f"wrote {args.output}: at {POSES} poses its tool pose is the machine's within {point_off:.2g} mm "
-              f"and {turn_off:.2g} rad")
+              f"and {turn_off:.2g} rad"
+              + (f" (left out, no joint origin holds them: {', '.join(blocks)})" if blocks else ""))
     return 0

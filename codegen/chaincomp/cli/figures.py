@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import io
 import os
+import re
 import sys
 
 from ..model.display import DEFAULT_UNITS, display_unit
@@ -65,6 +66,18 @@ def title(machine, what: str, params: str | None = None, sets=(), model: str | N
     return f"{name}: {what}\n" + "; ".join(second)
 
 
+def lines(text: str, width: int) -> str:
+    """Text broken at its '; ' and ', ' into lines of about ``width`` characters (a title over a
+    narrow panel)."""
+    out: list[str] = []
+    for part in re.split(r"(?<=[;,]) ", text):
+        if out and len(out[-1]) + 1 + len(part) <= width:
+            out[-1] += " " + part
+        else:
+            out.append(part)
+    return "\n".join(out)
+
+
 def label(quantity: str, unit: str) -> str:
     return f"{quantity} [{unit}]"
 
@@ -83,12 +96,13 @@ def component_unit(component: str, length_unit: str, units: str = DEFAULT_UNITS)
 
 
 def save(fig, path: str, **options) -> None:
-    """Write a matplotlib figure (its type from the file name, PNG without one). Drawn in memory
-    first, so that a failed write (a full disk, a folder that takes no files) is an error naming
-    the file, not a traceback or a silently short image."""
+    """Write a matplotlib figure (its type from the file name, PNG without one). The canvas is
+    the drawing's bounding box (bbox_inches="tight"): no title, label or key is cut at its edge
+    whatever its length. Drawn in memory first, so that a failed write (a full disk, a folder
+    that takes no files) is an error naming the file, not a traceback or a silently short image."""
     kind = os.path.splitext(path)[1].lstrip(".").lower() or "png"
     buffer = io.BytesIO()
-    fig.savefig(buffer, format=kind, **options)
+    fig.savefig(buffer, format=kind, **{"bbox_inches": "tight", "pad_inches": 0.15, **options})
     write_file(path, buffer.getvalue())
 
 

@@ -10,7 +10,7 @@ from .. import __version__
 from ..analysis.lint import lint
 from ..errors import ChaincompError
 from ..model.machine import load_machine
-from ..model.urdf import ERROR_MODES, machine_text
+from ..model.urdf import ERROR_BLOCKS, ERROR_MODES, machine_text
 from ..output import write_file
 from .common import add_format_argument, check_output, number_list
 
@@ -26,10 +26,13 @@ def add_parser(sub) -> None:
     p.add_argument("urdf", metavar="ROBOT.urdf", help="the URDF file (expand a xacro first)")
     p.add_argument("--base", required=True, metavar="LINK", help="link the chain starts from (the machine's reference)")
     p.add_argument("--tip", required=True, metavar="LINK", help="link the tool is fixed to (below --base in the tree)")
-    p.add_argument("--errors", choices=ERROR_MODES, default="none",
+    p.add_argument("--errors", default="none", metavar="|".join(ERROR_MODES) + "[,tool][,base]",
                    help="error symbols to declare: joint-offsets (one zero offset per moving joint, arcsec or "
                         "um), origins (a 6-DOF block at each moving joint's origin, um and arcsec), all (both); "
-                        "default none")
+                        "default none; and, after a comma, tool (a 6-DOF block tool_dx .. tool_ez after the tip "
+                        "link) and base (base_dx .. base_ez before the chain, marked registration: the measuring "
+                        "instrument's frame to the base, reported apart by identify): e.g. "
+                        f"origins,{','.join(ERROR_BLOCKS)}")
     p.add_argument("--tool-point", default="0,0,0", metavar="X,Y,Z",
                    help="tool point in the tip link's frame, mm (default 0,0,0)")
     p.add_argument("--tool-direction", default="0,0,1", metavar="X,Y,Z",

@@ -373,11 +373,19 @@ def _volume_figure(d: VolumeData):
     norm = colors.Normalize(lo_size, hi_size if hi_size > lo_size else lo_size + 1.0)
     rgba = cm.viridis(norm(size))
     u = d.error * d.scale
-    ax.quiver(*d.point.T, *u.T, colors=np.concatenate([rgba, rgba, rgba]), arrow_length_ratio=0.25)
-    ax.scatter(*d.point.T, s=4, color="0.4")
+    # thick shafts and wide heads: thin ones vanished against the panes and grid at 5^3 arrows
+    ax.quiver(*d.point.T, *u.T, colors=np.concatenate([rgba, rgba, rgba]), arrow_length_ratio=0.35,
+              linewidths=2.2)
+    ax.scatter(*d.point.T, s=10, color="black", depthshade=False, label="nominal tool point")
     x0, y0, z0 = _key_origin(d)
-    ax.quiver(x0, y0, z0, d.key * d.scale, 0, 0, color="red", arrow_length_ratio=0.25)
-    ax.text(x0, y0, z0, f"key: {d.key:g} {d.unit}  ", color="red", ha="right")
+    ax.quiver(x0, y0, z0, d.key * d.scale, 0, 0, color="red", arrow_length_ratio=0.35, linewidths=2.5)
+    # the key's words flat in a corner, clear of the arrows (a 3-D text lay over them or, at the
+    # left, beyond the canvas, which does not count 3-D texts in its bounds)
+    ax.text2D(0.0, 1.0, f"key: the red arrow (above the grid's corner) is {d.key:g} {d.unit}",
+              transform=ax.transAxes, color="red", fontweight="bold", va="top")
+    ax.xaxis.pane.set_alpha(0.3)
+    ax.yaxis.pane.set_alpha(0.3)
+    ax.zaxis.pane.set_alpha(0.3)
     for set_label, c in zip((ax.set_xlabel, ax.set_ylabel, ax.set_zlabel), "xyz"):
         set_label(F.label(f"tool point {c}", d.length_unit))
     fig.colorbar(cm.ScalarMappable(norm=norm, cmap="viridis"), ax=ax, shrink=0.6,
@@ -403,21 +411,25 @@ def write_html(args) -> None:
     m = map_data(args, None if volume else args.over, DEFAULT_GRID["map"] if volume else args.grid)
     v = volume_data(args, args.over if volume else None, args.grid if volume else DEFAULT_GRID["volume"])
     fig = make_subplots(rows=1, cols=2, specs=[[{"type": "scene"}, {"type": "scene"}]],
-                        subplot_titles=tuple("<br>".join(map(html_text, d.title.split("\n"))) for d in (m, v)),
+                        subplot_titles=tuple(_html_title(d.title) for d in (m, v)),
                         horizontal_spacing=0.08)
     label = html_text(m.label)   # plotly reads its texts as a subset of HTML
     fig.add_trace(go.Surface(x=m.g1, y=m.g2, z=m.z.T, colorscale="Viridis", name=label,
-                             colorbar={"title": {"text": label}, "x": 0.42, "len": 0.8}), 1, 1)
+                             colorbar={"title": {"text": label}, "x": 0.43, "len": 0.8}), 1, 1)
     tips = v.point + v.error * v.scale
     xs, ys, zs = (np.column_stack([v.point[:, k], tips[:, k], np.full(len(tips), np.nan)]).ravel()
                   for k in range(3))
     size = np.linalg.norm(v.error, axis=1)
-    fig.add_trace(go.Scatter3d(x=xs, y=ys, z=zs, mode="lines", line={"color": "grey", "width": 3},
-                               name="error (scaled)", hoverinfo="skip"), 1, 2)
+    # thick shafts in their size's colour and a dot at each tip: thin grey lines were hard to read
+    lo, hi = float(size.min()), float(size.max())
+    fig.add_trace(go.Scatter3d(x=xs, y=ys, z=zs, mode="lines", name="error (scaled)", hoverinfo="skip",
+                               line={"color": np.repeat(size, 3), "colorscale": "Viridis", "cmin": lo,
+                                     "cmax": hi, "width": 7}), 1, 2)
     fig.add_trace(go.Scatter3d(x=tips[:, 0], y=tips[:, 1], z=tips[:, 2], mode="markers",
-                               marker={"size": 3, "color": size, "colorscale": "Viridis",
+                               marker={"size": 4, "color": size, "colorscale": "Viridis", "cmin": lo, "cmax": hi,
+                                       "line": {"color": "black", "width": 1},
                                        "colorbar": {"title": {"text": F.label("|tool point error|", v.unit)},
-                                                    "x": 1.0, "len": 0.8}},
+                                                    "x": 0.93, "len": 0.8}},
                                text=[f"{s:.3f} {v.unit}" for s in size], name="arrow tips"), 1, 2)
     x0, y0, z0 = _key_origin(v)
     fig.add_trace(go.Scatter3d(x=[x0, x0 + v.key * v.scale], y=[y0, y0], z=[z0, z0],
@@ -426,9 +438,22 @@ def write_html(args) -> None:
     fig.update_scenes(xaxis_title=F.axis_label(m.a1), yaxis_title=F.axis_label(m.a2), zaxis_title=label,
                       row=1, col=1)
     fig.update_scenes(**{f"{c}axis_title": F.label(f"tool point {c}", v.length_unit) for c in "xyz"}, row=1, col=2)
-    fig.update_layout(width=1500, height=750, showlegend=True, legend={"x": 0.55, "y": 0.0},
-                      margin={"t": 110})
-    write_file(args.html, fig.to_html(include_plotlyjs=True, full_html=True))
+    # the page's width is the window's (no horizontal scroll at 1280 px); the titles in small
+    # type, a line per part, so that each stays over its half; each colour bar beside its scene
+    fig.update_annotations(font_size=12)
+    for k, (a, b) in enumerate(((0.0, 0.42), (0.51, 0.92))):
+        fig.layout[f"scene{k + 1 if k else ''}"].domain.x = (a, b)
+        fig.layout.annotations[k].x = (a + b) / 2
+    fig.update_layout(autosize=True, height=750, showlegend=True, margin={"t": 140, "l": 10, "r": 10},
+                      legend={"orientation": "h", "x": 0.51, "y": 0.0, "yanchor": "top"})
+    write_file(args.html, fig.to_html(include_plotlyjs=True, full_html=True, default_width="100%",
+                                      default_height="750px", config={"responsive": True}))
+
+
+def _html_title(title: str) -> str:
+    """A figure's title for plotly (a subset of HTML): escaped, its second line a line per part."""
+    first, _, rest = title.partition("\n")
+    return "<br>".join(html_text(t) for t in [first, *rest.split("; ")] if t)
 
 
 def _replay_figure(args):
@@ -444,11 +469,13 @@ def _replay_figure(args):
     if predicted:
         errors = predicted
         source = "the exact model at the corrected axes (ramp included)"
+        compensated = _compensated_with(args, predicted["with"][0], cols["residual_point_mm"])
     else:   # the compensator's own residuals
         direction = cols.get("residual_direction_rad")
         errors = {"with": (cols["residual_point_mm"], direction if direction is not None and direction.any()
                            else None)}
         source = "the compensator's residual (ramp included)"
+        compensated = "compensated with values the CSV does not name"
     um, arcsec = display_unit("length", args.units), display_unit("angle", args.units)
     panels = [("commanded", linear, "mm", 1.0), ("commanded", rotary, "deg", 1.0),
               ("correction", linear, um.name, 1.0 / um.to_internal),
@@ -473,11 +500,28 @@ def _replay_figure(args):
         ax.set_ylabel(F.label(quantity, unit.name))
         ax.legend(loc="upper right", fontsize="small")
     grid[-1].set_xlabel(F.label("time", "s"))
-    what = f"replay of {os.path.basename(args.replay)}, {ok} corrected, {rows - ok} rejected"
-    fig.suptitle(F.title(machine or "(no machine file)", what, args.params, args.sets, "exact",
-                         extra=f"with compensation: {source}"), fontsize="medium")
+    what = f"replay of {os.path.basename(args.replay)}, {ok} corrected, {rows - ok} rejected, {compensated}"
+    title = F.title(machine or "(no machine file)", what, args.params, args.sets, "exact",
+                    extra=f"with compensation: {source}")
+    fig.suptitle("\n".join(F.lines(line, 110) for line in title.split("\n")), fontsize="medium")
     fig.tight_layout()
     return fig
+
+
+AGREE_MM = 1e-6   # the compensator's residual and the exact model's, both double precision: within 1 nm
+
+
+def _compensated_with(args, model_residual: np.ndarray, replay_residual: np.ndarray) -> str:
+    """Which values the replay compensated with, for the title: a replay CSV does not name its
+    params, but its residual column is the compensator's own (mm); where the exact model with
+    --params at the corrected axes gives the same residual on every record, they were these."""
+    given = F.values_text(args.params, args.sets)
+    worst = float(np.max(np.abs(model_residual - replay_residual)))
+    if worst <= AGREE_MM:
+        return f"compensated with {given}"
+    F.warn(f"{args.replay}: its residuals differ from the exact model's with {given} by up to {worst * 1e3:.3g} µm: "
+           "the replay compensated with other values (another params file, updates or a thermal model in the log)")
+    return f"compensated with values other than {given} (residuals differ by up to {worst * 1e3:.3g} µm)"
 
 
 def _predicted(args, machine, axes: list[str], cols: dict):

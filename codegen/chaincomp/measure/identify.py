@@ -1028,12 +1028,14 @@ def to_json(fit: Fit, source: str) -> dict:
     """Every value in internal units (mm, rad, 1), named beside it; None where not measured or
     not identified."""
     byname = {p.name: p for p in fit.params}
+    constant = {n: {"value": v, "uncertainty": fit.uncertainties[n], "unit": _internal_unit(byname[n], fit)}
+                for n, v in fit.estimates.items() if byname[n].error not in fit.varying}
     return {
         "machine": fit.machine.name, "measurements": source, "units": "internal (mm, rad, 1)",
         "setups": fit.setups, "observations": fit.observations,
         "measured": fit.measured, "fitted": fit.fitted, "assumed_zero": fit.assumed_zero,
-        "estimates": {n: {"value": v, "uncertainty": fit.uncertainties[n], "unit": _internal_unit(byname[n], fit)}
-                      for n, v in fit.estimates.items() if byname[n].error not in fit.varying},
+        "estimates": {n: e for n, e in constant.items() if not _registration(fit, n)},
+        "registration": {n: e for n, e in constant.items() if _registration(fit, n)},
         "varying": {e: _varying_json(fit, e, v) for e, v in fit.varying.items()},
         "parameters": len(fit.params), "minimal": fit.minimal,
         "redundant": {n: {"reason": why, "carried_by": fit.carried[n]} for n, why in fit.redundant.items()},
@@ -1108,9 +1110,17 @@ def to_text(fit: Fit, source: str, units: str = DEFAULT_UNITS) -> str:
     width = max([12] + [len(n) for n in fit.estimates])
     lines.append(f"  {'parameter':<{width}}  estimate ± standard uncertainty")
     byname = {p.name: p for p in fit.params}
+    registration = [n for n in fit.estimates if _registration(fit, n)]
     for n, v in fit.estimates.items():
         f, unit = _shown(fit, byname[n], units)
-        lines.append(f"  {n:<{width}}  {plus_minus(v / f, fit.uncertainties[n] / f)} {unit}")
+        if n not in registration:
+            lines.append(f"  {n:<{width}}  {plus_minus(v / f, fit.uncertainties[n] / f)} {unit}")
+    if registration:
+        lines.append("registration (the base in the measuring instrument's frame: not a machine error, identified "
+                     "with the errors, written to the params as zero):")
+        for n in registration:
+            f, unit = _shown(fit, byname[n], units)
+            lines.append(f"  {n:<{width}}  {plus_minus(fit.estimates[n] / f, fit.uncertainties[n] / f)} {unit}")
     lines.append(f"condition number {fit.condition:.4g} (Jacobian columns scaled to unit norm)")
     lines.append("correlations above 0.9: " + (", ".join(f"{a}/{b} {c:+.3f}" for a, b, c in fit.correlations)
                                                  or "none"))
@@ -1142,10 +1152,13 @@ def _outliers(fit: Fit) -> str:
                    if shown else "")
 
 
-
 def _num(v: float) -> str:
     text = f"{v:.12g}"
     return "0" if text == "-0" else text
+
+def _registration(fit: Fit, name: str) -> bool:
+    """A parameter of an error marked registration (the base block: the instrument's frame)."""
+    return fit.machine.symbol(name).registration if name in fit.fitted else False
 
 
 def params_yaml(fit: Fit, source: str) -> str:
@@ -1192,6 +1205,9 @@ def params_yaml(fit: Fit, source: str) -> str:
                 out.append(f"    polynomial: [{', '.join(_num(x) for x in val)}]")
                 out += [f"    # {p.name}: {note(p.name)}" for p in ps]
                 out += [f"    range: [{_num(a.from_internal(lo))}, {_num(a.from_internal(hi))}]", "    outside: hold"]
+        elif s.name in fit.estimates and s.registration:   # the instrument's frame: never compensated
+            out.append(f'  {s.name}: "0 {s.unit.name}"   # registration, not a machine error: identified '
+                       f'{_num(s.from_internal(fit.estimates[s.name]))} {s.unit.name}, {note(s.name)}')
         elif s.name in fit.estimates:
             out.append(f'  {s.name}: "{_num(s.from_internal(fit.estimates[s.name]))} {s.unit.name}"   # {note(s.name)}')
         elif s.name in fit.assumed_zero:

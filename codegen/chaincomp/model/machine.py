@@ -40,6 +40,9 @@ class Symbol:
     limits: tuple[float, float] | None = None  # in the declared unit
     line: int = 0
     unobservable: bool = False  # known not to move the tool point or direction (lint stays quiet)
+    # the measuring instrument's frame to the machine's base (a base block): identified with the
+    # errors, reported apart and never compensated (not a machine error)
+    registration: bool = False
 
     @property
     def sym(self):
@@ -306,7 +309,8 @@ def _number(ctx: _Ctx, value, fld: str, line) -> float:
 
 def _parse_symbol(ctx: _Ctx, node, i: int, line) -> Symbol:
     fld = f"symbols[{i}]"
-    _require_map(ctx, node, fld, line, {"name", "role", "unit", "meaning", "nominal", "limits", "unobservable"},
+    _require_map(ctx, node, fld, line, {"name", "role", "unit", "meaning", "nominal", "limits", "unobservable",
+                                        "registration"},
                  {"name", "role", "unit"})
     name = node["name"]
     if not isinstance(name, str) or not NAME.match(name):
@@ -356,14 +360,15 @@ def _parse_symbol(ctx: _Ctx, node, i: int, line) -> Symbol:
     if role == "axis" and unit.kind == "ratio":
         raise ctx.fail(f"an axis must have a length or angle unit, not {unit.name!r}",
                        line_of(node, "unit"), f"{fld}.unit")
-    unobservable = node.get("unobservable", False)
-    if not isinstance(unobservable, bool):
-        raise ctx.fail(f"expected true or false, got {describe(unobservable)}", line_of(node, "unobservable"),
-                       f"{fld}.unobservable")
-    if unobservable and role != "error":
-        raise ctx.fail("only an error symbol can be marked unobservable", line_of(node, "unobservable"),
-                       f"{fld}.unobservable")
-    return Symbol(name, role, unit, meaning, nominal, limits, line or 0, unobservable)
+    flags = {}
+    for flag in ("unobservable", "registration"):
+        flags[flag] = node.get(flag, False)
+        if not isinstance(flags[flag], bool):
+            raise ctx.fail(f"expected true or false, got {describe(flags[flag])}", line_of(node, flag),
+                           f"{fld}.{flag}")
+        if flags[flag] and role != "error":
+            raise ctx.fail(f"only an error symbol can be marked {flag}", line_of(node, flag), f"{fld}.{flag}")
+    return Symbol(name, role, unit, meaning, nominal, limits, line or 0, **flags)
 
 
 def _expr(ctx: _Ctx, value, symbols, fld: str, line, want: str | None = None) -> Expr:

@@ -18,13 +18,18 @@ Each joint on the path base -> tip becomes, in the machine format (internal unit
                       phi = atan2(uy, ux), theta = atan2(sqrt(ux^2 + uy^2), uz): exact expressions
     prismatic         {translate: u·(q + q_zero)}
 
-Error symbols (--errors), per moving joint J (its name sanitised; x, y, z, kx, ky, kz, the
+Error symbols (--errors, a joint mode and any of the blocks tool and base, separated by commas),
+per moving joint J (its name sanitised; x, y, z, kx, ky, kz, the
 measured coordinates' names, become x_ .. kz_ as reserved words do): joint-offsets gives
 J_zero (arcsec, or um for a prismatic joint) added to the joint's motion; origins gives
 J_dx, J_dy, J_dz (um), J_ex, J_ey, J_ez (arcsec), the block T(d)·Rx·Ry·Rz after the
 joint's origin and before its motion (a fixed joint gets none: its origin error is the next
 block's); all gives both (J_zero and the block's rotation about the joint's axis then have
-the same gain where the axis is x, y or z: only their sum can be identified).
+the same gain where the axis is x, y or z: only their sum can be identified). tool gives
+tool_dx .. tool_ez, a block at the end of the chain in the tip link's frame (the mount of a
+camera, an SMR nest, a spindle); base gives base_dx .. base_ez, a block at its start marked
+``registration: true``: where the measuring instrument's frame has the base (identified with
+the errors, reported apart, never compensated).
 
 Numbers are folded into the chain as exact decimals (the parser makes them rationals), so
 the file holds exactly the values the URDF states. Axes: revolute in deg (limits rad -> deg),
@@ -50,9 +55,11 @@ from .yamlsource import read_text
 MAX_ELEMENTS = 50_000       # XML elements of one URDF (a humanoid's has a few thousand)
 MIN_MAGNITUDE = 1e-27      # smallest non-zero number: the machine format's 1e-30, in metres
 ERROR_MODES = ("none", "joint-offsets", "origins", "all")
+ERROR_BLOCKS = ("tool", "base")   # added to a mode: --errors origins,tool,base
 MOVING = ("revolute", "continuous", "prismatic")
 CONTINUOUS_LIMIT_DEG = 360.0
 _BLOCK = ("dx", "dy", "dz", "ex", "ey", "ez")
+BLOCK_SYMBOLS = tuple(f"{b}_{k}" for b in ERROR_BLOCKS for k in _BLOCK)   # tool_dx .. base_ez
 _START_TAG = re.compile(r"<[A-Za-z_]")
 
 
@@ -432,13 +439,43 @@ def shown_path(path: str) -> str:
     return path
 
 
+def error_modes(errors: str) -> tuple[str, tuple[str, ...]]:
+    """'origins,tool,base' -> ('origins', ('tool', 'base')): one of ERROR_MODES (none if only
+    blocks are given) and the ERROR_BLOCKS, each at most once."""
+    items = [t.strip() for t in errors.split(",")]
+    modes = [t for t in items if t in ERROR_MODES]
+    blocks = tuple(b for b in ERROR_BLOCKS if b in items)
+    unknown = [t for t in items if t not in ERROR_MODES + ERROR_BLOCKS]
+    if unknown or len(modes) > 1 or len(modes) + len(blocks) != len(items):
+        why = (f"{unknown[0]!r} is none of {', '.join(ERROR_MODES + ERROR_BLOCKS)}" if unknown else
+               f"one of {', '.join(ERROR_MODES)} at most" if len(modes) > 1 else "each item once")
+        raise ChaincompError(f"--errors {errors!r}: {why} (e.g. --errors origins,tool,base)")
+    return (modes[0] if modes else "none"), blocks
+
+
+def _block_symbols(block: str) -> list[str]:
+    """The six symbol entries of the tool or base block."""
+    out = []
+    for k in _BLOCK:
+        unit = "um" if k[0] == "d" else "arcsec"
+        axis = {"d": "along ", "e": "about "}[k[0]] + k[1]
+        if block == "base":
+            meaning = f"registration: the base in the measuring instrument's frame, {axis} (not a machine error)"
+            out.append(f"  - {{name: base_{k}, role: error, unit: {unit}, registration: true, "
+                       f"meaning: {yaml_scalar(meaning)}}}")
+        else:
+            meaning = f"tool mount error {axis} (in the tip link's frame)"
+            out.append(f"  - {{name: tool_{k}, role: error, unit: {unit}, meaning: {yaml_scalar(meaning)}}}")
+    return out
+
+
 def machine_text(urdf_path: str, base: str, tip: str, errors: str = "none", tool_point=(0.0, 0.0, 0.0),
                  tool_direction=(0.0, 0.0, 1.0), name: str | None = None, version: str = "",
                  tool_reference=None) -> str:
     """The machine file (YAML text) of the path base -> tip of the URDF; with ``tool_reference``
     a six-DOF tool frame (its x axis the reference's part orthogonal to the direction)."""
-    if errors not in ERROR_MODES:
-        raise ChaincompError(f"--errors {errors!r}: expected one of {', '.join(ERROR_MODES)}")
+    mode, extra = error_modes(errors)
+    errors = ",".join((mode,) + extra) if mode != "none" or not extra else ",".join(extra)
     robot, joints, _ = kinematic_path(urdf_path, base, tip)
     src = _Source(urdf_path, "")
     machine_name = name or sanitise(robot)
@@ -449,19 +486,24 @@ def machine_text(urdf_path: str, base: str, tip: str, errors: str = "none", tool
     if not moving:
         raise src.fail(f"no revolute, continuous or prismatic joint between {base!r} and {tip!r}: nothing moves",
                        joints[0].line)
-    offsets, blocks = errors in ("joint-offsets", "all"), errors in ("origins", "all")
+    offsets, blocks = mode in ("joint-offsets", "all"), mode in ("origins", "all")
 
     symbols: list[str] = []
-    taken: dict[str, PathJoint] = {}
+    taken: dict[str, PathJoint | None] = {}   # None: a tool or base block's
 
     def declare(symbol: str, j: PathJoint, entry: str) -> None:
         if symbol in taken:
             other = taken[symbol]
+            if other is None:
+                raise src.fail(f"joint {j.name!r} gives the name {symbol!r}, which --errors {symbol[:4]} "
+                               "declares for its block; rename the joint in the URDF", j.line, f"joint {j.name}")
             raise src.fail(f"joints {other.name!r} (line {other.line}) and {j.name!r} both give the name "
                            f"{symbol!r} in the machine file; rename one of them in the URDF", j.line,
                            f"joint {j.name}")
         taken[symbol] = j
         symbols.append(entry)
+
+    taken.update({f"{block}_{k}": None for block in extra for k in _BLOCK})
 
     for j in moving:
         unit = "mm" if j.type == "prismatic" else "deg"
@@ -481,7 +523,12 @@ def machine_text(urdf_path: str, base: str, tip: str, errors: str = "none", tool
                 declare(f"{j.axis_name}_{k}", j, f"  - {{name: {j.axis_name}_{k}, role: error, unit: {unit}, "
                                                  f"meaning: {yaml_scalar(what + ' of joint ' + j.name)}}}")
 
+    for block in extra:
+        symbols += _block_symbols(block)
     chain: list[str] = []
+    if "base" in extra:
+        chain.append("{errors: {" + ", ".join(f"{k}: base_{k}" for k in _BLOCK) + "}, order: txyz, "
+                     "label: base registration}")
     for j in joints:
         chain += _origin(j)
         if j.type not in MOVING:
@@ -490,6 +537,9 @@ def machine_text(urdf_path: str, base: str, tip: str, errors: str = "none", tool
             chain.append("{errors: {" + ", ".join(f"{k}: {j.axis_name}_{k}" for k in _BLOCK) + "}, order: txyz, "
                          f"label: {yaml_scalar(j.name + ' origin errors')}}}")
         chain += _motion(j, f"{j.axis_name} + {j.axis_name}_zero" if offsets else j.axis_name)
+    if "tool" in extra:
+        chain.append("{errors: {" + ", ".join(f"{k}: tool_{k}" for k in _BLOCK) + "}, order: txyz, "
+                     "label: tool mount errors}")
     if len(symbols) > MAX_SYMBOLS or len(chain) > MAX_CHAIN_ELEMENTS:
         raise src.fail(f"the path {base} -> {tip} makes {len(symbols)} symbols and {len(chain)} chain elements "
                        f"with --errors {errors} (a machine file holds at most {MAX_SYMBOLS} and "

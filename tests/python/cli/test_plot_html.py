@@ -49,7 +49,7 @@ def html(tmp_path_factory):
 def _chromium(tmp_path, *args):
     cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
            "--enable-unsafe-swiftshader", "--disable-dev-shm-usage", "--no-first-run",
-           f"--user-data-dir={tmp_path / 'profile'}", "--window-size=1500,800", "--virtual-time-budget=15000",
+           f"--user-data-dir={tmp_path / 'profile'}", "--window-size=1280,800", "--virtual-time-budget=15000",
            *args]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=180)
 
@@ -85,10 +85,10 @@ def test_the_screenshot_is_not_blank(html, tmp_path):
     proc = _chromium(tmp_path, f"--screenshot={shot}", html.as_uri())
     assert shot.exists(), proc.stderr[-2000:]
     gray = np.asarray(Image.open(shot).convert("L"), float)
-    assert gray.shape == (800, 1500)
-    for half in (gray[:, :750], gray[:, 750:]):          # the surface, the volume
+    assert gray.shape == (800, 1280)
+    for half in (gray[:, :640], gray[:, 640:]):          # the surface, the volume
         assert half.std() > 10.0
         assert (half < 200).mean() > 0.05                 # well beyond the titles' text
     # the surface's colours, not only grey axes: a viridis surface has saturated pixels
-    rgb = np.asarray(Image.open(shot).convert("RGB"), float)[:, :750]
+    rgb = np.asarray(Image.open(shot).convert("RGB"), float)[:, :640]
     assert ((rgb.max(axis=2) - rgb.min(axis=2)) > 80).mean() > 0.02

@@ -272,6 +272,20 @@ def test_replay_plot_of_a_three_axis_machine_leaves_the_tilt(figures, tmp_path):
     assert p_with[-1] < 1e-3 * p_without[-1]
 
 
+def test_replay_title_names_the_params_the_compensation_used(figures, replay_csv, capsys):
+    """The CSV does not name its params; its residual column is the compensator's. With the params
+    replay was given the title names them; with other values (ThetaCh 150 -> 10 arcsec: tens of
+    µm at these poses) it says they were not those, by how much, and warns."""
+    params = _params("five_axis_ac")
+    first = figures("plot", machine_path("five_axis_ac"), "--params", params, "--replay", replay_csv)
+    assert f"compensated with params {os.path.basename(params)}" in first._suptitle.get_text().split("\n")[0]
+    other = figures("plot", machine_path("five_axis_ac"), "--params", params, "--set", "ThetaCh=10",
+                    "--replay", replay_csv)
+    title = other._suptitle.get_text().replace("\n", " ")
+    assert f"compensated with values other than params {os.path.basename(params)}, --set ThetaCh=10" in title
+    assert "the replay compensated with other values" in capsys.readouterr().err
+
+
 def test_replay_plot_without_a_machine_warns(figures, replay_csv, capsys):
     figures("plot", "--replay", replay_csv)
     assert "without compensation needs MACHINE.yaml and --params" in capsys.readouterr().err
