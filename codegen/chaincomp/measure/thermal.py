@@ -55,17 +55,20 @@ CV_ITERATIONS = 6              # Levenberg-Marquardt steps per fold, from the wh
 CANDIDATES = 3                 # sensors per step cross-validated (the best of the grid the log supports)
 COLLINEAR = 0.995              # a candidate's multiple correlation with those chosen, said to be near-collinear
 MAX_RELATIVE_UNCERTAINTY = 0.5 # a term whose gain or time constant is known worse than this is not written
-GOOD_RELATIVE = 0.05           # design advice: what a log should pin each term down to
+GOOD_RELATIVE = 0.025          # design advice: each term's standard uncertainty (within 5 % at two of them)
 NOISE_DRAWS = 100              # draws of the sensors' reading noise, for the uncertainties
 KEPT_BYTES = 64 * 1024 * 1024  # lagged temperatures a fit keeps
+START_READINGS = 8             # a fit's first temperature: a quadratic through the first 8, 16, 32, ... readings
+START_WINDOW = 900.0           # s, at most (then a fast start's curve would bias it)
 BLOCK = 30.0                   # lag: time constants per vectorised block (exp(30) stays far from overflow)
 
 
 # ----------------------------------------------------------------------------- the lag
 
-def lag(t: np.ndarray, u: np.ndarray, tau: float) -> np.ndarray:
+def lag(t: np.ndarray, u: np.ndarray, tau: float, start: float | None = None) -> np.ndarray:
     """First-order lag of readings ``u`` at times ``t`` (s, increasing) with time constant
-    ``tau`` (s; 0: none), exact for an input linear between readings, settled at u[0]."""
+    ``tau`` (s; 0: none), exact for an input linear between readings, settled at u[0] (or at
+    ``start``, the first temperature as estimated from more readings than the first)."""
     t = np.asarray(t, float)
     u = np.asarray(u, float)
     if tau == 0 or len(u) < 2:
@@ -75,7 +78,7 @@ def lag(t: np.ndarray, u: np.ndarray, tau: float) -> np.ndarray:
     e = 1.0 - one_minus_e
     c = u[1:] - e * u[:-1] - (np.diff(u) / dt) * tau * one_minus_e   # y_k = e_k y_{k-1} + c_k
     y = np.empty_like(u)
-    y[0] = u[0]
+    y[0] = u[0] if start is None else start
     n, k = len(u), 1
     while k < n:
         y[k] = e[k - 1] * y[k - 1] + c[k - 1]
@@ -386,17 +389,23 @@ class Fit:
 
 class _Kept(dict):
     """A log's temperatures with the lags a fit computed kept, newest KEPT_BYTES of them: the fit
-    asks for the same ones many times (each candidate's Jacobian changes one column)."""
+    asks for the same ones many times (each candidate's Jacobian changes one column). Each
+    sensor's lags start at its first temperature estimated from its first readings
+    (start_readings): the first reading's own noise would stay in a long lag for hours, and
+    T_column's time constant came out 1.5 times as scattered as the Cramer-Rao bound allows
+    (tools/bench_thermal)."""
 
     def __init__(self, t: np.ndarray, temps: dict[str, np.ndarray]):
         super().__init__(temps)
         self.t = t
         self.kept: dict[tuple[str, float], np.ndarray] = {}
+        self.start_n = {s: start_readings(t, u) for s, u in temps.items()}
+        self.start = {s: _start(t, u, self.start_n[s])[0] for s, u in temps.items()}
 
     def lagged(self, sensor: str, tau: float) -> np.ndarray:
         y = self.kept.get((sensor, tau))
         if y is None:
-            y = lag(self.t, self[sensor], tau)
+            y = lag(self.t, self[sensor], tau, self.start[sensor])
             while self.kept and (len(self.kept) + 1) * y.nbytes > KEPT_BYTES:
                 del self.kept[next(iter(self.kept))]
             self.kept[sensor, tau] = y
@@ -404,8 +413,7 @@ class _Kept(dict):
 
 
 def _design(t, temps, chosen, taus, reference) -> np.ndarray:
-    cols = [np.ones(len(t))] + [(temps.lagged(s, tau) if isinstance(temps, _Kept) else lag(t, temps[s], tau))
-                                - reference for s, tau in zip(chosen, taus)]
+    cols = [np.ones(len(t))] + [temps.lagged(s, tau) - reference for s, tau in zip(chosen, taus)]
     return np.stack(cols, axis=1)
 
 
@@ -509,10 +517,41 @@ def reading_noise(u: np.ndarray) -> float:
     return 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6)
 
 
+def start_readings(t: np.ndarray, u: np.ndarray) -> int:
+    """How many of the first readings a fit estimates a sensor's first temperature from (the
+    lags start settled there): the longest of 8, 16, 32, ... readings within START_WINDOW s
+    whose quadratic's value at the first time agrees with every shorter one's within twice
+    that one's standard uncertainty (Lepski's rule: as many readings as the start's curve
+    allows). 1: the first reading alone (a sensor without noise, or too few readings)."""
+    sigma = reading_noise(u)
+    if not sigma > 0:
+        return 1
+    kept: list[tuple[float, float]] = []   # (value, its standard uncertainty) of each accepted length
+    n, m = 1, START_READINGS
+    while m <= len(u) and t[m - 1] - t[0] <= START_WINDOW:
+        value, weights = _start(t, u, m)
+        sd = sigma * math.sqrt(float(weights @ weights))
+        if any(abs(value - v) > 2 * s for v, s in kept):
+            break
+        kept.append((value, sd))
+        n, m = m, 2 * m
+    return n
+
+
+def _start(t: np.ndarray, u: np.ndarray, n: int) -> tuple[float, np.ndarray]:
+    """The value at t[0] of the quadratic in time through the first ``n`` readings, and the
+    weights it gives them (linear: the same weights carry the readings' noise)."""
+    if n < 3:
+        return float(u[0]), np.array([1.0])
+    x = (t[:n] - t[0]) / (t[n - 1] - t[0])
+    weights = np.linalg.pinv(np.vander(x, 3))[-1]
+    return float(weights @ u[:n]), weights
+
+
 def _uncertainties(t, temps, d, chosen, taus, coef, reference, draws: int = NOISE_DRAWS) -> np.ndarray:
     """Standard uncertainties of (offset, gains, time constants) from the Jacobian of the full
     model at the solution: white noise on the drift readings, plus each chosen sensor's reading
-    noise carried through its lag (NOISE_DRAWS draws of it, linearised: the first reading's
+    noise carried through its lag (NOISE_DRAWS draws of it, linearised: the first temperature's
     noise stays in a long lag for hours, as large as the drift's noise averaged over them)."""
     a = _design(t, temps, chosen, taus, reference)
     r = d - a @ coef
@@ -520,7 +559,8 @@ def _uncertainties(t, temps, d, chosen, taus, coef, reference, draws: int = NOIS
     for i, (s, tau) in enumerate(zip(chosen, taus)):
         if tau > 0:
             dtau = tau * 1e-6
-            cols.append(coef[1 + i] * (lag(t, temps[s], tau + dtau) - lag(t, temps[s], tau - dtau)) / (2 * dtau))
+            cols.append(coef[1 + i] * (lag(t, temps[s], tau + dtau, temps.start[s]) -
+                                       lag(t, temps[s], tau - dtau, temps.start[s])) / (2 * dtau))
     jac = np.stack(cols, axis=1)
     dof = max(len(d) - jac.shape[1], 1)
     s2 = float(r @ r) / dof
@@ -533,10 +573,17 @@ def _uncertainties(t, temps, d, chosen, taus, coef, reference, draws: int = NOIS
     if chosen and any(sigma) and draws:
         rng = np.random.default_rng(0)   # the same uncertainties on every run
         project = inverse @ jac.T
-        shifts = np.array([project @ sum(coef[1 + i] * lag(t, rng.normal(0.0, sigma[i], len(t)), taus[i])
+        shifts = np.array([project @ sum(coef[1 + i] * _noise_lagged(t, rng.normal(0.0, sigma[i], len(t)), taus[i],
+                                                                     temps.start_n[chosen[i]])
                                          for i in range(len(chosen))) for _ in range(draws)])
         cov = cov + shifts.T @ shifts / draws
     return np.sqrt(np.maximum(np.diag(cov), 0.0))
+
+
+def _noise_lagged(t: np.ndarray, noise: np.ndarray, tau: float, start_n: int) -> np.ndarray:
+    """Readings' noise through a lag as the fit's lags carry it: starting at its first
+    ``start_n`` readings' estimate of the first temperature."""
+    return lag(t, noise, tau, _start(t, noise, start_n)[0])
 
 
 def _model(t, temps, d, error, unit, chosen, taus, reference,
@@ -723,23 +770,40 @@ def _relative(term: Term) -> float:
     return rel
 
 
+def information_needed(term: Term) -> float:
+    """How many times its log's information a term needs to be known to GOOD_RELATIVE: a
+    variance falls as one over the number of readings and as the drift's noise squared."""
+    return (_relative(term) / GOOD_RELATIVE) ** 2
+
+
+def advised_noise(f: Fit) -> float:
+    """The drift readings' noise (standard deviation, the error's unit) at which the same log
+    would pin every term down to GOOD_RELATIVE: this fit's residual RMS scaled by the worst
+    term's information_needed (the residual itself when the log already does)."""
+    need = max([information_needed(term) for term in f.model.terms], default=1.0)
+    return f.rms_after / math.sqrt(max(need, 1.0))
+
+
 def advice(f: Fit) -> list[str]:
     """What log would pin down what this fit leaves uncertain: from each term's relative
-    uncertainties and time constant against the log's span. Uncertainties shrink about as one
-    over the square root of the informative log's length."""
+    uncertainties and time constant against the log's span. Within 5 % at two standard
+    uncertainties (95 % of logs) asks for GOOD_RELATIVE; uncertainties shrink as one over the
+    square root of the number of readings, and in proportion to the drift's noise
+    (tools/bench_thermal checks the noise it names)."""
     out = []
+    u = f.model.unit.name
     for term in f.model.terms:
         rel = _relative(term)
+        need = information_needed(term)
         if term.time_constant > f.span / 3:
             out.append(f"{term.sensor}'s time constant ({term.time_constant:.4g} s) is more than a third of the log "
                        f"({f.span:.4g} s): a log of at least 5 time constants ({5 * term.time_constant / 3600:.3g} h), "
                        "e.g. a cool-down that long after a step in spindle duty, would pin it down.")
-        elif rel > GOOD_RELATIVE:
-            longer = (rel / GOOD_RELATIVE) ** 2
-            out.append(f"{term.sensor} is known to ± {100 * rel:.2g} %: about {longer:.2g} times this log "
-                       f"({longer * f.span / 3600:.3g} h) of the same kind, or a step in spindle duty held "
-                       f"{5 * max(term.time_constant, 1.0) / 3600:.3g} h and a cool-down as long, would bring it "
-                       f"to ± {100 * GOOD_RELATIVE:.0f} %.")
+        elif need > 1:
+            out.append(f"{term.sensor} is known to ± {100 * rel:.2g} % (one standard uncertainty): within 5 % at two "
+                       f"(± {100 * GOOD_RELATIVE:.2g} %) needs {need:.2g} times this log's information: drift "
+                       f"readings with at most {f.rms_after / math.sqrt(need):.2g} {u} of noise (this fit left "
+                       f"{f.rms_after:.2g} {u} RMS), or {need:.2g} times as many readings over the same cycle.")
     if any("cannot support" in n for n in f.notes):
         out.append("A term the log cannot support was left out: a longer cool-down (5 times the slowest time "
                    "constant the machine may have), or a step in spindle duty that moves its sensor apart from the "
@@ -747,7 +811,8 @@ def advice(f: Fit) -> list[str]:
     if any("near-collinear" in n or "equally well" in n for n in f.notes):
         out.append("Sensors that move together are told apart by a log in which they do not: another day's "
                    "hall climate, or a spindle duty step followed by a long stop.")
-    return out or [f"The log pins down every term to ± {100 * GOOD_RELATIVE:.0f} % or better."]
+    return out or [f"The log pins down every term to ± {100 * GOOD_RELATIVE:.2g} % or better (within 5 % at two "
+                   "standard uncertainties)."]
 
 
 
