@@ -62,8 +62,8 @@ def main() -> int:
     true, warm, held, fitted = (os.path.join(tmp, n) for n in ("true.yaml", "warm.csv", "held.csv", "fitted.yaml"))
     with open(true, "w") as f:
         f.write(TRUE)
-    chaincomp("simulate-thermal", MACHINE, "--model", true, "-o", warm, "--rate", RATE)
-    chaincomp("simulate-thermal", MACHINE, "--model", true, "-o", held, "--rate", RATE, "--cycle", "varied",
+    chaincomp("simulate-thermal", MACHINE, "--truth", true, "-o", warm, "--rate", RATE)
+    chaincomp("simulate-thermal", MACHINE, "--truth", true, "-o", held, "--rate", RATE, "--cycle", "varied",
               "--seed", "2", "--drift-noise", "0")
     chaincomp("thermal", "fit", MACHINE, warm, "-o", fitted)
     log = read_log(held)

@@ -285,7 +285,7 @@ def with_reversal(tables: list[JointTable], reversal: dict[str, float]) -> None:
 def linear_axes(machine: Machine, axes: list[Symbol], fmt: str) -> list[Symbol]:
     lin = [a for a in axes if a.unit.kind == "length"]
     if len(lin) < 3:
-        raise ChaincompError(f"--format {fmt} needs three linear axes (X, Y, Z); {machine.name} has "
+        raise ChaincompError(f"--controller {fmt} needs three linear axes (X, Y, Z); {machine.name} has "
                              f"{len(lin)} ({', '.join(a.name for a in lin) or 'none'})")
     return lin[:3]
 
@@ -416,7 +416,7 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     each joint at the params' table knots, each point once; with
     ``shares`` also each nonzero error alone."""
     if fmt not in FORMATS:
-        raise ChaincompError(f"--format {fmt!r}: expected one of {', '.join(FORMATS)}")
+        raise ChaincompError(f"--controller {fmt!r}: expected one of {', '.join(FORMATS)}")
     axes = axes_of(machine, joints)
     if fmt == "linuxcnc-comp" and not 2 <= entries <= LINUXCNC_MAX_ENTRIES:
         raise ChaincompError(f"--entries {entries}: a LinuxCNC compensation file holds 2 to "
@@ -428,7 +428,7 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
     values = _held_at_the_ends(machine, values)
     lin = linear_axes(machine, axes, fmt) if fmt != "linuxcnc-comp" else []
     if fmt == "linuxcnc-matrixkins" and axes[:3] != lin:
-        raise ChaincompError(f"--format {fmt}: matrixkins drives joints 0, 1, 2 from X, Y, Z, but the joints of "
+        raise ChaincompError(f"--controller {fmt}: matrixkins drives joints 0, 1, 2 from X, Y, Z, but the joints of "
                              f"{machine.name} begin {', '.join(a.name for a in axes[:3])}: put "
                              f"{', '.join(a.name for a in lin)} first with --joints")
     free = np.ones((3, 3), bool) if fmt == "linuxcnc-matrixkins" else SKEW
@@ -467,7 +467,7 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
         _check_finite(machine, a, q, f"the tool point with {fmt}'s correction")
     windows = [skew_window(fmt, lin, c, q) for q in sets] if fmt in ("marlin", "klipper") else None
     if windows is not None and not any(w.any() for w in windows):
-        raise ChaincompError(f"--format {fmt}: the firmware would correct none of the {n_points} check points "
+        raise ChaincompError(f"--controller {fmt}: the firmware would correct none of the {n_points} check points "
                              f"({MARLIN_WINDOW if fmt == 'marlin' else KLIPPER_WINDOW}): nothing written")
     kept = _where(after, windows)
     out = Export(fmt, machine, points, n_points, Residual.of(before), Residual.of(kept),
@@ -487,7 +487,7 @@ def export(machine: Machine, values: dict, fmt: str, joints: list[str] | None, p
                                             [skew_window(fmt, lin, _i_alone(c), q) for q in sets]))
     if not left.max < base.max * (1 - 1e-3) - 1e-7:   # 0.1 nm: rounding, not compensation
         worse = left.max > base.max + 1e-7   # a fit on a coarse grid, worse between its points
-        raise ChaincompError(f"--format {fmt} " + ("leaves more tool error than no compensation" if worse else
+        raise ChaincompError(f"--controller {fmt} " + ("leaves more tool error than no compensation" if worse else
                              "represents none of the errors given") + f" for {machine.name} (largest tool error "
                              f"{base.max * 1e3:.3f} um without it, {left.max * 1e3:.3f} um with it, on "
                              f"{n_points} points" + ("; a finer --grid fits on more" if worse else "") +

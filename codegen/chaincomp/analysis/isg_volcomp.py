@@ -1,4 +1,4 @@
-"""``chaincomp export --format isg-volcomp``: the errors in the ISG kernel's (Beckhoff TwinCAT
+"""``chaincomp export --controller isg-volcomp``: the errors in the ISG kernel's (Beckhoff TwinCAT
 CNC's) volumetric compensation, an ISG CSV parameter file and its compensation list.
 
 Written from ISG's kernel manual, *Volumetric compensation* (isg-stuttgart.de/fileadmin/
@@ -105,17 +105,17 @@ def letters_of(machine: Machine, given: dict[str, str] | None) -> dict[str, Symb
             else:
                 continue
             if letter in out:
-                raise ChaincompError(f"--format {FORMAT}: axes {out[letter].name} and {a.name} of "
+                raise ChaincompError(f"--controller {FORMAT}: axes {out[letter].name} and {a.name} of "
                                      f"{machine.name} would both be {letter}: {hint}")
             out[letter] = a
     for letter, a in out.items():
         want = "length" if letter in LINEAR else "angle"
         if a.unit.kind != want:
-            raise ChaincompError(f"--format {FORMAT}: {letter} is a {'linear' if want == 'length' else 'rotary'} "
+            raise ChaincompError(f"--controller {FORMAT}: {letter} is a {'linear' if want == 'length' else 'rotary'} "
                                  f"axis in ISO 230-1, but {a.name} of {machine.name} is in {a.unit.name}: {hint}")
     missing = [a.name for a in axes if a not in out.values()]
     if missing or not set(LINEAR) <= set(out):
-        raise ChaincompError(f"--format {FORMAT} needs three linear axes X, Y, Z and at most three rotary A, B, "
+        raise ChaincompError(f"--controller {FORMAT} needs three linear axes X, Y, Z and at most three rotary A, B, "
                              f"C, each axis with its letter (ISG: serial kinematics with exactly three linear "
                              f"axes); {machine.name} has " + (f"no letter for {', '.join(missing)}" if missing else
                              f"no {', '.join(sorted(set(LINEAR) - set(out)))}") + f": {hint}")
@@ -153,7 +153,7 @@ def chain_order(machine: Machine, letters: dict[str, Symbol]) -> tuple[str, int]
 
     both = set(order(machine.workpiece_chain)) & set(order(machine.tool_chain))
     if both:
-        raise ChaincompError(f"--format {FORMAT}: {', '.join(letters[c].name for c in sorted(both))} of "
+        raise ChaincompError(f"--controller {FORMAT}: {', '.join(letters[c].name for c in sorted(both))} of "
                              f"{machine.name} moves both the tool and the workpiece side: not the serial chain "
                              f"ISG's volumetric compensation describes")
     return "".join(order(machine.chain)), len(order(machine.workpiece_chain))
@@ -184,10 +184,10 @@ def check_directions(machine: Machine, letters: dict[str, Symbol], f: IsgFile) -
                                            "axis"}, a.name).reshape(3)
         n = float(np.linalg.norm(d))
         if not n or d[k] < 0.7071 * n:
-            raise ChaincompError(f"--format {FORMAT}: {c} must move the tool along +{c.lower()} relative to the "
+            raise ChaincompError(f"--controller {FORMAT}: {c} must move the tool along +{c.lower()} relative to the "
                                  f"workpiece (ISO 841), but {a.name} of {machine.name} moves it along "
                                  f"({d[0] / n:+.3f}, {d[1] / n:+.3f}, {d[2] / n:+.3f})" if n else
-                                 f"--format {FORMAT}: {a.name} of {machine.name} does not move the tool")
+                                 f"--controller {FORMAT}: {a.name} of {machine.name} does not move the tool")
     for c, a in letters.items():
         if c in ROTARY:
             w = rotation_axis(machine, a.name, q)
@@ -199,7 +199,7 @@ def check_directions(machine: Machine, letters: dict[str, Symbol], f: IsgFile) -
                                f"no error of it is in the file; ISG describes such an axis by V{'XYZ'[0]}{c}, "
                                f"V{'XYZ'[1]}{c}, V{'XYZ'[2]}{c} (its modified orientation, 296423819)")
                 continue
-            raise ChaincompError(f"--format {FORMAT}: {c} must turn about {c_axis} (ISO 841), but {a.name} of "
+            raise ChaincompError(f"--controller {FORMAT}: {c} must turn about {c_axis} (ISO 841), but {a.name} of "
                                  f"{machine.name} turns about ({w[0]:+.3f}, {w[1]:+.3f}, {w[2]:+.3f}): name "
                                  f"the rotary axes with --iso-axes")
 
@@ -243,7 +243,7 @@ def rotation_axis(machine: Machine, axis: str, q: dict) -> np.ndarray:
         step = np.eye(3)
         step[i, i], step[i, j], step[j, i], step[j, j] = c, -s_, s_, c
         r = r @ step
-    raise ChaincompError(f"--format {FORMAT}: rotary axis {axis} of {machine.name} turns no rotation of the chain")
+    raise ChaincompError(f"--controller {FORMAT}: rotary axis {axis} of {machine.name} turns no rotation of the chain")
 
 
 # ----------------------------------------------------------------------------- the file
@@ -467,7 +467,7 @@ def export(machine: Machine, values: dict, joints: list[str] | None, points: int
     grid = X.check_grid(machine, axes, points)
     f = build(machine, values, letters, entries, workpiece_axes)
     if not f.names:
-        raise ChaincompError(f"--format {FORMAT} represents none of the errors given for {machine.name} (none has "
+        raise ChaincompError(f"--controller {FORMAT} represents none of the errors given for {machine.name} (none has "
                              f"an ISO 230-1 name of its axes: " + ", ".join(f"{e}: {w}" for e, w in
                                                                              list(f.left_out.items())[:3]) +
                              "): nothing written")

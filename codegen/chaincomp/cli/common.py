@@ -17,14 +17,43 @@ from ..model.params import load_params, parse_sets, parse_value
 from ..model.units import UNITS
 
 
+# Older spellings of options (docs/reference/cli.md, "Deprecated spellings"): accepted, with a
+# warning naming the new one, until this release removes them.
+REMOVED_IN = "0.3.0"
+
+
+class DeprecatedAlias(argparse.Action):
+    """An older spelling: stores its value as ``replacement`` does (appends with append=True),
+    after one warning on stderr."""
+
+    def __init__(self, option_strings, dest, replacement: str, append: bool = False, **kwargs):
+        self.replacement, self.append = replacement, append
+        kwargs.setdefault("help", f"deprecated spelling of {replacement} (removed in {REMOVED_IN})")
+        super().__init__(option_strings, dest, **kwargs)
+
+    def warn(self, parser, option_string) -> None:
+        print(f"{parser.prog}: warning: {option_string} is deprecated and will be removed in {REMOVED_IN}: "
+              f"use {self.replacement}", file=sys.stderr)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        self.warn(parser, option_string)
+        if self.append:
+            values = [*(getattr(namespace, self.dest, None) or []), values]
+        setattr(namespace, self.dest, values)
+
+
+def add_deprecated(p, old: str, replacement: str, dest: str, **kwargs) -> None:
+    """``old`` kept as an older spelling of ``replacement`` (same dest, same type)."""
+    p.add_argument(old, dest=dest, action=DeprecatedAlias, replacement=replacement, **kwargs)
+
+
 def add_machine_argument(p, optional: bool = False, alias: bool = False) -> None:
     """The machine file, the first positional argument of every verb that takes one. alias: also
     --machine (the older spelling of replay and laser-to-params; resolve_machine joins the two)."""
     p.add_argument("machine", metavar="MACHINE.yaml", nargs="?" if optional or alias else None,
                    help="machine description (configs/machines/*.yaml)")
     if alias:
-        p.add_argument("--machine", dest="machine_option", metavar="MACHINE.yaml",
-                       help="the machine file as an option (older spelling of the first argument)")
+        add_deprecated(p, "--machine", "the first argument (MACHINE.yaml)", "machine_option", metavar="MACHINE.yaml")
 
 
 def resolve_machine(args) -> None:
@@ -45,6 +74,34 @@ def add_format_argument(p, choices: tuple[str, ...] = ("text", "json"), default:
     if "json" in choices:
         p.add_argument("--json", dest="format", action="store_const", const="json",
                        help="the same as --format json")
+
+
+class _FormatOrController(argparse.Action):
+    """--format text|json; a controller's name there is the older spelling of --controller."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if values in ("text", "json"):
+            namespace.format = values
+            return
+        print(f"{parser.prog}: warning: {option_string} {values} is deprecated and will be removed in {REMOVED_IN}: "
+              f"use --controller {values} (--format is text or json)", file=sys.stderr)
+        namespace.target = values
+
+
+def add_controller_arguments(p, controllers: tuple[str, ...]) -> None:
+    """--controller (the format a controller reads; required, checked by require_controller) and
+    --format text|json for the report, as in every verb. Older spellings: --format CONTROLLER,
+    --report text|json."""
+    p.add_argument("--controller", dest="target", choices=controllers, help="the controller's format (required)")
+    p.add_argument("--format", choices=("text", "json") + controllers, default="text", metavar="{text,json}",
+                   action=_FormatOrController, help="report format (default text)")
+    p.add_argument("--json", dest="format", action="store_const", const="json", help="the same as --format json")
+    add_deprecated(p, "--report", "--format", "format", choices=("text", "json"))
+
+
+def require_controller(args, controllers: tuple[str, ...]) -> None:
+    if not args.target:
+        raise ChaincompError(f"--controller: the controller's format is needed (one of {', '.join(controllers)})")
 
 
 # A seed of 1 in every verb: one default, so that one verb's output reproduces another's.

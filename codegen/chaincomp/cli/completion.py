@@ -12,15 +12,18 @@ import argparse
 import re
 import shlex
 
+from .common import DeprecatedAlias
 from .main import build_parser
 
 
 def _values(action: argparse.Action) -> list[str]:
-    if action.choices:
-        return [str(c) for c in action.choices]
     metavar = action.metavar if isinstance(action.metavar, str) else ""
-    m = re.fullmatch(r"\{(.+)\}", metavar)   # a type= function listing its values, e.g. {1,2,exact}
-    return m.group(1).split(",") if m else []
+    # the values shown: {1,2,exact} of a type= function, or those of choices that also take an
+    # older spelling (export's --format text|json, which takes a controller's name too)
+    m = re.fullmatch(r"\{(.+)\}", metavar)
+    if m:
+        return m.group(1).split(",")
+    return [str(c) for c in action.choices] if action.choices else []
 
 
 def bash_script(parser: argparse.ArgumentParser | None = None) -> str:
@@ -33,6 +36,7 @@ def bash_script(parser: argparse.ArgumentParser | None = None) -> str:
         group = [a for a in actions if isinstance(a, argparse._SubParsersAction)]
         if group:   # a group of verbs (thermal fit, thermal check): their names, and all their options
             actions = [a for a in actions if a not in group] + [a for q in group[0].choices.values() for a in q._actions]
+        actions = [a for a in actions if not isinstance(a, DeprecatedAlias)]   # offered no more
         opts = list(dict.fromkeys(s for a in actions for s in a.option_strings))
         values = [f"            {verb}) words={shlex.quote(' '.join(group[0].choices))};;"] if group else []
         for a in actions:

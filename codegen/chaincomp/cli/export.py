@@ -10,8 +10,9 @@ from ..analysis import isg_volcomp as ISG
 from ..errors import ChaincompError
 from ..model.params import parse_value
 from ..output import write_files
-from .common import (add_machine_argument, add_values_arguments, assignments, check_finite, check_output,
-                     integer, load, names, refuse_empty, to_json, values_for)
+from .common import (add_controller_arguments, add_deprecated, add_machine_argument, add_values_arguments, assignments,
+                     check_finite, check_output, integer, load, names, refuse_empty, require_controller, to_json,
+                     values_for)
 
 MAX_GRID = 101
 FORMATS = X.FORMATS + (ISG.FORMAT,)
@@ -34,7 +35,7 @@ def add_parser(sub) -> None:
                                    "Nothing is written when anything is refused.")
     add_machine_argument(p)
     add_values_arguments(p)
-    p.add_argument("--format", dest="target", required=True, choices=FORMATS, help="the controller's format")
+    add_controller_arguments(p, FORMATS)
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="what to write (a folder for "
                    "linuxcnc-comp and isg-volcomp, a file otherwise)")
     p.add_argument("--grid", type=integer(2, MAX_GRID), metavar="N",
@@ -61,11 +62,9 @@ def add_parser(sub) -> None:
                         "X=-8um; repeatable): the forward trim takes -B̄/2, the reverse +B̄/2 (the model itself has "
                         "no reversal). LinuxCNC ignores [JOINT_n]BACKLASH once a COMP_FILE is loaded: the reversal "
                         "belongs here")
-    p.add_argument("--reversal", action="append", default=[], metavar="AXIS=VALUE",
-                   help="deprecated: the same as --mean-reversal (the signed mean B̄, not B = max |B_i|)")
-    p.add_argument("--report", choices=("text", "json"), default="text",
-                   help="the report's format (default text; --format names the controller's)")
-    p.add_argument("--json", dest="report", action="store_const", const="json", help="the same as --report json")
+    add_deprecated(p, "--reversal", "--mean-reversal with the value 'chaincomp iso230-2' prints (the signed mean B̄, "
+                   "negative for ordinary lost motion, not B = max |B_i|)", "reversal", append=True, default=[],
+                   metavar="AXIS=VALUE")
     p.add_argument("--no-breakdown", action="store_true", help="skip the fit of each error alone")
     p.set_defaults(run=run)
 
@@ -132,6 +131,7 @@ def _check_folder(out: str, files: list[str], inputs, fmt: str) -> None:
 
 
 def run(args) -> int:
+    require_controller(args, FORMATS)
     machine = load(args.machine)
     joints = names(args.joints, "--joints") or None
     if args.target == "linuxcnc-comp":
@@ -154,10 +154,6 @@ def run(args) -> int:
     if reversal and args.target != "linuxcnc-comp":
         raise ChaincompError(f"{'--mean-reversal' if args.mean_reversal else '--reversal'}: only linuxcnc-comp has "
                              f"a reverse trim, not {args.target}")
-    if args.reversal:
-        print("chaincomp export: warning: --reversal is deprecated: it takes the signed mean reversal B̄ (ISO "
-              "230-2, mean of B_i; negative for ordinary lost motion), not B = max |B_i|; use --mean-reversal "
-              "with the value 'chaincomp iso230-2' prints", file=sys.stderr)
     values, has_errors = values_for(machine, args.params, args.sets)
     if not has_errors:
         raise ChaincompError("nothing to compensate: give error values (--params P.yaml or --set E=V)")
@@ -179,5 +175,5 @@ def run(args) -> int:
     write_files(texts, folder=args.output if args.target in FOLDERS else None)   # all complete, then in place
     for path in texts:
         print(f"export: wrote {path}", file=sys.stderr)
-    print(to_json(doc) if args.report == "json" else X.to_text(e))
+    print(to_json(doc) if args.format == "json" else X.to_text(e))
     return 0

@@ -88,7 +88,7 @@ def _text(runs: iso.Runs, ev: iso.Evaluation) -> str:
     out += [f"  {_pad(label, 52)} {ev.axis[k]:9.3f} {u}" for k, label in AXIS_FIGURES]
     # the signed mean, not B = max |B_i| >= 0: ordinary lost motion has B_i < 0, and a
     # positive value in the table's reversal would double it
-    out += ["", f"  to take the reversal out in a LinuxCNC table: chaincomp export --format linuxcnc-comp "
+    out += ["", f"  to take the reversal out in a LinuxCNC table: chaincomp export --controller linuxcnc-comp "
                 f"--mean-reversal AXIS={round(ev.axis['B_mean'], 3) + 0.0:.3f}{u} (B̄, signed)"]   # (never -0)
     return "\n".join(out)
 

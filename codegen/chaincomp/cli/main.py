@@ -125,8 +125,7 @@ def _failed(args, kind: str, line: str, code: int) -> int:
     """The one line on stderr; in a JSON mode also one JSON object on stdout, so that a reader of
     the JSON always gets JSON (docs/reference/errors.md, exit codes)."""
     print(f"chaincomp {args.verb}: {line}", file=sys.stderr)
-    # (export's JSON switch is --report json: its --format names the controller)
-    if "json" in (getattr(args, "format", None), getattr(args, "report", None)) or getattr(args, "json", False) is True:
+    if getattr(args, "format", None) == "json":   # --json is --format json in every verb
         print(json.dumps({"error": {"verb": args.verb, "kind": kind, "exit": code,
                                     "message": f"chaincomp {args.verb}: {line}"}}))
     return code

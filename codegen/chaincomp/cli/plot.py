@@ -23,8 +23,8 @@ from ..symbolic.jets import JetModel
 from ..symbolic.numeric import ExactModel
 from ..symbolic.orientation import angle_between
 from . import figures as F
-from .common import (MODEL_NAMES, add_machine_argument, add_model_argument, add_values_arguments, check_image,
-                     check_output, integer, load, parse_number, refuse_empty, values_for)
+from .common import (MODEL_NAMES, add_deprecated, add_machine_argument, add_model_argument, add_values_arguments,
+                     check_image, check_output, integer, load, model_choice, parse_number, refuse_empty, values_for)
 
 COMPONENTS = ("dx", "dy", "dz", "dkx", "dky", "dkz", "norm")
 # 1000 x 1000 points: 4-5 s for one model, 39 s for exact minus second (five_axis_ac, 2026-12)
@@ -60,7 +60,7 @@ def add_parser(sub) -> None:
     add_values_arguments(p)
     p.add_argument("--view", choices=VIEWS, help="map (default), surface (a 3-D surface beside the map) or "
                    "volume (arrows of the tool point error over the working volume)")
-    p.add_argument("--style", choices=("heatmap", "surface"), help="older spelling of --view: heatmap is map")
+    add_deprecated(p, "--style", "--view (heatmap is map)", "style", choices=("heatmap", "surface"))
     p.add_argument("--component", default="dy", choices=COMPONENTS,
                    help="error component of the map and surface (default dy; dk*: tilt of the tool axis)")
     p.add_argument("--over", metavar="A1,A2", help="the two axes of the map (default: the first two axes); for "
@@ -71,8 +71,10 @@ def add_parser(sub) -> None:
     p.add_argument("--grid", type=integer(2, MAX_GRID), metavar="N",
                    help=f"points per axis: map and surface 2 to {MAX_GRID} (default 41); volume 2 to "
                         f"{MAX_VOLUME_GRID} (default 5; 3 gives the corners, mid-edges, face centres and centre)")
-    add_model_argument(p, ORDERS, ("--order", "--model"), "model, or a difference of two (e.g. exact-1); "
-                       "--model first|second|exact|second-first.. is the older spelling")
+    add_model_argument(p, ORDERS, ("--order",), "model, or a difference of two (e.g. exact-1)")
+    # --model names a compiled library elsewhere (replay, chaincompd)
+    add_deprecated(p, "--model", "--order (first, second, exact: 1, 2, exact)", "model", type=model_choice(ORDERS),
+                   metavar="first|second|exact|...")
     add_units_argument(p)
     p.add_argument("--replay", metavar="REPLAY.csv", help="plot a replay CSV instead of a map")
     p.add_argument("--table", metavar="P.yaml", help="plot an error of this params file that varies along an "

@@ -10,9 +10,9 @@ import numpy as np
 from ..measure import calibration
 from ..model.params import load_params
 from ..model.varying import INTERPOLATIONS, MAX_TABLE_KNOTS, OUTSIDE
-from .common import add_machine_argument, add_seed_argument, check_output, integer, load
+from .common import add_deprecated, add_machine_argument, add_seed_argument, check_output, integer, load
 
-# Plausible sizes of the errors that are not tabulated, without --base (internal units).
+# Plausible sizes of the errors that are not tabulated, without --params (internal units).
 _CONSTANT_SCALE = {"length": 3e-3, "angle": 5 * calibration.ARCSEC, "ratio": 5e-6}
 
 
@@ -24,14 +24,17 @@ def add_parser(sub) -> None:
                                    "the slide's travel with smooth, plausible shapes: positioning (scale "
                                    "error and waves, µm), straightness (from the slide's tilts, best-fit "
                                    "line removed, µm), pitch, yaw and roll (arcsec). The other errors are "
-                                   "constants from --base, or small random values. The file says it is "
+                                   "constants from --params, or small random values. The file says it is "
                                    "synthetic.")
     add_machine_argument(p)
     p.add_argument("-o", "--output", required=True, metavar="P.yaml", help="params file to write")
     p.add_argument("--knots", type=integer(2, MAX_TABLE_KNOTS), default=101,
                    help=f"points per table, over the axis limits (2 to {MAX_TABLE_KNOTS}, default 101)")
     add_seed_argument(p)
-    p.add_argument("--base", metavar="P.yaml", help="constants for the errors that are not tabulated")
+    p.add_argument("--params", metavar="P.yaml", help="error values: constants for the errors that are not "
+                   "tabulated")
+    # --base names a URDF link in import-urdf and export-urdf
+    add_deprecated(p, "--base", "--params", "params", metavar="P.yaml")
     p.add_argument("--interpolation", default="monotone_cubic", choices=INTERPOLATIONS,
                    help="interpolation written into each table (default monotone_cubic)")
     p.add_argument("--outside", default="hold", choices=OUTSIDE,
@@ -40,18 +43,18 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    check_output(args.output, args.machine, args.base)
+    check_output(args.output, args.machine, args.params)
     machine = load(args.machine)
     tables = calibration.simulate(machine, args.knots, args.seed)
-    if args.base:
-        constants = load_params(args.base, machine)
+    if args.params:
+        constants = load_params(args.params, machine)
     else:
         rng = np.random.default_rng((args.seed + 1) % 2**32)
         constants = {s.name: float(np.round(rng.uniform(-1, 1) * _CONSTANT_SCALE[s.unit.kind]
                                             / s.unit.to_internal, 3)) * s.unit.to_internal
                      for s in machine.errors}
     command = ["chaincomp", "simulate-calibration", args.machine, "--knots", str(args.knots), "--seed",
-               str(args.seed)] + (["--base", args.base] if args.base else []) + \
+               str(args.seed)] + (["--params", args.params] if args.params else []) + \
               ["--interpolation", args.interpolation, "--outside", args.outside, "-o", args.output]
     slides = calibration.find_slides(machine)
     header = [
@@ -62,7 +65,7 @@ def run(args) -> int:
         "straightness = what the slide's pitch/yaw make of its travel, best-fit line removed,",
         "pitch/yaw/roll = bow + long waves; µm and arcsec. Slides:",
         *(f"  {s.axis}: {', '.join(c.error for c in s.components)}" for s in slides),
-        "Other errors: " + (f"constants from {args.base}." if args.base else "small random constants."),
+        "Other errors: " + (f"constants from {args.params}." if args.params else "small random constants."),
     ]
     calibration.write(args.output, machine, tables, constants, header, args.interpolation, args.outside)
     n = len(tables)

@@ -10,7 +10,7 @@ from ..errors import ChaincompError
 from ..escape import one_line
 from ..measure import thermal as T
 from ..output import write_file
-from .common import add_machine_argument, add_seed_argument, check_output, load, number
+from .common import add_deprecated, add_machine_argument, add_seed_argument, check_output, load, number
 
 MAX_SAMPLES = T.MAX_ROWS
 
@@ -20,12 +20,14 @@ def add_parser(sub) -> None:
                        description="Run a simulated machine through a spindle duty cycle: each of five sensors "
                                    f"({', '.join(s.name for s in T.DEFAULT_SENSORS)}) follows the hall's "
                                    "temperature and the spindle's heat through its own lags, and each error of "
-                                   "--model drifts as the model says (computed on a step ten times finer than "
+                                   "--truth drifts as the model says (computed on a step ten times finer than "
                                    "--rate, then sampled). Noise is added to both. The CSV is what 'chaincomp "
                                    "thermal fit' reads.")
     add_machine_argument(p)
-    p.add_argument("--model", required=True, metavar="TRUE.yaml", help="the true thermal model (its sensors among "
-                   "the simulated ones)")
+    p.add_argument("--truth", metavar="TRUE.yaml", help="the true thermal model (its sensors among the simulated "
+                   "ones); required")
+    # --model names a compiled library elsewhere (replay, chaincompd)
+    add_deprecated(p, "--model", "--truth", "truth", metavar="TRUE.yaml")
     p.add_argument("-o", "--output", required=True, metavar="LOG.csv", help="log to write")
     p.add_argument("--cycle", default="warmup", metavar="CYCLE",
                    help=f"spindle duty: {' or '.join(T.CYCLES)} (default warmup), or DUTY:SECONDS,... with duty "
@@ -48,13 +50,15 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    check_output(args.output, args.machine, args.model)
+    if not args.truth:
+        raise ChaincompError("--truth TRUE.yaml: the true thermal model is needed")
+    check_output(args.output, args.machine, args.truth)
     machine = load(args.machine)
-    model = T.load_model(args.model, machine)
+    model = T.load_model(args.truth, machine)
     known = {s.name for s in T.DEFAULT_SENSORS}
     for s in model.sensors:
         if s not in known:
-            raise ChaincompError(f"sensor {s} is not simulated (sensors: {', '.join(sorted(known))})", args.model)
+            raise ChaincompError(f"sensor {s} is not simulated (sensors: {', '.join(sorted(known))})", args.truth)
     cycle = T.parse_cycle(args.cycle)
     duration = sum(s for _, s in cycle)
     if duration * args.rate + 1 > MAX_SAMPLES:
@@ -65,7 +69,7 @@ def run(args) -> int:
     t, temps, drift = T.simulate(model, T.sensors_with_lags(args.sensor_lags), cycle, args.rate,
                                  args.temperature_noise, args.drift_noise, args.seed, hall=hall)
     header = ["time [s]"] + [f"{n} [degC]" for n in temps] + [f"{n} [{model.errors[n].unit.name}]" for n in drift]
-    command = ["chaincomp", "simulate-thermal", args.machine, "--model", args.model, "-o", args.output,
+    command = ["chaincomp", "simulate-thermal", args.machine, "--truth", args.truth, "-o", args.output,
                "--cycle", args.cycle, "--rate", f"{args.rate:g}", "--seed", str(args.seed), "--hall", args.hall,
                "--sensor-lags", f"{args.sensor_lags:g}"]
     lines = [f"# Written by: {one_line(' '.join(shlex.quote(c) for c in command))}",

@@ -10,10 +10,10 @@ import sys
 import time
 
 from ..emit.buildtree import _ROOT, import_lcmtypes
-from ..errors import ChaincompError
+from ..errors import ChaincompError, NoAnswer
 from ..escape import terminal
 from ..model.units import UNITS
-from .common import number, to_json
+from .common import add_deprecated, add_format_argument, number, to_json
 
 # configs/runtime/default.yaml's lcm_url and channels: where a daemon with default settings is
 DEFAULT_URL = "udpm://239.255.76.67:7667?ttl=0"
@@ -40,20 +40,21 @@ def add_parser(sub) -> None:
                                    "ramping, counters (rejections by reason), latency percentiles, the "
                                    "current correction per axis (µm, arcsec) and the age of the last command. "
                                    "The view redraws in place until Ctrl-C. With --once: listen for --timeout "
-                                   "seconds, print and exit 0, or exit 1 when no daemon was heard.")
+                                   "seconds, print and exit 0, or exit 4 (no answer) when no daemon was heard.")
+    p.add_argument("machines", nargs="*", metavar="MACHINE.yaml",
+                   help="machine descriptions naming the daemons' axes and units (default: "
+                        "configs/machines/NAME.yaml of this checkout for a daemon's machine NAME)")
     p.add_argument("--url", default=DEFAULT_URL,
                    help=f"LCM URL the daemons use (default {DEFAULT_URL}, configs/runtime/default.yaml's)")
-    p.add_argument("--once", action="store_true", help="print one view and exit (1: no daemon heard)")
-    p.add_argument("--format", choices=("text", "json"), default="text",
-                   help="text (default) or json (live: one JSON document per line and refresh)")
+    p.add_argument("--once", action="store_true", help="print one view and exit (4: no daemon heard)")
+    add_format_argument(p, what="output format (live json: one JSON document per line and refresh)")
     p.add_argument("--timeout", type=number(0, 3600, above=True), default=DEFAULT_TIMEOUT,
                    help=f"with --once: seconds to listen, at least one daemon's status period (default "
                         f"{DEFAULT_TIMEOUT} s, for the default period of 1 s)")
     p.add_argument("--refresh", type=number(0.05, 3600), default=0.5,
                    help="seconds between redraws of the live view (default 0.5)")
-    p.add_argument("--machine", dest="machines", action="append", default=[], metavar="MACHINE.yaml",
-                   help="machine description naming a daemon's axes and units (repeatable; default: "
-                        "configs/machines/NAME.yaml of this checkout for a daemon's machine NAME)")
+    add_deprecated(p, "--machine", "the arguments (MACHINE.yaml ...)", "machine_option", append=True, default=[],
+                   metavar="MACHINE.yaml")
     p.set_defaults(run=run)
 
 
@@ -266,14 +267,13 @@ def _render(doc: dict, fmt: str, live: bool) -> str:
 
 
 def run(args) -> int:
-    axes = Axes(args.machines)
+    axes = Axes(args.machines + args.machine_option)
     bus = Bus(args.url)
     if args.once:
         bus.listen(args.timeout)
         doc = snapshot(bus, axes, args.url)
         if not doc["daemons"]:
-            print(f"chaincomp status: no chaincompd heard on {args.url} within {args.timeout:g} s", file=sys.stderr)
-            return 1
+            raise NoAnswer(f"no chaincompd heard on {args.url} within {args.timeout:g} s")
         sys.stdout.write(_render(doc, args.format, live=False))
         return 0
     redraw = args.format == "text" and sys.stdout.isatty()

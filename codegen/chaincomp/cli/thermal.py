@@ -12,8 +12,10 @@ import numpy as np
 from ..errors import ChaincompError
 from ..measure import thermal as T
 from ..output import write_file
-from .common import (add_format_argument, add_machine_argument, assignments, check_finite, check_output, integer,
-                     load, names, number, parse_number, to_json)
+from .common import (add_controller_arguments, add_format_argument, add_machine_argument, assignments, check_finite,
+                     check_output, integer, load, names, number, parse_number, require_controller, to_json)
+
+STREAM_CONTROLLERS = ("siemens", "isg")   # thermal stream's --controller
 
 LOG_HELP = ("a CSV log: 'time [s]', temperature columns 'NAME [degC]' and drift columns named by the errors they "
             "measure, e.g. 'EZZ [um]'")
@@ -73,7 +75,7 @@ def add_parser(sub) -> None:
                                      "offset at a reference position and a slope (the tool's error along the axis' "
                                      "travel over its range, the other axes at their default positions, fitted by a "
                                      "line): the error line itself, as both manuals define it, which the "
-                                     "controller takes out (it moves the axis by minus the line). --format "
+                                     "controller takes out (it moves the axis by minus the line). --controller "
                                      "siemens: SD43900 "
                                      "$SA_TEMP_COMP_ABS_VALUE (mm), SD43910 $SA_TEMP_COMP_SLOPE (tan beta) and "
                                      "SD43920 $SA_TEMP_COMP_REF_POSITION (mm), K = SD43900 + SD43910 (P - SD43920); "
@@ -85,13 +87,10 @@ def add_parser(sub) -> None:
     s.add_argument("model", metavar="MODEL.yaml", help="thermal model (as thermal fit writes)")
     s.add_argument("log", metavar="LOG.csv", help="a CSV log of the temperatures ('time [s]', 'NAME [degC]'; drift "
                    "columns are not needed)")
-    s.add_argument("--format", dest="target", required=True, choices=("siemens", "isg"), help="the controller's")
+    add_controller_arguments(s, STREAM_CONTROLLERS)
     s.add_argument("-o", "--output", required=True, metavar="OUT.csv", help="the stream to write")
     s.add_argument("--reference-position", action="append", default=[], metavar="AXIS=VALUE",
                    help="the line's reference position of an axis, in its unit (default its lower limit; repeatable)")
-    s.add_argument("--report", choices=("text", "json"), default="text",
-                   help="the report's format (default text; --format names the controller's)")
-    s.add_argument("--json", dest="report", action="store_const", const="json", help="the same as --report json")
     s.set_defaults(run=run_stream)
 
 
@@ -241,6 +240,7 @@ STREAM_COLUMNS = {   # per axis: (parameter, unit, scale from mm or mm/mm, integ
 
 
 def run_stream(args) -> int:
+    require_controller(args, STREAM_CONTROLLERS)
     check_output(args.output, args.machine, args.model, args.log)
     machine = load(args.machine)
     model = T.load_model(args.model, machine)
@@ -292,7 +292,7 @@ def run_stream(args) -> int:
         text_rows.append(",".join(f"{c[k] + 0.0:.0f}" if cols[(i - 1) % 3][3] and i else f"{c[k] + 0.0:.10g}"
                                   for i, c in enumerate(table)))   # (+ 0.0: never -0)
     write_file(args.output, "\n".join(text_rows) + "\n")
-    if args.report == "json":
+    if args.format == "json":
         print(to_json(doc))
         return 0
     out = [f"{args.target} temperature compensation of {machine.name} from {args.model} over {args.log} "

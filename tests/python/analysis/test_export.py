@@ -100,8 +100,8 @@ def export(capsys, tmp_path, params_text, fmt, *extra):
     machine = write_file(tmp_path, "own_xyz.yaml", OWN)
     params = write_file(tmp_path, "own.yaml", params_text)
     out = tmp_path / ("comp" if fmt == "linuxcnc-comp" else "out.txt")
-    code, stdout, err = run_main(capsys, "export", machine, "--params", params, "--format", fmt, "-o", out,
-                                 "--report", "json", *extra)
+    code, stdout, err = run_main(capsys, "export", machine, "--params", params, "--controller", fmt, "-o", out,
+                                 "--format", "json", *extra)
     assert code == 0, err
     return json.loads(stdout), out
 
@@ -197,8 +197,8 @@ def test_printer_skew_cancels_squareness(capsys, tmp_path, fmt):
 def test_printer_skew_cannot_scale_and_says_so(tmp_path):
     machine = write_file(tmp_path, "own_xyz.yaml", OWN)
     params = write_file(tmp_path, "own.yaml", POSITIONING)
-    nothing_written(tmp_path, "export", machine, "--params", params, "--format", "marlin", "-o", tmp_path / "m.g",
-                    match="--format marlin represents none of the errors given for own_xyz")
+    nothing_written(tmp_path, "export", machine, "--params", params, "--controller", "marlin", "-o", tmp_path / "m.g",
+                    match="--controller marlin represents none of the errors given for own_xyz")
 
 
 # ----------------------------------------------------------------------------- bundled machines
@@ -208,8 +208,8 @@ def test_bundled_positioning_in_tables_squareness_in_the_matrix(capsys, tmp_path
     machine, params = machine_path(name), os.path.join(PARAMS, f"{name}-demo.yaml")
     reports = {}
     for fmt, out in (("linuxcnc-comp", tmp_path / "comp"), ("linuxcnc-matrixkins", tmp_path / "m.hal")):
-        code, stdout, err = run_main(capsys, "export", machine, "--params", params, "--format", fmt, "-o", out,
-                                     "--grid", "5", "--report", "json")
+        code, stdout, err = run_main(capsys, "export", machine, "--params", params, "--controller", fmt, "-o", out,
+                                     "--grid", "5", "--format", "json")
         assert code == 0, err
         reports[fmt] = {e["name"]: e for e in json.loads(stdout)["errors"]}
     for e in ("EXX", "EYY", "EZZ"):
@@ -234,33 +234,33 @@ def test_refusals_write_nothing(tmp_path):
     me220 = machine_path("me220_xz")
     fa = machine_path("five_axis_ac")
     out = tmp_path / "out"
-    nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "siemens", "-o", out,
+    nothing_written(tmp_path, "export", vmc, "--params", params, "--controller", "siemens", "-o", out,
                     match="invalid choice: 'siemens'")
-    nothing_written(tmp_path, "export", me220, "--set", "dx1=1um", "--format", "linuxcnc-matrixkins", "-o", out,
+    nothing_written(tmp_path, "export", me220, "--set", "dx1=1um", "--controller", "linuxcnc-matrixkins", "-o", out,
                     match="needs three linear axes")
-    nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "linuxcnc-comp", "-o", out,
+    nothing_written(tmp_path, "export", vmc, "--params", params, "--controller", "linuxcnc-comp", "-o", out,
                     "--entries", "257", match="must be between 2 and 256")
     nothing_written(tmp_path, "export", fa, "--params", os.path.join(PARAMS, "five_axis_ac-demo.yaml"),
-                    "--format", "linuxcnc-comp", "-o", out, "--grid", "60", match="the check grid would hold")
-    nothing_written(tmp_path, "export", vmc, "--format", "marlin", "-o", out, match="nothing to compensate")
-    nothing_written(tmp_path, "export", vmc, "--set", "EXX=3um", "--format", "marlin", "-o", out,
-                    match="--format marlin represents none of the errors given for vmc_xyz")
-    nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "linuxcnc-comp", "-o", out,
+                    "--controller", "linuxcnc-comp", "-o", out, "--grid", "60", match="the check grid would hold")
+    nothing_written(tmp_path, "export", vmc, "--controller", "marlin", "-o", out, match="nothing to compensate")
+    nothing_written(tmp_path, "export", vmc, "--set", "EXX=3um", "--controller", "marlin", "-o", out,
+                    match="--controller marlin represents none of the errors given for vmc_xyz")
+    nothing_written(tmp_path, "export", vmc, "--params", params, "--controller", "linuxcnc-comp", "-o", out,
                     "--mean-reversal", "Q=1um", match="--mean-reversal Q: not an axis")
-    nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "marlin", "-o", out,
+    nothing_written(tmp_path, "export", vmc, "--params", params, "--controller", "marlin", "-o", out,
                     "--mean-reversal", "X=1um", match="--mean-reversal: only linuxcnc-comp")
     nothing_written(tmp_path, "export", machine_path("trunnion_ac"), "--params",
-                    os.path.join(PARAMS, "trunnion_ac-demo.yaml"), "--format", "linuxcnc-comp", "-o", out,
+                    os.path.join(PARAMS, "trunnion_ac-demo.yaml"), "--controller", "linuxcnc-comp", "-o", out,
                     "--grid", "3", "--entries", "9", match="leaves more tool error than no compensation for trunnion_ac")
-    nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "linuxcnc-comp", "-o", out,
-                    "--mean-reversal", "X=1um", "--reversal", "X=2um", match="--mean-reversal: X given twice")
-    nothing_written(tmp_path, "export", vmc, "--params", params, "--set", "X=100", "--format", "linuxcnc-comp",
+    nothing_written(tmp_path, "export", vmc, "--params", params, "--controller", "linuxcnc-comp", "-o", out,
+                    "--mean-reversal", "X=1um", "--mean-reversal", "X=2um", match="--mean-reversal: X given twice")
+    nothing_written(tmp_path, "export", vmc, "--params", params, "--set", "X=100", "--controller", "linuxcnc-comp",
                     "-o", out, match="--set X=100: X is an axis")
-    nothing_written(tmp_path, "export", vmc, "--params", params, "--format", "linuxcnc-comp", "-o", "",
+    nothing_written(tmp_path, "export", vmc, "--params", params, "--controller", "linuxcnc-comp", "-o", "",
                     match="-o: an empty value")
     # bounded work: the breakdown fits every error alone on every point
     nothing_written(tmp_path, "export", machine_path("panda"), "--params", os.path.join(PARAMS, "panda-demo.yaml"),
-                    "--format", "linuxcnc-comp", "-o", out, "--grid", "6", match="the breakdown would fit each of")
+                    "--controller", "linuxcnc-comp", "-o", out, "--grid", "6", match="the breakdown would fit each of")
 
 
 def test_a_folder_in_the_way_or_an_input_inside_it_writes_nothing(tmp_path):
@@ -270,12 +270,12 @@ def test_a_folder_in_the_way_or_an_input_inside_it_writes_nothing(tmp_path):
     folder.mkdir()
     (folder / "compensation.ini").mkdir()
     vmc, params = machine_path("vmc_xyz"), os.path.join(PARAMS, "vmc_xyz-demo.yaml")
-    nothing_written(folder, "export", vmc, "--params", params, "--format", "linuxcnc-comp", "-o", folder,
+    nothing_written(folder, "export", vmc, "--params", params, "--controller", "linuxcnc-comp", "-o", folder,
                     match="compensation.ini: is a folder")
     (folder / "compensation.ini").rmdir()
     machine = write_file(folder, "joint0_X.comp", OWN)   # a user's machine file, by an unlucky name
     pos = write_file(tmp_path, "pos.yaml", POSITIONING)
-    nothing_written(folder, "export", machine, "--params", pos, "--format", "linuxcnc-comp", "-o", folder,
+    nothing_written(folder, "export", machine, "--params", pos, "--controller", "linuxcnc-comp", "-o", folder,
                     match="is also an input")
     assert (folder / "joint0_X.comp").read_text() == OWN
 
@@ -286,7 +286,7 @@ def test_a_model_undefined_inside_the_limits_is_named(tmp_path):
     machine = write_file(tmp_path, "root.yaml", OWN.replace("name: own_xyz", "name: root_xyz").replace(
         "limits: [0, 300]", "limits: [-10, 300]").replace("translate: [X + EXX, 0, 0]", "translate: [X + EXX*sqrt(X), 0, 0]"))
     before = sorted(os.listdir(tmp_path))
-    proc = cli("export", machine, "--set", "EXX=1um", "--format", "linuxcnc-comp", "-o", tmp_path / "c", check=False)
+    proc = cli("export", machine, "--set", "EXX=1um", "--controller", "linuxcnc-comp", "-o", tmp_path / "c", check=False)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     warning, error = proc.stderr.splitlines()
     assert "'X + EXX*sqrt(X)' is not real (or not finite) at X = -10 mm" in warning, warning
@@ -344,10 +344,10 @@ def test_matrixkins_names_where_its_joints_after_z_go_and_wants_x_y_z_first(caps
     axes that are not joints 0, 1, 2 are refused."""
     machine, params = machine_path("five_axis_ac"), os.path.join(PARAMS, "five_axis_ac-demo.yaml")
     out = tmp_path / "m.hal"
-    code, stdout, err = run_main(capsys, "export", machine, "--params", params, "--format", "linuxcnc-matrixkins",
+    code, stdout, err = run_main(capsys, "export", machine, "--params", params, "--controller", "linuxcnc-matrixkins",
                                  "-o", out, "--grid", "3", "--no-breakdown")
     assert code == 0, err
     note = [line for line in out.read_text().splitlines() if "passes the joints after X, Y, Z" in line]
     assert note and "joint 3 (Ap) <-> axis A, joint 4 (Cp) <-> axis B" in note[0]
-    nothing_written(tmp_path, "export", machine, "--params", params, "--format", "linuxcnc-matrixkins", "-o",
+    nothing_written(tmp_path, "export", machine, "--params", params, "--controller", "linuxcnc-matrixkins", "-o",
                     tmp_path / "n.hal", "--joints", "Ap,X,Y,Z,Cp", match="matrixkins drives joints 0, 1, 2 from X, Y, Z")

@@ -1,4 +1,4 @@
-"""chaincomp export --format isg-volcomp (ISG's and Beckhoff TwinCAT CNC's volumetric
+"""chaincomp export --controller isg-volcomp (ISG's and Beckhoff TwinCAT CNC's volumetric
 compensation) against truth from outside the exporter: a machine the test writes into a
 temp dir with its tool point written out by hand (own_model), the CSV read back by the
 test's own reader written from ISG's manual (isg_csv.py), the controller's correction
@@ -63,8 +63,8 @@ def export(capsys, tmp_path, params_text=PARAMS_TEXT, *extra):
     machine = write_file(tmp_path, "own_iso.yaml", OWN)
     params = write_file(tmp_path, "own.yaml", params_text)
     out = tmp_path / "isg"
-    code, stdout, err = run_main(capsys, "export", machine, "--params", params, "--format", "isg-volcomp",
-                                 "-o", out, "--report", "json", *extra)
+    code, stdout, err = run_main(capsys, "export", machine, "--params", params, "--controller", "isg-volcomp",
+                                 "-o", out, "--format", "json", *extra)
     assert code == 0, err
     return json.loads(stdout), out
 
@@ -122,8 +122,8 @@ def test_the_residual_is_the_controllers_replay_and_a_parabolas_chord(capsys, tm
 def test_bundled_laser_tables_their_knots_are_records_and_leave_under_a_micrometre(capsys, tmp_path):
     """five_axis_ac-laser.yaml: 18 component errors as monotone cubic tables of 101 knots."""
     code, stdout, err = run_main(capsys, "export", machine_path("five_axis_ac"), "--params",
-                                 f"{PARAMS}/five_axis_ac-laser.yaml", "--format", "isg-volcomp", "-o",
-                                 tmp_path / "isg", "--grid", "3", "--no-breakdown", "--report", "json")
+                                 f"{PARAMS}/five_axis_ac-laser.yaml", "--controller", "isg-volcomp", "-o",
+                                 tmp_path / "isg", "--grid", "3", "--no-breakdown", "--format", "json")
     assert code == 0, err
     doc = json.loads(stdout)
     blocks = isg_csv.read((tmp_path / "isg" / "volcomp.csv").read_text())
@@ -154,7 +154,7 @@ def test_an_error_without_an_iso_name_is_left_out_and_its_share_reported(capsys,
 @pytest.mark.parametrize("name", ["vmc_xyz", "five_axis_ac"])
 def test_bundled_every_iso_error_is_carried_and_leaves_under_a_micrometre(capsys, tmp_path, name):
     code, stdout, err = run_main(capsys, "export", machine_path(name), "--params", f"{PARAMS}/{name}-demo.yaml",
-                                 "--format", "isg-volcomp", "-o", tmp_path / "isg", "--grid", "5", "--report", "json")
+                                 "--controller", "isg-volcomp", "-o", tmp_path / "isg", "--grid", "5", "--format", "json")
     assert code == 0, err
     doc = json.loads(stdout)
     iso = [e for e in doc["errors"] if isg_csv.COMPONENT.match(e["name"]) or isg_csv.POSITION.match(e["name"][1:])]
@@ -187,22 +187,22 @@ def test_refusals_write_nothing(tmp_path):
     machine = write_file(tmp_path, "own_iso.yaml", OWN)
     params = write_file(tmp_path, "own.yaml", PARAMS_TEXT)
     out = tmp_path / "isg"
-    base = ("export", machine, "--params", params, "--format", "isg-volcomp", "-o", out)
+    base = ("export", machine, "--params", params, "--controller", "isg-volcomp", "-o", out)
     nothing_written(tmp_path, *base, "--iso-axes", "X=Y,Y=X,Z=Q", match="--iso-axes Z=Q: not an axis of own_iso")
     nothing_written(tmp_path, *base, "--iso-axes", "X=X,Y=Y,W=Z", match="--iso-axes W=Z: W is not an ISO axis letter")
     nothing_written(tmp_path, *base, "--iso-axes", "X=X,Y=Y,A=Z", match="A is a rotary axis in ISO 230-1, but Z")
     nothing_written(tmp_path, *base, "--iso-axes", "X=X,Y=Y", match="needs three linear axes X, Y, Z")
     nothing_written(tmp_path, *base, "--iso-axes", "X=X,X=Y", match="--iso-axes: X given twice")
-    nothing_written(tmp_path, "export", machine, "--params", params, "--format", "marlin", "-o", tmp_path / "m.g",
+    nothing_written(tmp_path, "export", machine, "--params", params, "--controller", "marlin", "-o", tmp_path / "m.g",
                     "--iso-axes", "X=X,Y=Y,Z=Z", match="--iso-axes: only isg-volcomp")
     only_sxz = write_file(tmp_path, "sxz.yaml", "machine: own_iso\nvalues:\n  SXZ: 10 arcsec\n")
-    nothing_written(tmp_path, "export", machine, "--params", only_sxz, "--format", "isg-volcomp", "-o", out,
+    nothing_written(tmp_path, "export", machine, "--params", only_sxz, "--controller", "isg-volcomp", "-o", out,
                     match="isg-volcomp represents none of the errors given for own_iso")
     (tmp_path / "afile").write_text("x")
-    nothing_written(tmp_path, "export", machine, "--params", params, "--format", "isg-volcomp", "-o",
+    nothing_written(tmp_path, "export", machine, "--params", params, "--controller", "isg-volcomp", "-o",
                     tmp_path / "afile", match="isg-volcomp writes a folder of files")
     lathe = machine_path("me220_xz")
-    nothing_written(tmp_path, "export", lathe, "--params", f"{PARAMS}/me220_xz-example.yaml", "--format",
+    nothing_written(tmp_path, "export", lathe, "--params", f"{PARAMS}/me220_xz-example.yaml", "--controller",
                     "isg-volcomp", "-o", out, match="needs three linear axes X, Y, Z")
 
 
@@ -214,7 +214,7 @@ def test_rotary_arguments_are_degrees_and_linear_ones_mm_whatever_the_declared_u
     sit where the arguments say."""
     params = write_file(tmp_path, "tr.yaml", "machine: trunnion_ac\nvalues:\n  EC0C: 5 arcsec\n"
                         "  EX0C: {axis: C, units: [deg, um], polynomial: [0, 0.05]}\n")
-    code, _, err = run_main(capsys, "export", machine_path("trunnion_ac"), "--params", params, "--format",
+    code, _, err = run_main(capsys, "export", machine_path("trunnion_ac"), "--params", params, "--controller",
                             "isg-volcomp", "-o", tmp_path / "tr", "--entries", "5", "--grid", "3", "--no-breakdown")
     assert code == 0, err
     c = next(b for b in isg_csv.read((tmp_path / "tr" / "volcomp.csv").read_text()) if b.arguments == ["C"])
@@ -225,7 +225,7 @@ def test_rotary_arguments_are_degrees_and_linear_ones_mm_whatever_the_declared_u
     machine = write_file(tmp_path, "own_in.yaml", inches)
     params = write_file(tmp_path, "in.yaml", "machine: own_iso\nvalues:\n  EXX: {axis: X, units: [in, um], "
                         "polynomial: [0, 1]}\n")
-    code, _, err = run_main(capsys, "export", machine, "--params", params, "--format", "isg-volcomp", "-o",
+    code, _, err = run_main(capsys, "export", machine, "--params", params, "--controller", "isg-volcomp", "-o",
                             tmp_path / "in", "--entries", "3", "--grid", "3", "--no-breakdown")
     assert code == 0, err
     x = next(b for b in isg_csv.read((tmp_path / "in" / "volcomp.csv").read_text()) if b.arguments == ["X"])
@@ -238,8 +238,8 @@ def test_an_error_it_cannot_carry_is_never_called_represented(capsys, tmp_path):
         "[X + EXX, 0, 0]", "[X + EXX*X, 0, 0]")
     machine = write_file(tmp_path, "own_ppm.yaml", ppm)
     params = write_file(tmp_path, "ppm.yaml", "machine: own_iso\nvalues:\n  EXX: 0.2 ppm\n  EYY: 3 um\n")
-    code, stdout, err = run_main(capsys, "export", machine, "--params", params, "--format", "isg-volcomp", "-o",
-                                 tmp_path / "isg", "--grid", "3", "--report", "json")
+    code, stdout, err = run_main(capsys, "export", machine, "--params", params, "--controller", "isg-volcomp", "-o",
+                                 tmp_path / "isg", "--grid", "3", "--format", "json")
     assert code == 0, err
     doc = json.loads(stdout)
     assert "EXX" in doc["isg"]["left_out"]
@@ -252,7 +252,7 @@ def test_more_refusals_write_nothing(tmp_path):
 
     def refused(params_text, *extra, match, machine=machine):
         params = write_file(tmp_path, "p.yaml", params_text)
-        nothing_written(tmp_path, "export", machine, "--params", params, "--format", "isg-volcomp", "-o", out,
+        nothing_written(tmp_path, "export", machine, "--params", params, "--controller", "isg-volcomp", "-o", out,
                         *extra, match=match)
 
     refused("machine: own_iso\nvalues:\n  EXX: {axis: X, units: [mm, um], interpolation: linear, outside: hold, "
@@ -280,21 +280,21 @@ def test_trunnion_chain_letters_and_directions(capsys, tmp_path):
     workpiece side; --workpiece-axes is written as given; swapped rotary letters, a linear
     axis moving along -x and a --workpiece-axes past the chain are refused."""
     params = f"{PARAMS}/trunnion_ac-demo.yaml"
-    code, stdout, err = run_main(capsys, "export", machine_path("trunnion_ac"), "--params", params, "--format",
+    code, stdout, err = run_main(capsys, "export", machine_path("trunnion_ac"), "--params", params, "--controller",
                                  "isg-volcomp", "-o", tmp_path / "t", "--grid", "3", "--no-breakdown",
-                                 "--workpiece-axes", "2", "--report", "json")
+                                 "--workpiece-axes", "2", "--format", "json")
     assert code == 0, err
     doc = json.loads(stdout)
     assert doc["isg"]["chain"] == "CAXYZ" and doc["isg"]["workpiece_side"] == 2 and doc["isg"]["workpiece_axes"] == 2
     assert "\nworkpiece_axes 2\n" in (tmp_path / "t" / "volcomp.lis").read_text()
-    base = ("export", machine_path("trunnion_ac"), "--params", params, "--format", "isg-volcomp", "-o", tmp_path / "u")
+    base = ("export", machine_path("trunnion_ac"), "--params", params, "--controller", "isg-volcomp", "-o", tmp_path / "u")
     nothing_written(tmp_path, *base, "--iso-axes", "X=X,Y=Y,Z=Z,A=C,C=A",
                     match="A must turn about x (ISO 841), but C of trunnion_ac turns about (+0.000, +0.000, +1.000)")
     nothing_written(tmp_path, *base, "--workpiece-axes", "5", match="--workpiece-axes 5: expected 0 to 4")
     minus = OWN.replace("[X + EXX, 0, 0]", "[-X - EXX, 0, 0]")
     machine = write_file(tmp_path, "minus.yaml", minus)
     p = write_file(tmp_path, "m.yaml", "machine: own_iso\nvalues:\n  EXX: 3 um\n")
-    nothing_written(tmp_path, "export", machine, "--params", p, "--format", "isg-volcomp", "-o", tmp_path / "v",
+    nothing_written(tmp_path, "export", machine, "--params", p, "--controller", "isg-volcomp", "-o", tmp_path / "v",
                     match="X must move the tool along +x relative to the workpiece (ISO 841), but X of own_iso "
                           "moves it along (-1.000, +0.000, +0.000)")
 
@@ -355,8 +355,8 @@ def test_one_rule_for_a_rotary_axis_at_any_inclination(capsys, tmp_path, n):
     machine = write_file(tmp_path, "nutating.yaml", text)
     params = write_file(tmp_path, "p.yaml", "machine: nutating\nvalues:\n  EXX: 3 um\n  EX0B: 5 um\n"
                                             "  EB0B: 8 arcsec\n")
-    argv = ("export", machine, "--params", params, "--format", "isg-volcomp", "-o", tmp_path / "isg", "--grid", "3",
-            "--no-breakdown", "--report", "json")
+    argv = ("export", machine, "--params", params, "--controller", "isg-volcomp", "-o", tmp_path / "isg", "--grid", "3",
+            "--no-breakdown", "--format", "json")
     code, stdout, err = run_main(capsys, *argv)
     if n == 90:
         assert code == 2 and "must turn about y" in err and "--iso-axes" in err

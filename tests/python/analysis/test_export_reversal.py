@@ -38,7 +38,7 @@ def table_of(capsys, tmp_path, *option):
     machine = write_file(tmp_path, "own_xyz.yaml", OWN)
     params = write_file(tmp_path, "own.yaml", POSITIONING)
     out = tmp_path / "comp"
-    code, stdout, err = run_main(capsys, "export", machine, "--params", params, "--format", "linuxcnc-comp", "-o",
+    code, stdout, err = run_main(capsys, "export", machine, "--params", params, "--controller", "linuxcnc-comp", "-o",
                                  out, "--grid", "3", "--entries", "31", "--no-breakdown", *option)
     assert code == 0, err
     return linuxcnc_comp.read((out / "joint0_X.comp").read_text(), 1), stdout, err, out

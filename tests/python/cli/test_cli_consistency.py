@@ -27,7 +27,7 @@ MODEL_DEFAULT = "1"              # budget and plot: 1, 2 or exact
 # Verbs without a machine file as their first argument, and why.
 NO_MACHINE_FIRST = {
     "iso230-2": "reads laser runs only",
-    "status": "listens to the daemons on the bus; --machine there names axes of several daemons",
+    "status": "listens to the daemons on the bus; its machine files (any number) name the daemons' axes",
     "generate": "takes several machine files (all positional)",
     "import-urdf": "reads a URDF and writes the machine file",
 }
@@ -75,10 +75,10 @@ def test_shared_options_have_the_same_names_and_defaults(verb):
         assert opts["--seed"].type("4294967295") == 2**32 - 1
     if "--format" in opts and "json" in (opts["--format"].choices or ()):
         assert opts["--format"].default == FORMAT_DEFAULT, verb
-    if "--json" in opts:   # the older spelling: --format json (--report json where --format names a target's)
-        report = "--report" if "--report" in opts else "--format"
-        assert report in opts and opts["--json"].dest == opts[report].dest and opts["--json"].const == "json", verb
-        assert opts[report].default == FORMAT_DEFAULT and "json" in opts[report].choices, verb
+    if "--json" in opts:   # the older spelling of --format json, in every verb
+        assert "--format" in opts and opts["--json"].dest == opts["--format"].dest == "format", verb
+        assert opts["--json"].const == "json", verb
+        assert opts["--format"].default == FORMAT_DEFAULT and "json" in opts["--format"].choices, verb
     if "--assume-zero" in opts:
         a = opts["--assume-zero"]
         assert isinstance(a, argparse._AppendAction) and a.default == [] and a.metavar == "E1,E2", verb
@@ -120,8 +120,9 @@ def test_replay_refuses_the_machine_twice_or_never(tmp_path, capsys):
     log = tmp_path / "in.lcmlog"
     log.write_bytes(b"")
     assert main(["replay", M, str(log), "--machine", M, "--params", "p.yaml"]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "chaincomp replay: error: --machine" in err and "give it once" in err
+    warning, err = capsys.readouterr().err.splitlines()   # --machine is deprecated: a warning, then the error
+    assert warning.startswith("chaincomp replay: warning: --machine is deprecated")
+    assert "chaincomp replay: error: --machine" in err and "give it once" in err
     assert main(["replay", str(log), "--params", "p.yaml"]) == 2
     assert "a machine file is needed" in capsys.readouterr().err
 
@@ -230,7 +231,7 @@ def test_bash_completes_verbs_options_and_values():
     assert _complete("chaincomp", "--ver") == ["--version"]
     assert _complete("chaincomp", "budget", M, "--se") == ["--set", "--seed"]
     assert _complete("chaincomp", "budget", M, "--order", "") == ["1", "2", "exact"]
-    assert _complete("chaincomp", "plot", M, "--model", "e") == ["exact", "exact-1", "exact-2"]
+    assert _complete("chaincomp", "plot", M, "--order", "e") == ["exact", "exact-1", "exact-2"]
     assert _complete("chaincomp", "eval", M, "--format", "") == ["text", "json"]
-    assert _complete("chaincomp", "replay", "--mach") == ["--machine"]
+    assert _complete("chaincomp", "replay", "--mach") == []   # a deprecated spelling is offered no more
     assert _complete("chaincomp", "eval", "") == []   # a file name: bash's own completion (-o default)

@@ -117,8 +117,8 @@ CASES = (
     + _opt(["simulate-calibration", "{five}", "-o", "{out}.yaml"], "--knots", ["1", "0", "4097"] + INTEGERS)
     + _opt(["simulate-calibration", "{five}", "-o", "{out}.yaml"], "--seed", ["-1", str(2**32), "nan"])
     + _opt(["simulate-calibration", "{five}"], "-o", ["{five}", "{folder}", "{nodir}"])
-    + _opt(["simulate-calibration", "{five}", "--base", "{ahp}"], "-o", ["{ahp}"])
-    + _opt(["simulate-calibration", "{five}", "-o", "{out}.yaml"], "--base", ["{missing}", "{latin1}", "{folder}"],
+    + _opt(["simulate-calibration", "{five}", "--params", "{ahp}"], "-o", ["{ahp}"])
+    + _opt(["simulate-calibration", "{five}", "-o", "{out}.yaml"], "--params", ["{missing}", "{latin1}", "{folder}"],
            FILE)
     # simulate-log
     + _opt(["simulate-log", "{five}", "-o", "{out}.log"], "--rate", ["0", "-1", "2e6"] + NUMBERS)
@@ -139,9 +139,12 @@ for verb, tail in (("derive", []), ("eval", []), ("generate", ["-o", "{folder}"]
                    ("budget", ["--params", "{ahp}"]), ("simulate-calibration", ["-o", "{out}.yaml"]),
                    ("simulate-log", ["-o", "{out}.log"]), ("identify", ["{ahp}"]),
                    ("simulate-measurements", ["-o", "{out}.csv"]), ("lint", []), ("build", []),
-                   # these two take a CSV of laser runs first: the same three cases for it
-                   ("iso230-2", []), ("laser-to-params", ["--machine", "{five}", "--error", "EXX", "-o", "{out}.yaml"])):
+                   # iso230-2 takes a CSV of laser runs first: the same three cases for it
+                   ("iso230-2", [])):
     CASES += [([verb, m] + tail, m) for m in ("{missing}", "{latin1}", "{folder}")]
+# laser-to-params: the CSV of laser runs after the machine file
+CASES += [(["laser-to-params", "{five}", m, "--error", "EXX", "-o", "{out}.yaml"], m)
+          for m in ("{missing}", "{latin1}", "{folder}")]
 
 
 def _id(case) -> str:

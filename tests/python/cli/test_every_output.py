@@ -90,16 +90,16 @@ CASES = [
     Case("ballbar-plot", "ballbar", "--plot",
          lambda i: ["ballbar", VMC, "--set", "EXX=1", "--plane", "XY", "--radius", "10"], "bb.png", kind="png"),
     Case("export-klipper", "export", "--output",
-         lambda i: ["export", VMC, "--params", VMC_PARAMS, "--format", "klipper"], "k.cfg"),
+         lambda i: ["export", VMC, "--params", VMC_PARAMS, "--controller", "klipper"], "k.cfg"),
     Case("export-linuxcnc-comp", "export", "--output",
-         lambda i: ["export", VMC, "--params", VMC_PARAMS, "--format", "linuxcnc-comp"], "compensation.ini", True),
+         lambda i: ["export", VMC, "--params", VMC_PARAMS, "--controller", "linuxcnc-comp"], "compensation.ini", True),
     Case("export-isg-volcomp", "export", "--output",
-         lambda i: ["export", VMC, "--params", VMC_PARAMS, "--format", "isg-volcomp"], "volcomp.lis", True),
+         lambda i: ["export", VMC, "--params", VMC_PARAMS, "--controller", "isg-volcomp"], "volcomp.lis", True),
     Case("simulate-thermal", "simulate-thermal", "--output",
-         lambda i: ["simulate-thermal", VMC, "--model", VMC_THERMAL, "--rate", "0.01"], "th.csv"),
+         lambda i: ["simulate-thermal", VMC, "--truth", VMC_THERMAL, "--rate", "0.01"], "th.csv"),
     Case("thermal-fit", "thermal fit", "--output", lambda i: ["thermal", "fit", VMC, i["thermal_log"]], "fit.yaml"),
     Case("thermal-stream", "thermal stream", "--output",
-         lambda i: ["thermal", "stream", VMC, VMC_THERMAL, i["thermal_log"], "--format", "isg"], "s.csv"),
+         lambda i: ["thermal", "stream", VMC, VMC_THERMAL, i["thermal_log"], "--controller", "isg"], "s.csv"),
 ]
 IDS = [c.id for c in CASES]
 OUTPUT_OPTIONS = ("--output", "--plot", "--html", "--csv")
@@ -151,7 +151,7 @@ def inputs(base):
     cli("simulate-measurements", VMC, "--setups", "random:20", "-o", i["meas"])
     cli("simulate-log", VMC, "--seconds", "0.01", "-o", i["log"])
     cli("ballbar", VMC, "--set", "EXX=1", "--plane", "XY", "--radius", "10", "-o", i["trace"])
-    cli("simulate-thermal", VMC, "--model", VMC_THERMAL, "--rate", "0.01", "-o", i["thermal_log"])
+    cli("simulate-thermal", VMC, "--truth", VMC_THERMAL, "--rate", "0.01", "-o", i["thermal_log"])
     with open(i["urdf"], "w") as f:
         f.write(URDF)
     cli("import-urdf", i["urdf"], "--base", "base", "--tip", "tip", "--errors", "all", "-o", i["urdf_machine"])

@@ -16,14 +16,12 @@ def _subparsers(parser):
 
 
 def _json_switch(parser):
-    """The options that turn a verb's output into JSON (export's is --report json: its --format
-    names the controller)."""
+    """The option that turns a verb's output into JSON: --json, or --format json."""
     for a in parser._actions:
         if "--json" in a.option_strings:
             return ["--json"]
-        for name in ("--format", "--report"):
-            if name in a.option_strings and a.choices and "json" in a.choices:
-                return [name, "json"]
+        if "--format" in a.option_strings and a.choices and "json" in a.choices:
+            return ["--format", "json"]
     return None
 
 

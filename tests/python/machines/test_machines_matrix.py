@@ -429,9 +429,9 @@ def test_export_linuxcnc_tables(name, tmp_path):
     import linuxcnc_comp
 
     out = tmp_path / "comp"
-    doc = json.loads(run_cli("export", machine_path(name), "--params", params_file(name), "--format",
+    doc = json.loads(run_cli("export", machine_path(name), "--params", params_file(name), "--controller",
                              "linuxcnc-comp", "-o", str(out), "--grid", "5", "--entries", "9", "--no-breakdown",
-                             "--report", "json").stdout)
+                             "--format", "json").stdout)
     m, values = truth(name)
     # the check points the report promises: 5 per axis, and each joint between its 9 entries
     limits = [s["limits"] for s in raw(name)["symbols"] if s["role"] == "axis"]
@@ -470,7 +470,7 @@ def test_simulate_thermal_then_fit(name, tmp_path):
         f"  {e}:\n    unit: {u}\n    terms:\n      - {{sensor: {s}, gain: {g}, time_constant: {tau}}}\n"
         for e, (s, g, tau, u) in chosen.items()))
     log, fit = tmp_path / "log.csv", tmp_path / "fit.yaml"
-    run_cli("simulate-thermal", machine_path(name), "--model", str(true), "-o", str(log), "--rate", "0.2")
+    run_cli("simulate-thermal", machine_path(name), "--truth", str(true), "-o", str(log), "--rate", "0.2")
     doc = json.loads(run_cli("thermal", "fit", machine_path(name), str(log), "-o", str(fit), "--json").stdout)
     assert sorted(doc["errors"]) == sorted(chosen)
     for e, (s, g, tau, u) in chosen.items():
@@ -494,8 +494,8 @@ def test_export_isg_volcomp(name, tmp_path):
 
     out = tmp_path / "isg"
     linear = {s["name"] for s in raw(name)["symbols"] if s["role"] == "axis" and s["unit"] == "mm"}
-    r = run_cli("export", machine_path(name), "--params", params_file(name), "--format", "isg-volcomp", "-o",
-                str(out), "--grid", "3", "--no-breakdown", "--report", "json", check=False)
+    r = run_cli("export", machine_path(name), "--params", params_file(name), "--controller", "isg-volcomp", "-o",
+                str(out), "--grid", "3", "--no-breakdown", "--format", "json", check=False)
     if not {"X", "Y", "Z"} <= linear:
         assert r.returncode == 2 and "needs three linear axes X, Y, Z" in r.stderr, r.stderr
         assert len(r.stderr.strip().splitlines()) == 1 and not out.exists()

@@ -99,7 +99,7 @@ def _terms(model_path):
 
 
 def _simulate(machine, true, out, *extra):
-    cli("simulate-thermal", machine, "--model", true, "-o", out, *extra)
+    cli("simulate-thermal", machine, "--truth", true, "-o", out, *extra)
 
 
 def test_fit_recovers_the_lathe_written_here_and_compensates_a_held_out_cycle(lathe):
@@ -225,7 +225,7 @@ def test_bad_models_are_refused_naming_the_line_and_field(lathe, old, new, words
     p = lathe / "badmodel.yaml"
     p.write_text(MODEL.replace(old, new))
     out = lathe / "never.csv"
-    res = run_in_process("simulate-thermal", lathe / "lathe.yaml", "--model", p, "-o", out)
+    res = run_in_process("simulate-thermal", lathe / "lathe.yaml", "--truth", p, "-o", out)
     one_error_line(res, "simulate-thermal", str(p), *words)
     assert not out.exists()
 
@@ -254,7 +254,7 @@ def test_bad_fit_options_are_refused(lathe, args, words):
 ])
 def test_bad_simulation_options_are_refused(lathe, args, words):
     out = lathe / "never.csv"
-    res = run_in_process("simulate-thermal", lathe / "lathe.yaml", "--model", lathe / "true.yaml", "-o", out, *args)
+    res = run_in_process("simulate-thermal", lathe / "lathe.yaml", "--truth", lathe / "true.yaml", "-o", out, *args)
     one_error_line(res, "simulate-thermal", *words)
     assert not out.exists()
 
@@ -262,7 +262,7 @@ def test_bad_simulation_options_are_refused(lathe, args, words):
 def test_a_model_of_sensors_not_simulated_or_not_logged_is_refused(lathe):
     p = lathe / "other.yaml"
     p.write_text(MODEL.replace("T_spindle", "T_motor"))
-    res = run_in_process("simulate-thermal", lathe / "lathe.yaml", "--model", p, "-o", lathe / "never.csv")
+    res = run_in_process("simulate-thermal", lathe / "lathe.yaml", "--truth", p, "-o", lathe / "never.csv")
     one_error_line(res, "simulate-thermal", "sensor T_motor is not simulated")
     log = _log(lathe, GOOD_LOG, "good.csv")
     res = run_in_process("thermal", "check", lathe / "lathe.yaml", p, log)
@@ -333,7 +333,7 @@ def test_the_model_written_reads_back_whatever_its_values_and_names(lathe):
 def test_more_bad_models(lathe, edit, words):
     p = lathe / "bad2.yaml"
     p.write_text(edit(MODEL))
-    res = run_in_process("simulate-thermal", lathe / "lathe.yaml", "--model", p, "-o", lathe / "never.csv")
+    res = run_in_process("simulate-thermal", lathe / "lathe.yaml", "--truth", p, "-o", lathe / "never.csv")
     one_error_line(res, "simulate-thermal", str(p), *words)
 
 
@@ -360,7 +360,7 @@ def test_a_line_separator_in_a_comment_does_not_split_it(lathe):
 
 def test_the_simulated_log_is_read_every_1_over_rate_seconds(lathe):
     out = lathe / "slow.csv"
-    cli("simulate-thermal", lathe / "lathe.yaml", "--model", lathe / "true.yaml", "-o", out, "--rate", "0.09",
+    cli("simulate-thermal", lathe / "lathe.yaml", "--truth", lathe / "true.yaml", "-o", out, "--rate", "0.09",
         "--cycle", "1:3600")
     t = np.loadtxt(out, delimiter=",", skiprows=3, usecols=0)
     assert np.diff(t) == pytest.approx(1 / 0.09, abs=1e-3) and len(t) == 325   # (written to 1 ms)
@@ -401,11 +401,11 @@ def test_streams_are_the_error_lines_along_each_axis(tmp_path):
     (tmp_path / "m.yaml").write_text(SCALED_LATHE)
     (tmp_path / "true.yaml").write_text(SCALED_TRUE)
     m, true, log = tmp_path / "m.yaml", tmp_path / "true.yaml", tmp_path / "log.csv"
-    cli("simulate-thermal", m, "--model", true, "-o", log, "--drift-noise", "0", "--temperature-noise", "0",
+    cli("simulate-thermal", m, "--truth", true, "-o", log, "--drift-noise", "0", "--temperature-noise", "0",
         "--rate", "0.1")
     truth = np.loadtxt(log, delimiter=",", skiprows=3)
     ezs, sxs = truth[:, -2] * 1e-3, truth[:, -1] * 1e-6    # mm, 1 (the truth on a 1 s step; the stream on the log's 10 s)
-    doc = json.loads(cli("thermal", "stream", m, true, log, "--format", "siemens", "-o", tmp_path / "s.csv",
+    doc = json.loads(cli("thermal", "stream", m, true, log, "--controller", "siemens", "-o", tmp_path / "s.csv",
                          "--reference-position", "X=50", "--json").stdout)
     s = _stream(tmp_path / "s.csv")
     # X moves the tool by X (1 + SXS): the error along X is SXS X = SXS 50 + SXS (X - 50)
@@ -416,7 +416,7 @@ def test_streams_are_the_error_lines_along_each_axis(tmp_path):
     assert s["Z SD43900 $SA_TEMP_COMP_ABS_VALUE [mm]"] == pytest.approx(-ezs, rel=1e-3, abs=1e-7)   # (readings 10 s apart)
     assert np.max(np.abs(s["Z SD43910 $SA_TEMP_COMP_SLOPE [1]"])) < 1e-12   # (rounding: 0.01 nm over 1 m)
     assert doc["axes"]["X"]["line_departure_max_um"] < 1e-6   # a scale is a line
-    cli("thermal", "stream", m, true, log, "--format", "isg", "-o", tmp_path / "i.csv", "--reference-position", "X=50")
+    cli("thermal", "stream", m, true, log, "--controller", "isg", "-o", tmp_path / "i.csv", "--reference-position", "X=50")
     i = _stream(tmp_path / "i.csv")
     assert np.array_equal(i["X P-AXIS-00274 temp_comp_coefficient [um/m]"],
                           np.rint(s["X SD43910 $SA_TEMP_COMP_SLOPE [1]"] * 1e6))   # the same values, rounded
@@ -446,10 +446,10 @@ def test_the_controller_applying_the_stream_as_its_manual_says_removes_the_bundl
     relative to the workpiece (configs/machines/vmc_xyz.yaml): the error along Z is EZZ and along
     Y is EYZ, at every position. What is left must be a small part of the drift, not double it."""
     m, true, log = machine_path("vmc_xyz"), f"{ROOT}/configs/thermal/vmc_xyz-true.yaml", tmp_path / "log.csv"
-    cli("simulate-thermal", m, "--model", true, "-o", log, "--drift-noise", "0", "--temperature-noise", "0",
+    cli("simulate-thermal", m, "--truth", true, "-o", log, "--drift-noise", "0", "--temperature-noise", "0",
         "--rate", "0.1")
     drift = _stream(log)
-    cli("thermal", "stream", m, true, log, "--format", fmt, "-o", tmp_path / "s.csv")
+    cli("thermal", "stream", m, true, log, "--controller", fmt, "-o", tmp_path / "s.csv")
     s = _stream(tmp_path / "s.csv")
     for axis, error, (lo, hi) in (("Z", "EZZ", (-400, 0)), ("Y", "EYZ", (-250, 250))):
         e = drift[f"{error} [um]"] * 1e-3   # mm: the axis' actual position minus its command, uncompensated
@@ -466,10 +466,10 @@ def test_stream_bad_options(lathe):
     out = lathe / "never.csv"
     p = lathe / "tmodel.yaml"
     p.write_text(MODEL)
-    one_error_line(run_in_process("thermal", "stream", lathe / "lathe.yaml", p, log, "--format", "isg", "-o", out),
+    one_error_line(run_in_process("thermal", "stream", lathe / "lathe.yaml", p, log, "--controller", "isg", "-o", out),
                    "thermal stream", "reads sensor T_spindle, not in the log")
     p.write_text(MODEL.replace("T_spindle", "T_a"))
     for bad in ("Q=1", "X", "X=abc"):
-        one_error_line(run_in_process("thermal", "stream", lathe / "lathe.yaml", p, log, "--format", "isg", "-o", out,
+        one_error_line(run_in_process("thermal", "stream", lathe / "lathe.yaml", p, log, "--controller", "isg", "-o", out,
                                       "--reference-position", bad), "thermal stream", "--reference-position")
     assert not out.exists()

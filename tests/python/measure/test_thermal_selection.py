@@ -39,9 +39,9 @@ def _truth(path, truth):
 def _fit_and_check(tmp_path, truth, seed, cycle, rate):
     m = machine_path("vmc_xyz")
     true = _truth(tmp_path / "true.yaml", truth)
-    cli("simulate-thermal", m, "--model", true, "-o", tmp_path / "warm.csv", "--cycle", cycle, "--rate", rate,
+    cli("simulate-thermal", m, "--truth", true, "-o", tmp_path / "warm.csv", "--cycle", cycle, "--rate", rate,
         "--drift-noise", "0.1", *(("--seed", str(seed)) if seed is not None else ()))
-    cli("simulate-thermal", m, "--model", true, "-o", tmp_path / "held.csv", "--rate", "0.2", *HELD_OUT)
+    cli("simulate-thermal", m, "--truth", true, "-o", tmp_path / "held.csv", "--rate", "0.2", *HELD_OUT)
     res = cli("thermal", "fit", m, tmp_path / "warm.csv", "-o", tmp_path / "fit.yaml", "--check",
               tmp_path / "held.csv", "--json")
     doc = json.loads(res.stdout)
@@ -78,7 +78,7 @@ def test_a_term_the_log_cannot_support_is_not_written(tmp_path):
     m = machine_path("vmc_xyz")
     true = _truth(tmp_path / "true.yaml", {"EZZ": VMC["EZZ"]})
     # the warm-up at 0.5 Hz pins T_column's time constant to a few %, T_spindle's to far better
-    cli("simulate-thermal", m, "--model", true, "-o", tmp_path / "warm.csv", "--rate", "0.5", "--seed", "21")
+    cli("simulate-thermal", m, "--truth", true, "-o", tmp_path / "warm.csv", "--rate", "0.5", "--seed", "21")
     res = cli("thermal", "fit", m, tmp_path / "warm.csv", "-o", tmp_path / "fit.yaml", "--json",
               "--max-uncertainty", "0.02")
     doc = json.loads(res.stdout)["errors"]["EZZ"]
@@ -109,7 +109,7 @@ def test_the_hall_and_the_sensor_lags_of_simulate_thermal(tmp_path):
     out = tmp_path / "still.csv"
     # a hall without swings stays at 20 degC; a spindle sensor, once the spindle starts at 1 s, rises as
     # 15 K (1 - exp(-(t - 1 s) / (2 * 1200 s)))
-    cli("simulate-thermal", m, "--model", true, "-o", out, "--cycle", "0:1,1:3000", "--hall", "0:86400",
+    cli("simulate-thermal", m, "--truth", true, "-o", out, "--cycle", "0:1,1:3000", "--hall", "0:86400",
         "--sensor-lags", "2", "--temperature-noise", "0", "--drift-noise", "0")
     rows = np.array([[float(c) for c in line.split(",")] for line in out.read_text().splitlines()
                      if line and not line.startswith(("#", "time"))])
@@ -119,7 +119,7 @@ def test_the_hall_and_the_sensor_lags_of_simulate_thermal(tmp_path):
     spindle = rows[:, head.index("T_spindle [degC]")]
     assert np.allclose(spindle, 20.0 + 15.0 * (1 - np.exp(-np.maximum(t - 1.0, 0.0) / 2400.0)), atol=2e-3)
     for bad, words in (("1:10", "period from 60"), ("x", "AMPLITUDE:PERIOD"), ("30:3600", "amplitude is from 0")):
-        res = run_in_process("simulate-thermal", m, "--model", true, "-o", tmp_path / "no.csv", "--hall", bad)
+        res = run_in_process("simulate-thermal", m, "--truth", true, "-o", tmp_path / "no.csv", "--hall", bad)
         assert res.returncode == 2 and words in res.stderr and "--hall" in res.stderr, res.stderr
     assert not (tmp_path / "no.csv").exists()
     assert math.isclose(T.sensors_with_lags(3)[1].ambient_lag, 3 * T.DEFAULT_SENSORS[1].ambient_lag)
@@ -129,7 +129,7 @@ def test_when_every_term_is_unsupported_nothing_is_written(tmp_path):
     m = machine_path("vmc_xyz")
     true = _truth(tmp_path / "true.yaml", {"EZZ": [("T_spindle", -1.0, 600.0)]})
     log = tmp_path / "short.csv"
-    cli("simulate-thermal", m, "--model", true, "-o", log, "--cycle", "0:600,1:6600", "--rate", "0.2")
+    cli("simulate-thermal", m, "--truth", true, "-o", log, "--cycle", "0:600,1:6600", "--rate", "0.2")
     out = tmp_path / "never.yaml"
     res = run_in_process("thermal", "fit", m, log, "-o", out, "--max-uncertainty", "0.0001")
     # the fit's progress lines come first on stderr; the error is the last line, and the only one

@@ -221,7 +221,7 @@ def test_the_bundled_laser_calibration(tmp_path):
 @pytest.mark.slow
 def test_simulate_calibration_regenerates_the_bundled_file(tmp_path):
     out = tmp_path / "laser.yaml"
-    run_cli("simulate-calibration", "configs/machines/five_axis_ac.yaml", "--base",
+    run_cli("simulate-calibration", "configs/machines/five_axis_ac.yaml", "--params",
             "configs/params/five_axis_ac-demo.yaml", "-o", str(out))
     got, want = yaml.safe_load(out.read_text()), yaml.safe_load(open(LASER).read())
     assert got.keys() == want.keys() and got["values"].keys() == want["values"].keys()

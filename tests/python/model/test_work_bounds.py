@@ -208,7 +208,7 @@ def test_huge_integer_in_a_thermal_model_refused_at_its_line(tmp_path):
                        f"    offset: {DIGITS}\n    terms:\n      - {{sensor: T_spindle"))
     path = write_file(tmp_path, "thermal.yaml", text)
     out = tmp_path / "log.csv"
-    proc, seconds = run("simulate-thermal", os.path.join(ROOT, "configs", "machines", "vmc_xyz.yaml"), "--model",
+    proc, seconds = run("simulate-thermal", os.path.join(ROOT, "configs", "machines", "vmc_xyz.yaml"), "--truth",
                         path, "-o", out)
     refused(proc, seconds, path, line_holding(text, "offset: 777"), "offset")   # the thermal reader names the key
     assert not out.exists()

@@ -395,7 +395,7 @@ def test_trunnion_under_tool_centre_point_control_is_compensated(trunnion_rt_mod
 
 @pytest.fixture(scope="module")
 def comp_export(machine):
-    """chaincomp export --format linuxcnc-comp of five_axis_ac with the demo params: the fit
+    """chaincomp export --controller linuxcnc-comp of five_axis_ac with the demo params: the fit
     (its tables predict the residual) and the files LinuxCNC loads."""
     from chaincomp.analysis import export as X
     from chaincomp.cli.common import values_for

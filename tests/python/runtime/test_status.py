@@ -4,6 +4,7 @@ end-to-end run against real daemons in a network namespace (tests/e2e/e2e_status
 
 import argparse
 import io
+import json
 import os
 import re
 import subprocess
@@ -143,7 +144,8 @@ def _live(monkeypatch, tty: bool, frames: int = 2, fmt: str = "text") -> str:
             raise KeyboardInterrupt
         calls.append(seconds)
     monkeypatch.setattr(status.Bus, "listen", listen)
-    args = argparse.Namespace(url="memq://", once=False, format=fmt, timeout=1.0, refresh=0.2, machines=[])
+    args = argparse.Namespace(url="memq://", once=False, format=fmt, timeout=1.0, refresh=0.2, machines=[],
+                              machine_option=[])
     with pytest.raises(KeyboardInterrupt):
         status.run(args)
     assert calls == [0.2] * frames
@@ -171,10 +173,12 @@ def test_live_view_redraws_in_place_and_gives_the_cursor_back(monkeypatch):
     assert out == "\x1b[?25l\x1b[2J" + frame * 2 + "\x1b[?25h\n"
 
 
-def test_once_without_daemons_exits_1():
+def test_once_without_daemons_is_no_answer():
     proc = run_cli("status", "--once", "--url", "memq://", "--timeout", "0.1", "--format", "json", check=False)
-    assert (proc.returncode, proc.stdout) == (1, "")
-    assert proc.stderr == "chaincomp status: no chaincompd heard on memq:// within 0.1 s\n"
+    # exit 4, no answer (docs/reference/cli.md), and in JSON mode the error object on stdout
+    line = "chaincomp status: error: no chaincompd heard on memq:// within 0.1 s"
+    assert proc.returncode == 4 and proc.stderr == line + "\n"
+    assert json.loads(proc.stdout) == {"error": {"verb": "status", "kind": "no answer", "exit": 4, "message": line}}
 
 
 @pytest.mark.parametrize("args, line", [
@@ -182,7 +186,7 @@ def test_once_without_daemons_exits_1():
     (["--timeout", "0"], "argument --timeout: must be"),
     (["--refresh", "nan"], "argument --refresh:"),
     (["--format", "xml"], "argument --format: invalid choice"),
-    (["--machine", "/nonexistent/m.yaml"], "m.yaml"),
+    (["/nonexistent/m.yaml"], "m.yaml"),
 ])
 def test_refusals_are_one_line(args, line):
     # memq:// (in-process) unless the case gives its own: never udpm outside a namespace
