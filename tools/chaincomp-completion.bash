@@ -41,7 +41,7 @@ _chaincomp() {
           case "$prev" in
             --units) words='people internal';;
             --format) words='text json';;
-            *) words='-h --help --assume-zero --sigma --minimal --prefer --vary --smooth -o --output --strict --units --format --json'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --assume-zero --sigma --minimal --prefer --vary --smooth -o --output --strict --loss --report --units --format --json'; [[ $cur == -* ]] || return 0;;
           esac;;
         simulate-measurements)
           case "$prev" in
@@ -54,16 +54,15 @@ _chaincomp() {
         replay)
           case "$prev" in
             --format) words='text json';;
-            *) words='-h --help --machine --model --params --config --thermal -o --output --csv --channel --format --json'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --model --params --config --thermal -o --output --csv --channel --format --json'; [[ $cur == -* ]] || return 0;;
           esac;;
         plot)
           case "$prev" in
             --view) words='map surface volume';;
-            --style) words='heatmap surface';;
             --component) words='dx dy dz dkx dky dkz norm';;
-            --order|--model) words='1 2 exact 2-1 exact-1 exact-2';;
+            --order) words='1 2 exact 2-1 exact-1 exact-2';;
             --units) words='people internal';;
-            *) words='-h --help --params --set --view --style --component --over --range --range2 --grid --order --model --units --replay --table --error -o --output --html'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --params --set --view --component --over --range --range2 --grid --order --units --replay --table --error -o --output --html'; [[ $cur == -* ]] || return 0;;
           esac;;
         check)
           case "$prev" in
@@ -87,7 +86,7 @@ _chaincomp() {
           case "$prev" in
             --interpolation) words='linear monotone_cubic';;
             --outside) words='hold reject';;
-            *) words='-h --help -o --output --knots --seed --base --interpolation --outside'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help -o --output --knots --seed --params --interpolation --outside'; [[ $cur == -* ]] || return 0;;
           esac;;
         build)
           case "$prev" in
@@ -95,7 +94,8 @@ _chaincomp() {
           esac;;
         lint)
           case "$prev" in
-            *) words='-h --help --strict'; [[ $cur == -* ]] || return 0;;
+            --format) words='text json';;
+            *) words='-h --help --strict --format --json'; [[ $cur == -* ]] || return 0;;
           esac;;
         iso230-2)
           case "$prev" in
@@ -107,16 +107,15 @@ _chaincomp() {
             --direction) words='mean up down';;
             --interpolation) words='linear monotone_cubic';;
             --outside) words='hold reject';;
-            *) words='-h --help --machine --columns --column-units --error --axis --direction -o --output --merge --interpolation --outside'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --columns --column-units --error --axis --direction -o --output --merge --interpolation --outside'; [[ $cur == -* ]] || return 0;;
           esac;;
         status)
           case "$prev" in
             --format) words='text json';;
-            *) words='-h --help --url --once --format --timeout --refresh --machine'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --url --once --format --json --timeout --refresh'; [[ $cur == -* ]] || return 0;;
           esac;;
         import-urdf)
           case "$prev" in
-            --errors) words='none joint-offsets origins all';;
             --format) words='text json';;
             *) words='-h --help --base --tip --errors --tool-point --tool-direction --tool-reference --name -o --output --format --json'; [[ $cur == -* ]] || return 0;;
           esac;;
@@ -133,22 +132,21 @@ _chaincomp() {
           esac;;
         export)
           case "$prev" in
-            --format) words='linuxcnc-comp linuxcnc-matrixkins klipper marlin rrf isg-volcomp';;
+            --controller) words='linuxcnc-comp linuxcnc-matrixkins klipper marlin rrf isg-volcomp';;
+            --format) words='text json';;
             --comp-file-type) words='0 1';;
-            --report) words='text json';;
-            *) words='-h --help --params --set --format -o --output --grid --entries --workpiece-axes --iso-axes --comp-file-type --joints --mean-reversal --reversal --report --json --no-breakdown'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --params --set --controller --format --json -o --output --grid --entries --workpiece-axes --iso-axes --comp-file-type --joints --mean-reversal --no-breakdown'; [[ $cur == -* ]] || return 0;;
           esac;;
         thermal)
           case "$prev" in
             thermal) words='fit check stream';;
             --format) words='text json';;
-            --format) words='siemens isg';;
-            --report) words='text json';;
-            *) words='-h --help -o --output --errors --sensors --max-sensors --min-improvement --max-uncertainty --no-lag --reference --drift --check --format --json --reference-position --report'; [[ $cur == -* ]] || return 0;;
+            --controller) words='siemens isg';;
+            *) words='-h --help -o --output --errors --sensors --max-sensors --min-improvement --max-uncertainty --no-lag --reference --drift --check --format --json --controller --reference-position'; [[ $cur == -* ]] || return 0;;
           esac;;
         simulate-thermal)
           case "$prev" in
-            *) words='-h --help --model -o --output --cycle --rate --temperature-noise --drift-noise --hall --sensor-lags --seed'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --truth -o --output --cycle --rate --temperature-noise --drift-noise --hall --sensor-lags --seed'; [[ $cur == -* ]] || return 0;;
           esac;;
         *) return 0;;
         esac
