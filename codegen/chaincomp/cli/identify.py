@@ -194,7 +194,7 @@ def add_parser(sub) -> None:
                    help="squares (default) or Huber's robust loss, quadratic within K standard uncertainties and "
                         f"linear beyond (K default {HUBER_K}; iteratively reweighted): outliers are down-weighted "
                         "and listed with their standardized residuals")
-    p.add_argument("--report", metavar="FILE.html",
+    p.add_argument("--report", metavar="OUT.html",
                    help="also write a calibration report: one self-contained HTML file (set-up, the set-ups "
                         "measured, residuals before and after, dispersion, values with uncertainties and "
                         "correlations, what could not be seen, figures); never one of the inputs")

@@ -59,6 +59,7 @@ CASES = [
     Case("testvectors", "testvectors", "--output", lambda i: ["testvectors", VMC, "--count", "2"]),
     Case("protocol", "protocol", "--output", lambda i: ["protocol", VMC, "--poses", "12"], "poses.csv"),
     Case("identify", "identify", "--output", lambda i: ["identify", VMC, i["meas"]], "p.yaml"),
+    Case("identify-report", "identify", "--report", lambda i: ["identify", VMC, i["meas"]], "r.html", kind="html"),
     Case("simulate-measurements", "simulate-measurements", "--output",
          lambda i: ["simulate-measurements", VMC, "--setups", "random:5"], "meas.csv"),
     Case("simulate-log", "simulate-log", "--output", lambda i: ["simulate-log", VMC, "--seconds", "0.01"],
@@ -198,7 +199,7 @@ def _whole(data: bytes, kind: str) -> bool:
     if kind == "png":
         return data.startswith(PNG_MAGIC) and data.endswith(b"IEND\xaeB`\x82")   # the IEND chunk closes a PNG
     if kind == "html":
-        return data.startswith(b"<html>") and data.rstrip().endswith(b"</html>")
+        return data.startswith((b"<html>", b"<!DOCTYPE html>")) and data.rstrip().endswith(b"</html>")
     if kind == "lcm":
         return data.startswith(LCM_MAGIC)
     if kind == "bytes":   # the file standing for the library, copied whole
