@@ -12,6 +12,7 @@
 #include <csignal>
 #include <cstdio>
 #include <cstring>
+#include <exception>
 #include <memory>
 #include <string>
 
@@ -72,7 +73,7 @@ int fail(const std::string& msg) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int run_daemon(int argc, char** argv) {
   std::string machine_path, params_path, config_path, model_path, thermal_path;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -175,4 +176,17 @@ int main(int argc, char** argv) {
   node.reset();
   lcm_destroy(lcm);
   return 0;
+}
+
+// Exit codes, as chaincomp's (docs/reference/cli.md): 0 done, 2 bad input (one line, from fail),
+// 3 internal error (one line here, not an abort's core dump).
+int main(int argc, char** argv) {
+  try {
+    return run_daemon(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "chaincompd: internal error: %s (please report this with the command line)\n", e.what());
+  } catch (...) {
+    std::fprintf(stderr, "chaincompd: internal error (please report this with the command line)\n");
+  }
+  return 3;
 }

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <exception>
 #include <string>
 #include <vector>
 
@@ -89,7 +90,7 @@ bool same_file(const std::string& a, const std::string& b) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int run_replay(int argc, char** argv) {
   std::string machine_path, params_path, config_path, in_path, out_path, csv_path, model_path,
       channel = "CHAINCOMP_COMMAND", format = "text", thermal_path;
   bool quiet = false;
@@ -386,4 +387,18 @@ int main(int argc, char** argv) {
                  entry->info->axes[i].unit);
   }
   return 0;
+}
+
+// Exit codes, as chaincomp's (docs/reference/cli.md): 0 done, 2 bad input (one line, from fail),
+// 3 internal error (one line here, not an abort's core dump).
+int main(int argc, char** argv) {
+  try {
+    return run_replay(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "chaincomp replay: internal error: %s (please report this with the command line)\n",
+                 e.what());
+  } catch (...) {
+    std::fprintf(stderr, "chaincomp replay: internal error (please report this with the command line)\n");
+  }
+  return 3;
 }
