@@ -30,6 +30,7 @@ from ..escape import html_text as _h
 from ..output import write_file
 
 MAX_TABLE_ROWS = 200   # poses listed in the residual table; beyond, the largest after the fit
+OPEN_ROWS = 25         # a longer table is folded (a click opens it): the figures come first to the eye
 
 
 @dataclass
@@ -98,8 +99,8 @@ def to_html(c: Calibration) -> str:
     out += ["<h2>Summary</h2>", _pairs(c.summary + _headline(c))]
     out += ["<h2>Set-up</h2>", _pairs(c.setup)]
     if c.plan:
-        out += [f"<h2>Plan: {len(c.plan)} poses</h2>", '<div class="wide">',
-                _table(c.plan_columns, c.plan, numeric=range(1, len(c.plan_columns))), "</div>"]
+        out += [f"<h2>Plan: {len(c.plan)} poses</h2>",
+                _folded(_table(c.plan_columns, c.plan, numeric=range(1, len(c.plan_columns))), len(c.plan))]
     out += _residual_section(c)
     if c.dispersion:
         out += ["<h2>Dispersion per axis</h2>", f"<p>{_h(c.dispersion_meaning)}</p>",
@@ -136,9 +137,8 @@ def _residual_section(c: Calibration) -> list[str]:
     return ["<h2>Residual per measurement</h2>",
             _figure(_residual_figure(c), f"Size of each pose's residual (measured minus model) before the fit "
                                          f"and after it, {c.residual_unit}."),
-            note, '<div class="wide">',
-            _table(["pose", f"before [{c.residual_unit}]", f"after [{c.residual_unit}]"],
-                   [[r.label, _num(r.before), _num(r.after)] for r in rows], numeric=(1, 2)), "</div>"]
+            note, _folded(_table(["pose", f"before [{c.residual_unit}]", f"after [{c.residual_unit}]"],
+                                 [[r.label, _num(r.before), _num(r.after)] for r in rows], numeric=(1, 2)), len(rows))]
 
 
 def _values_section(c: Calibration) -> list[str]:
@@ -165,6 +165,12 @@ def _values_section(c: Calibration) -> list[str]:
 
 def _num(x: float) -> str:
     return "–" if not math.isfinite(x) else f"{x:.4g}"
+
+
+def _folded(table: str, rows: int) -> str:
+    """A table in a box that scrolls sideways if it must; folded when it is long."""
+    inner = f'<div class="wide">{table}</div>'
+    return inner if rows <= OPEN_ROWS else f"<details><summary>the {rows} rows</summary>{inner}</details>"
 
 
 def _pairs(rows) -> str:
@@ -214,7 +220,7 @@ def _residual_figure(c: Calibration):
     ax.set_xlabel("pose (in the order measured)")
     ax.set_ylabel(f"residual [{c.residual_unit}]")
     ax.grid(alpha=0.3)
-    ax.legend(loc="upper right")
+    ax.legend(loc="lower left", bbox_to_anchor=(0.0, 1.0), ncol=2, frameon=False)   # above: no point hidden
     return fig
 
 
