@@ -9,7 +9,7 @@ _chaincomp() {
         case "${COMP_WORDS[i]}" in -*) ;; *) verb="${COMP_WORDS[i]}"; break;; esac
     done
     if [[ -z $verb ]]; then
-        words='derive eval generate testvectors protocol identify simulate-measurements simulate-log replay plot check report budget simulate-calibration build lint iso230-2 laser-to-params status import-urdf export-urdf ballbar export thermal simulate-thermal -h --help --version'
+        words='derive eval generate testvectors protocol identify simulate-measurements simulate-log replay plot check report budget simulate-calibration build lint iso230-2 laser-to-params status import-urdf export-urdf import-ur-calibration ballbar export thermal simulate-thermal -h --help --version'
     else
         case "$verb" in
         derive)
@@ -121,8 +121,14 @@ _chaincomp() {
           esac;;
         export-urdf)
           case "$prev" in
+            --as) words='urdf ur-calibration';;
             --format) words='text json';;
-            *) words='-h --help --base --tip --params -o --output --format --json'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --base --tip --params --as -o --output --format --json'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        import-ur-calibration)
+          case "$prev" in
+            --format) words='text json';;
+            *) words='-h --help --base --tip -o --output --format --json'; [[ $cur == -* ]] || return 0;;
           esac;;
         ballbar)
           case "$prev" in

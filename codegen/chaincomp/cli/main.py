@@ -22,7 +22,8 @@ VERB_MODULES = {
     "simulate-log": "simulate_log", "replay": "replay", "plot": "plot", "check": "check",
     "report": "report", "budget": "budget", "simulate-calibration": "simulate_calibration",
     "build": "build", "lint": "lint", "iso230-2": "iso230_2", "laser-to-params": "laser_to_params",
-    "status": "status", "import-urdf": "import_urdf", "export-urdf": "export_urdf", "ballbar": "ballbar", "export": "export",
+    "status": "status", "import-urdf": "import_urdf", "export-urdf": "export_urdf",
+    "import-ur-calibration": "import_ur_calibration", "ballbar": "ballbar", "export": "export",
     "thermal": "thermal", "simulate-thermal": "simulate_thermal",
 }
 

@@ -73,16 +73,19 @@ def calibrated_urdf(urdf_path: str, base: str, tip: str, values: dict[str, float
     """The URDF's text with every moving joint of the path base -> tip given its calibrated
     <origin> (``values``: internal units by symbol name, e.g. params.values)."""
     _, joints, text = kinematic_path(urdf_path, base, tip)   # checked and hardened as import-urdf reads it
+    return with_origins(text, {j.name: calibrated_origin(j, values) for j in joints if j.type in MOVING})
+
+
+def with_origins(text: str, origins: dict[str, np.ndarray]) -> bytes:
+    """The URDF ``text`` (as kinematic_path returns it, checked) with these joints' <origin> set
+    to these frames (4x4, metres), the rest kept as written."""
     from lxml import etree
     # the same settings as urdf._parse_xml (no DTD, entities, network), comments kept
     parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, huge_tree=False)
     root = etree.fromstring(text.encode("utf-8"), parser=parser)
     by_name = {el.get("name"): el for el in root.findall("joint")}
-    for j in joints:
-        if j.type not in MOVING:
-            continue
-        m = calibrated_origin(j, values)
-        el = by_name[j.name]
+    for name, m in origins.items():
+        el = by_name[name]
         origin = el.find("origin")
         if origin is None:
             origin = etree.SubElement(el, "origin")

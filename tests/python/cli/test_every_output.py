@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import pytest
 
+import ur_description
 from helpers import PARAMS, ROOT, RUNS, URDF, VMC, cli, machine_path
 
 FIVE = machine_path("five_axis_ac")
@@ -85,6 +86,9 @@ CASES = [
     Case("export-urdf", "export-urdf", "--output",
          lambda i: ["export-urdf", i["urdf_machine"], i["urdf"], "--base", "base", "--tip", "tip",
                     "--params", i["urdf_params"]], "c.urdf"),
+    Case("import-ur-calibration", "import-ur-calibration", "--output",
+         lambda i: ["import-ur-calibration", i["ur_machine"], i["ur_urdf"], i["ur_calibration"], "--base", "base_link",
+                    "--tip", "tool0"], "ur-params.yaml"),
     Case("ballbar-o", "ballbar", "--output",
          lambda i: ["ballbar", VMC, "--set", "EXX=1", "--plane", "XY", "--radius", "10"], "trace.csv"),
     Case("ballbar-fit-o", "ballbar", "--output", lambda i: ["ballbar", VMC, "--fit", i["trace"]], "fit.yaml"),
@@ -148,7 +152,8 @@ def inputs(base):
     os.mkdir(d)
     i = {"meas": f"{d}/meas.csv", "log": f"{d}/a.lcmlog", "trace": f"{d}/trace.csv", "thermal_log": f"{d}/th.csv",
          "urdf": f"{d}/r.urdf", "library": f"{d}/vmc_xyz.so", "urdf_machine": f"{d}/u.yaml",
-         "urdf_params": f"{d}/u-params.yaml"}
+         "urdf_params": f"{d}/u-params.yaml", "ur_urdf": f"{d}/ur5e.urdf", "ur_machine": f"{d}/ur5e.yaml",
+         "ur_calibration": f"{d}/ur5e-calibration.yaml"}
     cli("simulate-measurements", VMC, "--setups", "random:20", "-o", i["meas"])
     cli("simulate-log", VMC, "--seconds", "0.01", "-o", i["log"])
     cli("ballbar", VMC, "--set", "EXX=1", "--plane", "XY", "--radius", "10", "-o", i["trace"])
@@ -160,6 +165,12 @@ def inputs(base):
     m = load_machine(i["urdf_machine"])
     with open(i["urdf_params"], "w") as f:
         f.write(f"machine: {m.name}\nvalues:\n" + "".join(f"  {e.name}: 3 {e.unit.name}\n" for e in m.errors))
+    with open(i["ur_urdf"], "w") as f:
+        f.write(ur_description.urdf_text(ur_description.UR5E))
+    with open(i["ur_calibration"], "w") as f:
+        f.write(ur_description.calibration_text(ur_description.UR5E))
+    cli("import-urdf", i["ur_urdf"], "--base", "base_link", "--tip", "tool0", "--errors", "origins", "-o",
+        i["ur_machine"])
     with open(i["library"], "wb") as f:
         f.write(b"\x7fELF stands for the library chaincomp build compiles\n")
     for p in i.values():
