@@ -389,7 +389,7 @@ int run_replay(int argc, char** argv) {
   return 0;
 }
 
-// Exit codes, as chaincomp's (docs/reference/cli.md): 0 done, 2 bad input (one line, from fail),
+// Exit codes, as chaincomp's (docs/reference/grammar.md): 0 done, 2 bad input (one line, from fail),
 // 3 internal error (one line here, not an abort's core dump).
 int main(int argc, char** argv) {
   try {

@@ -175,7 +175,7 @@ def test_live_view_redraws_in_place_and_gives_the_cursor_back(monkeypatch):
 
 def test_once_without_daemons_is_no_answer():
     proc = run_cli("status", "--once", "--url", "memq://", "--timeout", "0.1", "--format", "json", check=False)
-    # exit 4, no answer (docs/reference/cli.md), and in JSON mode the error object on stdout
+    # exit 4, no answer (docs/reference/grammar.md), and in JSON mode the error object on stdout
     line = "chaincomp status: error: no chaincompd heard on memq:// within 0.1 s"
     assert proc.returncode == 4 and proc.stderr == line + "\n"
     assert json.loads(proc.stdout) == {"error": {"verb": "status", "kind": "no answer", "exit": 4, "message": line}}
