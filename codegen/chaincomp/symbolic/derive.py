@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import sympy as sp
 
+from ..errors import ChaincompError
 from ..model.expressions import sin_cos
 from ..model.machine import ROT_PLANE, Machine, Rotation
 from . import series as S
@@ -30,6 +31,8 @@ COMPONENTS = ("x", "y", "z")
 # (its gain matrix 754 operations instead of 1893, error_order2 648 instead of 5493; generated
 # in 0.5 s instead of 17 s).
 EXPANDED_TERMS_LIMIT = 2000
+
+EXPANSION_LIMIT = 800_000
 
 
 class Progress:
@@ -120,6 +123,67 @@ def derive(machine: Machine, order: int = 1, htm: bool = False, progress: bool =
     if order < 0:
         raise ValueError("order must be >= 0")
     k = order
+    small, atoms, R, steps, vectors, n_tool = _prepare(machine, k, htm)
+    one = R.one
+    dir0, frame = machine.tool_direction, machine.tool_frame
+
+    over = next(((el, n) for el, n in _predicted_terms(machine, steps, vectors, k) if n > EXPANSION_LIMIT), None)
+    if over is not None:
+        if max_terms is not None:   # the caller has a way for long chains
+            return None
+        element, size = over
+        raise ChaincompError(
+            f"the tool pose to order {k} could expand to up to {float(size):.3g} terms by this element, applying "
+            f"the chain from the tool (at most {EXPANSION_LIMIT:g}; every rotation with errors multiplies them): "
+            f"use fewer rotations with errors, fewer symbols in their angles, or a lower --order",
+            machine.file, element.line or None, "loop" if machine.workpiece_chain else "chain")
+
+    # Apply the chain from the right.
+    prog = Progress(f"derive {machine.name} (order {k})", progress)
+    n = len(steps)
+    for idx, step in enumerate(reversed(steps)):
+        if step[0] == "rot":
+            _, axis, cos0, sin0, delta = step
+            s_d, c_d = S.sin_cos(delta, k, one)
+            c0 = {(): cos0} if cos0 else {}
+            s0 = {(): sin0} if sin0 else {}
+            cos_t = S.add(S.mul(c0, c_d, k), S.mul(s0, s_d, k), -1)
+            sin_t = S.add(S.mul(s0, c_d, k), S.mul(c0, s_d, k))
+            i, j = ROT_PLANE[axis]
+            for vec, _w in vectors:
+                vi, vj = vec[i], vec[j]
+                vec[i] = S.add(S.mul(cos_t, vi, k), S.mul(sin_t, vj, k), -1)
+                vec[j] = S.add(S.mul(sin_t, vi, k), S.mul(cos_t, vj, k))
+        else:
+            t = step[1]
+            for vec, w in vectors:
+                if w:
+                    for c in range(3):
+                        vec[c] = S.add(vec[c], t[c])
+        if max_terms is not None and _terms(vectors[:n_tool]) > max_terms:
+            return None
+        prog.step(f"element {n - idx}/{n}")
+
+    point = vectors[0][0]
+    direction = vectors[1][0] if dir0 else None
+    columns = [v for v, _ in vectors[-4:]] if htm else None
+    reference = orientation = None
+    if frame:
+        prog.step("orientation error")
+        x, y = vectors[n_tool][0], vectors[n_tool + 1][0]
+        reference = x
+        orientation = rotation_vector_series(
+            [x, y, direction], k, S.mul,
+            lambda a, ca, b, cb: S.add(_scale(a, ca), _scale(b, cb)), _scale,
+            S.pythagoras(R, atoms.restore()))
+    prog.done()
+    return Derivation(machine, k, small, point, direction, columns, atoms.restore(), reference, orientation)
+
+
+def _prepare(machine: Machine, k: int, htm: bool):
+    """The chain's elements and the vectors it turns, as series in the coefficient ring:
+    (small symbols, atoms, ring, steps, vectors, how many of the vectors are the point and
+    direction)."""
     small = [s.sym for s in machine.errors]
     large = [s.sym for s in machine.symbols if not s.small]
     atoms = S.Atoms(large)
@@ -144,12 +208,15 @@ def derive(machine: Machine, order: int = 1, htm: bool = False, progress: bool =
     frame = machine.tool_frame
     frame0 = [[taylor(v) for v in axis] for axis in frame[:2]] if frame else []   # its x and y axes
 
-    # Pass 2: into the coefficient ring; apply the chain from the right.
+    # Pass 2: into the coefficient ring.
     R = atoms.make_ring()
     one = R.one
 
     def to_ring(series):
         return {m: R.from_expr(c) if c != 0 else R.zero for m, c in series.items() if c != 0}
+
+    steps = [("rot", st[1], R.from_expr(st[2]), R.from_expr(st[3]), to_ring(st[4])) if st[0] == "rot"
+             else ("trans", [to_ring(v) for v in st[1]]) for st in steps]
 
     vectors: list[tuple[list[dict], int]] = [([to_ring(v) for v in point0], 1)]
     if dir0:
@@ -161,47 +228,67 @@ def derive(machine: Machine, order: int = 1, htm: bool = False, progress: bool =
         for i in range(3):
             vectors.append(([{(): one} if j == i else {} for j in range(3)], 0))
         vectors.append(([{}, {}, {}], 1))
+    return small, atoms, R, steps, vectors, n_tool
 
-    prog = Progress(f"derive {machine.name} (order {k})", progress)
-    n = len(steps)
-    for idx, step in enumerate(reversed(steps)):
+
+def expansion_peak(machine: Machine, order: int) -> int:
+    """The most terms derive(machine, order) could hold after any element (what EXPANSION_LIMIT
+    bounds), without expanding: for calibrating the bound and for tests."""
+    _, _, _, steps, vectors, _ = _prepare(machine, order, False)
+    return max((n for _, n in _predicted_terms(machine, steps, vectors, order)), default=0)
+
+
+def _sizes(series: dict, k: int) -> list[int]:
+    """The terms of a ring series by degree 0..k."""
+    out = [0] * (k + 1)
+    for m, c in series.items():
+        out[len(m)] += len(c)
+    return out
+
+
+def _mul_sizes(a: list[int], b: list[int]) -> list[int]:
+    """At most the terms of a product by degree: each pair of terms gives one, none merge."""
+    return [sum(a[i] * b[d - i] for i in range(d + 1)) for d in range(len(a))]
+
+
+def _add_sizes(a: list[int], b: list[int]) -> list[int]:
+    return [x + y for x, y in zip(a, b)]
+
+
+def _predicted_terms(machine: Machine, steps: list, vectors: list, k: int):
+    """For each element as derive() applies it (from the tool end): (the element, at most how many
+    terms every series then holds). Counts, not polynomials: the terms of each series by degree,
+    each product counted as if no two of its terms merged (an upper bound, which rotations about
+    distinct angles, the growth that costs, reach). Microseconds per element, before expanding."""
+    sizes = [[_sizes(s, k) for s in vec] for vec, _ in vectors]
+    one = [1] + [0] * k
+    elements = machine.chain
+    for el, step in zip(reversed(elements), reversed(steps)):
         if step[0] == "rot":
             _, axis, cos0, sin0, delta = step
-            s_d, c_d = S.sin_cos(to_ring(delta), k, one)
-            c0, s0 = {(): R.from_expr(cos0)}, {(): R.from_expr(sin0)}
-            c0 = {m: v for m, v in c0.items() if v}
-            s0 = {m: v for m, v in s0.items() if v}
-            cos_t = S.add(S.mul(c0, c_d, k), S.mul(s0, s_d, k), -1)
-            sin_t = S.add(S.mul(s0, c_d, k), S.mul(c0, s_d, k))
+            d = _sizes(delta, k)
+            s_d, c_d, power = [0] * (k + 1), one, one
+            for j in range(1, k + 1):
+                power = _mul_sizes(power, d)
+                if j % 2:
+                    s_d = _add_sizes(s_d, power)
+                else:
+                    c_d = _add_sizes(c_d, power)
+            c0, s0 = [len(cos0)] + [0] * k, [len(sin0)] + [0] * k
+            cos_t = _add_sizes(_mul_sizes(c0, c_d), _mul_sizes(s0, s_d))
+            sin_t = _add_sizes(_mul_sizes(s0, c_d), _mul_sizes(c0, s_d))
             i, j = ROT_PLANE[axis]
-            for vec, _w in vectors:
+            for vec in sizes:
                 vi, vj = vec[i], vec[j]
-                vec[i] = S.add(S.mul(cos_t, vi, k), S.mul(sin_t, vj, k), -1)
-                vec[j] = S.add(S.mul(sin_t, vi, k), S.mul(cos_t, vj, k))
+                vec[i] = _add_sizes(_mul_sizes(cos_t, vi), _mul_sizes(sin_t, vj))
+                vec[j] = _add_sizes(_mul_sizes(sin_t, vi), _mul_sizes(cos_t, vj))
         else:
-            t = [to_ring(v) for v in step[1]]
-            for vec, w in vectors:
+            t = [_sizes(v, k) for v in step[1]]
+            for vec, (_, w) in zip(sizes, vectors):
                 if w:
                     for c in range(3):
-                        vec[c] = S.add(vec[c], t[c])
-        if max_terms is not None and _terms(vectors[:n_tool]) > max_terms:
-            return None
-        prog.step(f"element {n - idx}/{n}")
-
-    point = vectors[0][0]
-    direction = vectors[1][0] if dir0 else None
-    columns = [v for v, _ in vectors[-4:]] if htm else None
-    reference = orientation = None
-    if frame:
-        prog.step("orientation error")
-        x, y = vectors[n_tool][0], vectors[n_tool + 1][0]
-        reference = x
-        orientation = rotation_vector_series(
-            [x, y, direction], k, S.mul,
-            lambda a, ca, b, cb: S.add(_scale(a, ca), _scale(b, cb)), _scale,
-            S.pythagoras(R, atoms.restore()))
-    prog.done()
-    return Derivation(machine, k, small, point, direction, columns, atoms.restore(), reference, orientation)
+                        vec[c] = _add_sizes(vec[c], t[c])
+        yield el, sum(sum(s) for vec in sizes for s in vec)
 
 
 def _scale(a: dict, c) -> dict:
