@@ -58,8 +58,9 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
                     "argument of every verb that takes one; 'chaincomp VERB --help' lists its options.",
         epilog="Exit codes: 0 done, 1 a result outside a limit ('check' found differences, identify --strict), 2 bad input (one line naming the file, "
                "line and field, or the option), 3 internal error (one line; set CHAINCOMP_DEBUG=1 for the "
-               "traceback), 4 no answer (a fit that does not converge), 130 interrupted. With --format json "
-               "an error is also one JSON object on stdout: {\"error\": {verb, kind, exit, message}}.")
+               "traceback), 4 no answer (a fit that does not converge, no daemon heard), 130 interrupted. With "
+               "--format json an error is also one JSON object on stdout: {\"error\": {verb, kind, exit, message}}. "
+               "The grammar of every option: docs/reference/grammar.md.")
     parser.add_argument("--version", action="version", version=f"chaincomp {__version__}",
                         help="print the version and exit")
     sub = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
