@@ -1168,6 +1168,9 @@ def params_yaml(fit: Fit, source: str) -> str:
     out = [f"# Error values identified by chaincomp identify from {one_line(source)}:",
            f"# {fit.observations} coordinates at {fit.setups} set-ups, {_residuals(fit, 'internal')}, "
            f"condition number {fit.condition:.4g}."]
+    if fit.huber is not None:
+        out.append(f"# Huber loss (k = {fit.huber:g}): {len(fit.outliers)} of {fit.observations} coordinates "
+                   "down-weighted (identify's report lists them).")
     if fit.minimal:
         out.append(f"# Minimal identifiable set: {len(fit.estimates)} of {len(fit.params)} parameters fitted; "
                    f"every other one is written as zero (held at zero in the fit).")

@@ -78,11 +78,12 @@ def test_huber_holds_the_truth_where_squares_does_not(tmp_path, capsys, data):
         row, (c, mm) = o["line"] - 3, SPOILED[o["line"] - 3]
         assert o["standardized_residual"] == pytest.approx(mm / NOISE, rel=0.05)
         assert 0 < o["weight"] < 1.345 / abs(mm / NOISE) * 1.1
-    # and the text report says so
+    # and the text report says so, and the params file
     rc = main(["identify", UR5, str(tmp_path / "m.csv"), "--assume-zero",
                ",".join(n for n in names(load_machine(UR5)) if n not in FITTED), "--sigma", f"{NOISE}mm",
-               "--loss", "huber:2"])
+               "--loss", "huber:2", "-o", str(tmp_path / "p.yaml")])
     text = capsys.readouterr().out
+    assert "# Huber loss (k = 2): " in (tmp_path / "p.yaml").read_text()
     worst = max(SPOILED, key=lambda r: abs(SPOILED[r][1]))
     assert rc == 0 and "Huber loss (k = 2):" in text and f"line {worst + 3} y" in text
 
