@@ -109,3 +109,26 @@ def test_a_bad_loss_is_refused(tmp_path, capsys, data, bad):
     rc = main(["identify", UR5, str(tmp_path / "m.csv"), "--loss", bad])
     err = capsys.readouterr().err
     assert rc == 2 and f"--loss {bad}" in err and err.count("\n") == 1, err
+
+
+def test_without_sigma_the_scale_is_robust(tmp_path, capsys, data):
+    """Without --sigma the residuals are standardized by 1.4826 x their median absolute value, which
+    the outliers do not inflate: the same readings are named, the estimates as good."""
+    truth, q_deg, clean, spoiled = data
+    m = load_machine(UR5)
+    held = ",".join(n for n in names(m) if n not in FITTED)
+    write_csv(tmp_path / "c.csv", q_deg, clean, [0, 1, 2])
+    write_csv(tmp_path / "m.csv", q_deg, spoiled, [0, 1, 2])
+    docs = []
+    for csv, loss in (("c.csv", "squares"), ("m.csv", "huber")):
+        rc = main(["identify", UR5, str(tmp_path / csv), "--assume-zero", held, "--loss", loss, "--format", "json"])
+        out, err = capsys.readouterr()
+        assert rc == 0, err
+        docs.append(json.loads(out))
+    best, huber = docs
+    clean_fit = {n: e["value"] for n, e in best["estimates"].items()}
+    assert max(off(huber, clean_fit).values()) <= 2, off(huber, clean_fit)
+    worst = huber["outliers"][:len(SPOILED)]
+    assert {(o["line"], o["column"]) for o in worst} == {(r + 3, "xyz"[c]) for r, (c, _) in SPOILED.items()}
+    for o in worst:   # in units of the robust scale, about the noise's 20 um
+        assert o["standardized_residual"] == pytest.approx(SPOILED[o["line"] - 3][1] / NOISE, rel=0.2)
