@@ -159,6 +159,10 @@ int run_daemon(int argc, char** argv) {
       if (next_status <= now) next_status = now + period;  // after a stall: no burst to catch up
     }
   }
+  // What LCM holds when asked to stop is handled before the final status: no command received
+  // goes uncounted (bounded: a flood does not hold the exit up for ever).
+  for (int i = 0; i < 4 * chaincomp::LcmNode::kQueueCapacity && lcm_handle_timeout(lcm, 0) > 0; ++i) {
+  }
   node->publish_status(true);
   long long refused = 0;
   for (const auto n : updater.refused()) refused += n;

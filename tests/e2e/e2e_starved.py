@@ -1,0 +1,99 @@
+"""Every command accounted for under starvation (issue 39 item 3): chaincompd pinned to one
+core beside a busy loop (and, given NICE, its main thread behind the loop while LCM's receive
+thread is not: the user-space queue overflows), N commands at RATE Hz with a burst of
+100 control messages in the middle ending in enable=false. The status must account for each
+command the test sent: answered or rejected by reason, or missing by seq and then lost in
+LCM's user-space queue (seen full) or in the kernel (its drop counter), never silently.
+
+    netns.sh python e2e_starved.py N RATE [NICE]
+"""
+
+import os
+import subprocess
+import sys
+import time
+
+import lcm_harness as h
+from common import HERE, MACHINE, PARAMS, toolpath
+
+CORE = 0
+BURST = 100
+
+
+def main(n: int, rate: float, niceness: int) -> int:
+    h.require_namespace()
+    if len(os.sched_getaffinity(0)) > 1:
+        os.sched_setaffinity(0, os.sched_getaffinity(0) - {CORE})  # the test beside, not on, the core
+    hog = subprocess.Popen(["taskset", "-c", str(CORE), "sh", "-c", "while :; do :; done"])
+    daemon = h.start_daemon(MACHINE, PARAMS, f"{HERE}/config_test.yaml", wrapper=("taskset", "-c", str(CORE)))
+    # niceness is a thread's on Linux: the main thread's (its id is the process's), not that of
+    # LCM's receive thread, started with the first subscription
+    try:
+        os.setpriority(os.PRIO_PROCESS, daemon.pid, niceness)
+        return starve(daemon, hog, n, rate, niceness)
+    finally:
+        hog.kill()
+        if daemon.poll() is None:
+            daemon.kill()
+
+
+def starve(daemon, hog, n: int, rate: float, niceness: int) -> int:
+    listener = h.Listener()
+    pub = h.lcm.LCM(h.URL)
+    path = toolpath(n + 1)
+    try:
+        pub.publish("CHAINCOMP_CONTROL", h.control(True))
+        t0 = time.perf_counter()
+        for i in range(n):
+            h.pace(t0, i, rate)
+            pub.publish("CHAINCOMP_COMMAND", h.command(i + 1, path[i]))
+            if i == n // 2:  # the burst: enable, enable, ..., disable
+                for k in range(BURST):
+                    pub.publish("CHAINCOMP_CONTROL", h.control(k < BURST - 1))
+        elapsed = time.perf_counter() - t0
+    finally:
+        hog.kill()
+        hog.wait()
+    # Commands after the stream, until one gets through (a full queue drops them too): commands
+    # lost at its end (a burst's tail) are a gap before it.
+    def through(count):
+        return any(s.instance_id == daemon.instance and s.received + s.seq_missing >= count for s in listener.status)
+    sent = n
+    end = time.monotonic() + 90
+    while not through(n + 1) and time.monotonic() < end:
+        sent += 1
+        pub.publish("CHAINCOMP_COMMAND", h.command(sent, path[n]))
+        listener.wait_for(lambda: through(n + 1), 0.2)
+    listener.wait_for(lambda: through(sent), 5)
+    daemon.terminate()
+    daemon.wait(10)
+    s = h.final_status(listener, daemon)
+    listener.close()
+    lost = s.seq_missing
+    print(f"starved (core {CORE}, busy loop beside, main thread nice {niceness}): sent {n} commands at {rate:g} Hz in "
+          f"{elapsed:.2f} s, then {sent - n}; received {s.received} = published {s.published} + unpublished "
+          f"{s.unpublished} + rejected {sum(s.rejected)} {list(s.rejected)}")
+    print(f"missing by seq {lost} in {s.seq_gaps} gaps: queue {s.queue_dropped} (queue of {s.queue_capacity} "
+          f"found full {s.queue_full} times), kernel or before {lost - s.queue_dropped} "
+          f"(kernel drops, all channels: {s.kernel_drops})")
+    print(f"control: sent {BURST + 1}, received {s.control_received} (queue of {s.control_queue_capacity} found "
+          f"full {s.control_queue_full} times), compensating at the end {s.compensating}")
+    print(f"latency ns: compute p50 {s.latency_p50_ns} p99 {s.latency_p99_ns}; receipt-to-publish "
+          f"p50 {s.receipt_p50_ns} p99 {s.receipt_p99_ns} max {s.receipt_max_ns}")
+    # the daemon's own sum: every command it received was answered or rejected
+    assert s.received == s.published + s.unpublished + sum(s.rejected)
+    # every command sent: received, or missing by seq (the last one reveals a lost tail)
+    assert s.received + lost == sent, (s.received, lost, sent)
+    # each missing command was lost where the daemon saw loss: its queue full, or the kernel
+    assert 0 <= s.queue_dropped <= lost and lost - s.queue_dropped <= max(s.kernel_drops, 0)
+    assert s.queue_dropped == 0 or s.queue_full > 0
+    # the burst's final enable=false: applied, or its loss counted
+    control_lost = BURST + 1 - s.control_received
+    assert control_lost >= 0
+    assert not s.compensating or (control_lost > 0 and (s.control_queue_full > 0 or s.kernel_drops > 0))
+    assert control_lost <= max(s.kernel_drops, 0) or s.control_queue_full > 0
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(int(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3]) if len(sys.argv) > 3 else 0))
