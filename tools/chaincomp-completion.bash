@@ -9,7 +9,7 @@ _chaincomp() {
         case "${COMP_WORDS[i]}" in -*) ;; *) verb="${COMP_WORDS[i]}"; break;; esac
     done
     if [[ -z $verb ]]; then
-        words='derive eval generate testvectors protocol identify simulate-measurements simulate-log replay plot check report budget simulate-calibration build lint iso230-2 laser-to-params status import-urdf export-urdf import-ur-calibration ballbar export thermal simulate-thermal -h --help --version'
+        words='derive eval generate testvectors protocol identify simulate-measurements simulate-log replay plot check report budget simulate-calibration build lint iso230-2 laser-to-params status import-urdf export-urdf import-ur-calibration ballbar export thermal simulate-thermal probe -h --help --version'
     else
         case "$verb" in
         derive)
@@ -41,7 +41,7 @@ _chaincomp() {
           case "$prev" in
             --units) words='people internal';;
             --format) words='text json';;
-            *) words='-h --help --assume-zero --sigma --minimal --prefer --vary --smooth -o --output --strict --loss --report --units --format --json'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --assume-zero --hold --sigma --minimal --prefer --vary --smooth -o --output --strict --loss --report --units --format --json'; [[ $cur == -* ]] || return 0;;
           esac;;
         simulate-measurements)
           case "$prev" in
@@ -153,6 +153,13 @@ _chaincomp() {
         simulate-thermal)
           case "$prev" in
             *) words='-h --help --truth -o --output --cycle --rate --temperature-noise --drift-noise --hall --sensor-lags --seed'; [[ $cur == -* ]] || return 0;;
+          esac;;
+        probe)
+          case "$prev" in
+            probe) words='plan fit simulate';;
+            --per-axis) words='2 3 4 5 6 7 8 9 10 11 12';;
+            --format) words='text json';;
+            *) words='-h --help --sphere --radius --stylus --positions --per-axis --backlash-step --clearance --feed --log-name --gcode --csv --hold --assume-zero --format --json --plan --radius-tolerance -o --output --params --noise --backlash --seed'; [[ $cur == -* ]] || return 0;;
           esac;;
         *) return 0;;
         esac

@@ -9,7 +9,7 @@ import sys
 from ..analysis.calibration_report import write_report
 from ..errors import ChaincompError, NoAnswer, OutsideLimit
 from ..measure.calibration import _write_loadable, slide_axis
-from ..measure.identify import (COMPONENTS, DIRECTIONS, HUBER_K, MAX_SMOOTH, ROTATION, Vary, identify,
+from ..measure.identify import (COMPONENTS, DIRECTIONS, HUBER_K, MAX_SMOOTH, ROTATION, HeldModel, Vary, held_values, identify,
                         outside_limits, params_yaml, read_table, to_json, to_text)
 from ..measure.protocol import check_errors
 from ..model.display import add_units_argument
@@ -159,6 +159,9 @@ def add_parser(sub) -> None:
     add_machine_argument(p)
     p.add_argument("measurements", metavar="MEAS.csv", help="measured tool-tip coordinates")
     add_assume_zero_argument(p, "errors held at zero (not fitted)")
+    p.add_argument("--hold", metavar="P.yaml",
+                   help="hold the errors this params file gives at its values, tables along an axis included (e.g. "
+                        "the linear axes' from a laser calibration): not fitted, and written as given with -o")
     p.add_argument("--sigma", metavar="SIGMA",
                    help="standard uncertainty of the measured coordinates, positive: a length for x, y, z "
                         "(e.g. 20um; a bare number is in the machine's length unit), an angle for the "
@@ -207,9 +210,10 @@ def run(args) -> int:
     refuse_empty(("--sigma", args.sigma), *(("--prefer", v) for v in args.prefer),
                  *(("--assume-zero", v) for v in args.assume_zero), *(("--vary", v) for v in args.vary))
     machine = load(args.machine)
-    check_output(args.output, args.measurements, args.machine)
+    check_output(args.output, args.measurements, args.machine, args.hold)
     check_report(args.report, args.output, args.measurements, args.machine)
     assume = check_errors(machine, names(",".join(args.assume_zero)), "--assume-zero")
+    held = held_values(machine, args.hold, assume)
     sigma = sigma_spec(machine, args.sigma) if args.sigma is not None else None
     prefer = check_errors(machine, names(",".join(args.prefer)), "--prefer")
     vary = [vary_spec(machine, v) for v in args.vary]
@@ -217,9 +221,10 @@ def run(args) -> int:
     table = read_table(args.measurements, machine)
     for text in outside_limits(machine, table):
         print(f"chaincomp identify: warning: {text}", file=sys.stderr)
-    fit = identify(machine, table, assume, sigma, vary=vary, smooth=args.smooth, minimal=args.minimal,
+    fit = identify(machine, table, assume + list(held), sigma, vary=vary, smooth=args.smooth, minimal=args.minimal,
                    prefer=prefer, progress=lambda text: print(f"chaincomp identify: {text}", file=sys.stderr),
-                   huber=huber)
+                   huber=huber, model=HeldModel(machine, held))
+    fit.assumed_zero = [n for n in fit.assumed_zero if n not in held]
     if not fit.converged:
         units = ", ".join(f"{s.name} in {s.unit.name}" for s in machine.axes)
         hint = (f": a residual this large is most often a column in another unit (the axes are read in their "
@@ -232,16 +237,19 @@ def run(args) -> int:
         if args.strict:
             raise OutsideLimit(f"{fit.misfit}; --strict: no values given", args.measurements)
         print(f"chaincomp identify: warning: {fit.misfit}", file=sys.stderr)
-    print(json_text(to_json(fit, args.measurements)) if args.format == "json"
-          else to_text(fit, args.measurements, args.units))
+    if args.format == "json":
+        print(json_text({**to_json(fit, args.measurements), "held": sorted(held)}))
+    else:
+        print(to_text(fit, args.measurements, args.units)
+              + (f"\nheld at the values of {args.hold} (--hold): {', '.join(held)}" if held else ""))
     if args.output:
-        _write_loadable(args.output, params_yaml(fit, args.measurements), machine)
+        _write_loadable(args.output, params_yaml(fit, args.measurements, held), machine)
         if args.format == "text":
             print(f"wrote {args.output}")
     if args.report:
         setup = [("machine file", args.machine), ("measurements", args.measurements),
                  ("sigma", args.sigma or "estimated from the residuals"),
-                 ("assumed zero", ", ".join(assume) or "none"), ("fitted as varying", ", ".join(args.vary) or "none"),
+                 ("assumed zero", ", ".join(assume) or "none"), ("held (--hold)", args.hold or "none"), ("fitted as varying", ", ".join(args.vary) or "none"),
                  ("minimal set", "yes" if args.minimal else "no"), ("params written", args.output or "none")]
         write_report(args.report, calibration_of(fit, table, setup, args.units))
         if args.format == "text":

@@ -24,7 +24,7 @@ VERB_MODULES = {
     "build": "build", "lint": "lint", "iso230-2": "iso230_2", "laser-to-params": "laser_to_params",
     "status": "status", "import-urdf": "import_urdf", "export-urdf": "export_urdf",
     "import-ur-calibration": "import_ur_calibration", "ballbar": "ballbar", "export": "export",
-    "thermal": "thermal", "simulate-thermal": "simulate_thermal",
+    "thermal": "thermal", "simulate-thermal": "simulate_thermal", "probe": "probe",
 }
 
 
@@ -93,8 +93,9 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:   # --help, or a bad option (already reported in one line)
         return exc.code if isinstance(exc.code, int) else 0
     debug = os.environ.get("CHAINCOMP_DEBUG") == "1"
-    if getattr(args, "thermal_verb", None):   # a verb of a group (thermal fit): named as argparse names it
-        args.verb = f"{args.verb} {args.thermal_verb}"
+    action = getattr(args, "thermal_verb", None) or getattr(args, "probe_verb", None)
+    if action:   # a verb of a group (thermal fit, probe plan): named as argparse names it
+        args.verb = f"{args.verb} {action}"
     try:
         # numpy's warnings on nan and overflow would print formulas on stderr: the verbs
         # check their results and name what is not finite instead

@@ -37,8 +37,10 @@ from ..model import csvtable
 from ..model.display import DEFAULT_UNITS, display_unit, plus_minus, quantity
 from ..model.expressions import MAX_LITERAL
 from ..model.machine import Machine
+from ..model.params import load_params
 from ..model.units import INTERNAL, UNITS
-from ..model.varying import MAX_POLYNOMIAL_COEFFICIENTS, MAX_TABLE_KNOTS, MAX_VARYING_ERRORS
+from ..model.varying import MAX_POLYNOMIAL_COEFFICIENTS, MAX_TABLE_KNOTS, MAX_VARYING_ERRORS, Varying
+from ..model.yamlsource import read_text
 from ..output import write_file
 from ..symbolic.derive import COMPONENTS
 from ..symbolic.numeric import ExactModel
@@ -1156,15 +1158,18 @@ def _num(v: float) -> str:
     text = f"{v:.12g}"
     return "0" if text == "-0" else text
 
+
 def _registration(fit: Fit, name: str) -> bool:
     """A parameter of an error marked registration (the base block: the instrument's frame)."""
     return fit.machine.symbol(name).registration if name in fit.fitted else False
 
 
-def params_yaml(fit: Fit, source: str) -> str:
+def params_yaml(fit: Fit, source: str, held: dict | None = None) -> str:
     """A params file (machine + values as 'VALUE UNIT', tables and polynomials in the params
-    format) that load_params and chaincompd read."""
+    format) that load_params and chaincompd read; ``held``: the values the fit held (--hold, by
+    name, internal units or a table along an axis), written as they were given."""
     m = fit.machine
+    held = held or {}
     out = [f"# Error values identified by chaincomp identify from {one_line(source)}:",
            f"# {fit.observations} coordinates at {fit.setups} set-ups, {_residuals(fit, 'internal')}, "
            f"condition number {fit.condition:.4g}."]
@@ -1188,7 +1193,9 @@ def params_yaml(fit: Fit, source: str) -> str:
         return "held at zero: moves no measured coordinate"
 
     for s in m.errors:
-        if s.name in fit.varying:
+        if s.name in held:
+            out += _held_entry(s, held[s.name])
+        elif s.name in fit.varying:
             v = fit.varying[s.name]
             ps = [p for p in fit.params if p.error == s.name]
             if not fit.minimal and any(p.name in fit.unidentifiable for p in ps):
@@ -1218,3 +1225,47 @@ def params_yaml(fit: Fit, source: str) -> str:
         elif fit.minimal:
             out.append(f'  {s.name}: "0 {s.unit.name}"   # {note(s.name)}')
     return "\n".join(out) + "\n"
+
+
+def _held_entry(s, value) -> list[str]:
+    """A held error's lines: a number as 'VALUE UNIT', a table or polynomial as the lines of its
+    entry in the params file it was read from."""
+    if not isinstance(value, Varying):
+        return [f'  {s.name}: "{_num(s.from_internal(value))} {s.unit.name}"   # held at a given value (--hold)']
+    lines = read_text(value.file).splitlines()
+    first = lines[value.line - 1]
+    indent = len(first) - len(first.lstrip())
+    block = [first]
+    for line in lines[value.line:]:
+        if line.strip() and not line.lstrip().startswith("#") and len(line) - len(line.lstrip()) <= indent:
+            break
+        block.append(line)
+    return [f"  # {s.name}: held as given in {one_line(value.file)} (--hold)"] + \
+        ["  " + line[indent:] for line in block if line.strip()]
+
+
+def held_values(machine, path: str | None, assume_zero=()) -> dict:
+    """--hold P.yaml: the errors it gives, by name, internal units (a table along an axis as
+    read); an error both held and assumed zero is refused."""
+    if not path:
+        return {}
+    held = {n: v for n, v in load_params(path, machine).items() if machine.symbol(n).role == "error"}
+    both = [n for n in held if n in assume_zero]
+    if both:
+        raise ChaincompError(f"--hold {path}: {both[0]} is also assumed zero (--assume-zero): give it once")
+    if not held:
+        raise ChaincompError(f"--hold {path}: the file gives no error of {machine.name}")
+    return held
+
+
+class HeldModel(ExactModel):
+    """The exact model with some errors (or constants) held at given values, numbers or tables
+    along an axis (internal units), whatever the caller passes for them: ``identify`` with these
+    errors assumed zero and this model fits the others around the held values (--hold)."""
+
+    def __init__(self, machine: Machine, held: dict):
+        super().__init__(machine)
+        self.held = dict(held)
+
+    def frame(self, values: dict, backend: str = "numpy"):
+        return super().frame({**values, **self.held}, backend)

@@ -38,6 +38,8 @@ import ur_description
 from helpers import PARAMS, ROOT, RUNS, URDF, VMC, cli, machine_path
 
 FIVE = machine_path("five_axis_ac")
+NUTATING = machine_path("nutating_bc45")
+SPHERE = ["--sphere", "50,30,80", "--radius", "12.5", "--stylus", "2"]
 VMC_PARAMS = os.path.join(PARAMS, "vmc_xyz-demo.yaml")
 VMC_THERMAL = os.path.join(ROOT, "configs", "thermal", "vmc_xyz-true.yaml")
 LCM_MAGIC = bytes.fromhex("EDA1DA01")   # every lcm-logger event starts with it (lcm/eventlog.c)
@@ -105,6 +107,12 @@ CASES = [
     Case("thermal-fit", "thermal fit", "--output", lambda i: ["thermal", "fit", VMC, i["thermal_log"]], "fit.yaml"),
     Case("thermal-stream", "thermal stream", "--output",
          lambda i: ["thermal", "stream", VMC, VMC_THERMAL, i["thermal_log"], "--controller", "isg"], "s.csv"),
+    Case("probe-plan-gcode", "probe plan", "--gcode", lambda i: ["probe", "plan", NUTATING, *SPHERE], "p.ngc"),
+    Case("probe-plan-csv", "probe plan", "--csv", lambda i: ["probe", "plan", NUTATING, *SPHERE], "p.csv"),
+    Case("probe-simulate", "probe simulate", "--output",
+         lambda i: ["probe", "simulate", NUTATING, i["probe_plan"], *SPHERE], "probe.txt"),
+    Case("probe-fit", "probe fit", "--output", lambda i: ["probe", "fit", NUTATING, i["probe_log"], *SPHERE],
+         "fit.yaml"),
 ]
 IDS = [c.id for c in CASES]
 OUTPUT_OPTIONS = ("--output", "--plot", "--html", "--csv")
@@ -153,7 +161,9 @@ def inputs(base):
     i = {"meas": f"{d}/meas.csv", "log": f"{d}/a.lcmlog", "trace": f"{d}/trace.csv", "thermal_log": f"{d}/th.csv",
          "urdf": f"{d}/r.urdf", "library": f"{d}/vmc_xyz.so", "urdf_machine": f"{d}/u.yaml",
          "urdf_params": f"{d}/u-params.yaml", "ur_urdf": f"{d}/ur5e.urdf", "ur_machine": f"{d}/ur5e.yaml",
-         "ur_calibration": f"{d}/ur5e-calibration.yaml"}
+         "ur_calibration": f"{d}/ur5e-calibration.yaml", "probe_plan": f"{d}/plan.csv", "probe_log": f"{d}/probe.txt"}
+    cli("probe", "plan", NUTATING, *SPHERE, "--csv", i["probe_plan"])
+    cli("probe", "simulate", NUTATING, i["probe_plan"], *SPHERE, "-o", i["probe_log"])
     cli("simulate-measurements", VMC, "--setups", "random:20", "-o", i["meas"])
     cli("simulate-log", VMC, "--seconds", "0.01", "-o", i["log"])
     cli("ballbar", VMC, "--set", "EXX=1", "--plane", "XY", "--radius", "10", "-o", i["trace"])
