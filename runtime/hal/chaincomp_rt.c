@@ -24,6 +24,10 @@
  *   chaincomp-rt.params-version      s32 out    sets applied so far
  *   chaincomp-rt.params-refused      s32 out    sets refused so far
  *   chaincomp-rt.params-reason       s32 out    -1, or why the last set was refused (chaincompd's params reasons)
+ * Parameter:
+ *   chaincomp-rt.direction-weight    float rw   mm (0.1 .. 10000, default 100): the objective counts a direction
+ *                                               error as at this length (chaincompd's direction_weight); a
+ *                                               value outside is not taken (the parameter goes back)
  * Function: chaincomp-rt.update (floating point), between motion-controller and the offsets.
  */
 #include "rtapi.h"
@@ -49,6 +53,7 @@ struct ccrt_pins {
   hal_s32_t *reject_reason, *rejected, *status, *cost_ns, *cost_max_ns;
   hal_float_t *error[CCRT_MAX_ERRORS];
   hal_s32_t *params_seq, *params_version, *params_refused, *params_reason;
+  hal_float_t direction_weight;  /* a parameter */
 };
 
 static int comp_id;
@@ -77,6 +82,8 @@ static void update(void *arg, long period) {
     }
     *pins->params_reason = reason;
   }
+  if (pins->direction_weight != ccrt_direction_weight() && ccrt_set_direction_weight(pins->direction_weight) != 0)
+    pins->direction_weight = ccrt_direction_weight();  /* outside the range: not taken */
   for (i = 0; i < num_axes; ++i) cmd[i] = *pins->pos_cmd[i];
   if (ccrt_step(cmd, *pins->enable, utime_ns / 1000, corr, &r)) {
     for (i = 0; i < num_axes; ++i) *pins->correction[i] = corr[i];
@@ -145,6 +152,8 @@ int rtapi_app_main(void) {
   *pins->params_seq = 0;
   last_params_seq = 0;
   *pins->params_reason = -1;
+  if (hal_param_float_newf(HAL_RW, &pins->direction_weight, comp_id, CCRT_PREFIX ".direction-weight") != 0) goto fail;
+  pins->direction_weight = ccrt_direction_weight();
   if (hal_export_funct(CCRT_PREFIX ".update", update, 0, 1, 0, comp_id) != 0) goto fail;
   rtapi_print_msg(RTAPI_MSG_INFO, CCRT_MODULE ": machine %s, %d joints, params %s\n", ccrt_machine(), num_axes,
                   ccrt_params_file());

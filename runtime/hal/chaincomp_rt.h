@@ -38,6 +38,10 @@ double ccrt_error_value(int i);
  * together and applied all or none (chaincompd's params updates: ParamsUpdater). -1 applied,
  * else the chaincomp::Refuse reason. */
 int ccrt_set_errors(const double* values, long long utime_us);
+/* The objective's direction weight (mm per rad, compensate.hpp) from the next step on: 0, or
+ * -1 (unchanged) outside 0.1 .. 10000 mm. ccrt_direction_weight() is the one in use. */
+int ccrt_set_direction_weight(double mm);
+double ccrt_direction_weight(void);
 
 #ifdef __cplusplus
 }

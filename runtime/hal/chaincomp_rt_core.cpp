@@ -107,6 +107,9 @@ extern "C" int ccrt_set_errors(const double* values, long long utime_us) {
   return g_updater->apply_values(u, utime_us, &why) ? -1 : static_cast<int>(why);
 }
 
+extern "C" int ccrt_set_direction_weight(double mm) { return g_comp->set_direction_weight(mm) ? 0 : -1; }
+extern "C" double ccrt_direction_weight(void) { return g_comp->direction_weight(); }
+
 extern "C" int ccrt_num_axes(void) { return kN; }
 extern "C" const char* ccrt_machine(void) { return model::kName; }
 extern "C" const char* ccrt_params_file(void) { return ccrt_params::kParamsFile; }

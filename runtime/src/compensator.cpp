@@ -8,6 +8,8 @@
 
 namespace chaincomp {
 
+static_assert(CompensatorConfig{}.direction_weight == kDefaultDirectionWeight, "one default weight");
+
 const char* reject_name(Reject r) noexcept {
   static const char* const kNames[kNumReasons] = {
       "undecodable", "wrong_machine", "wrong_axis_count", "non_finite", "out_of_limits",
@@ -31,6 +33,12 @@ bool Compensator::reject(Reject r, Reject* why) noexcept {
   ++counters_.rejected[static_cast<int>(r)];
   if (why != nullptr) *why = r;
   return false;
+}
+
+bool Compensator::set_direction_weight(double mm) noexcept {
+  if (!(mm >= kMinDirectionWeight && mm <= kMaxDirectionWeight)) return false;
+  config_.direction_weight = mm;
+  return true;
 }
 
 void Compensator::reset() noexcept {
@@ -103,8 +111,6 @@ void Compensator::residual_at(const double* q, const std::array<double, kMaxAxes
   residual[1] = orientation_residual(zt, cross3(zt, V(nominal + 6)), V(actual + 3), V(actual + 6)).norm();
 }
 
-// The error a residual (point, direction) stands for, weighted as compensate() weighs it.
-static double weighted_error(const double* residual) noexcept { return objective(residual[0], residual[1]); }
 
 bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept {
   ++counters_.received;
@@ -137,9 +143,10 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
   if (jumped) return reject(Reject::kStepTooLarge, why);
 
   // Full correction at this command, in axis units.
-  double q[kMaxAxes], corrected[kMaxAxes], residual[2] = {0, 0};
+  double q[kMaxAxes], corrected[kMaxAxes], residual[2] = {0, 0}, before[2] = {0, 0};
   for (int i = 0; i < n_; ++i) q[i] = cmd[i] * info[i].to_internal;
-  const auto status = static_cast<Status>(entry_.compensate(model_, workspace_, q, corrected, residual));
+  const auto status = static_cast<Status>(
+      entry_.compensate(model_, workspace_, q, config_.direction_weight, corrected, residual, before));
   // outside a table whose `outside` is reject: the errors are not known there
   if (status == Status::kOutsideTable) return reject(Reject::kOutOfLimits, why);
   if (status != Status::kOk && status != Status::kResidual) return reject(Reject::kCompensationFailed, why);
@@ -200,6 +207,8 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
   Status published = status;
   std::array<double, kMaxAxes> target_axes{};
   for (int i = 0; i < n_; ++i) target_axes[i] = cmd[i] + correction[i];
+  // The error a residual (point, direction) stands for, weighted as compensate() weighs it.
+  auto weighted_error = [&](const double* r) { return objective(r[0], r[1], config_.direction_weight); };
   if (clamped || ramp_ < 1.0) {
     residual_at(q, target_axes, residual);
     // A limited correction may leave the tool further off than none (the wanted one moved
@@ -227,6 +236,9 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
     published = residual[0] <= kPointTolerance && residual[1] <= kDirectionTolerance ? Status::kOk : Status::kResidual;
   }
   if (published == Status::kResidual) flags |= kFlagResidual;
+  bool corrected_any = false;
+  for (int i = 0; i < n_; ++i) corrected_any = corrected_any || correction[i] != 0.0;
+  const double before_objective = weighted_error(before), after_objective = weighted_error(residual);
 
   out.utime = in.utime;
   out.seq = in.seq;
@@ -246,6 +258,13 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
   have_last_ = true;
   order_.accept(in.seq);
   if (restarting) ++counters_.stream_restarts;
+  ++(published == Status::kOk ? counters_.targets_full
+     : corrected_any          ? counters_.targets_partial
+                              : counters_.targets_uncorrected);
+  // (beyond rounding: a ramped or limited target's residual is evaluated apart from compensate's)
+  if (after_objective > before_objective * (1 + 1e-9) + 1e-24) ++counters_.targets_worse;
+  counters_.objective_before += before_objective;
+  counters_.objective_after += after_objective;
   last_utime_ = in.utime;
   last_correction_ = correction;
   return true;

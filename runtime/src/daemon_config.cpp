@@ -2,6 +2,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include "chaincomp/compensate.hpp"
 #include "chaincomp/yaml_strict.hpp"
 
 #include <algorithm>
@@ -126,7 +127,7 @@ bool load_daemon_config(const MachineInfo& info, const std::string& path, Daemon
   Reader r{path, error};
   if (!r.keys(doc, "", {"lcm_url", "channels", "status_period", "latency_window", "start_enabled", "ramp_time",
                         "out_of_limits", "linear_axes", "rotary_axes", "axes", "realtime", "recv_buf_size",
-                        "params_updates"}))
+                        "params_updates", "direction_weight"}))
     return false;
   if (doc["lcm_url"] && !r.text(doc["lcm_url"], "lcm_url", out.lcm_url)) return false;
   if (out.lcm_url.find("recv_buf_size=") != std::string::npos)
@@ -165,6 +166,12 @@ bool load_daemon_config(const MachineInfo& info, const std::string& path, Daemon
   }
   if (doc["start_enabled"] && !r.boolean(doc["start_enabled"], "start_enabled", out.compensator.start_enabled))
     return false;
+  if (const YAML::Node w = doc["direction_weight"]) {
+    double& weight = out.compensator.direction_weight;
+    if (!r.number(w, "direction_weight", weight)) return false;
+    if (!(weight >= kMinDirectionWeight && weight <= kMaxDirectionWeight))
+      return r.fail(w, "direction_weight", "must be between 0.1 and 10000 mm");
+  }
   if (doc["ramp_time"] && !r.number(doc["ramp_time"], "ramp_time", out.compensator.ramp_time_s, 0)) return false;
   if (const YAML::Node pol = doc["out_of_limits"]) {
     std::string v;

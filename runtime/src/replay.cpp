@@ -335,7 +335,12 @@ int run_replay(int argc, char** argv) {
                   json_string(entry->info->axes[i].name).c_str(), json_string(entry->info->axes[i].unit).c_str(),
                   max_abs[i], k.published ? std::sqrt(sum_sq[i] / k.published) : 0.0);
     }
-    std::printf("],\n \"params_updates\": {\"received\": %lld, \"applied\": %lld, \"last_seq\": %lld, \"refused\": {",
+    std::printf("],\n \"objective\": {\"direction_weight_mm\": %.17g, \"full\": %lld, \"partial\": %lld, "
+                "\"uncorrected\": %lld, \"worse\": %lld, \"before_sum_mm2\": %.17g, \"after_sum_mm2\": %.17g}",
+                config.compensator.direction_weight, static_cast<long long>(k.targets_full),
+                static_cast<long long>(k.targets_partial), static_cast<long long>(k.targets_uncorrected),
+                static_cast<long long>(k.targets_worse), k.objective_before, k.objective_after);
+    std::printf(",\n \"params_updates\": {\"received\": %lld, \"applied\": %lld, \"last_seq\": %lld, \"refused\": {",
                 static_cast<long long>(updater.received()), static_cast<long long>(updater.version()),
                 static_cast<long long>(updater.last_seq()));
     for (int r = 0; r < chaincomp::kNumRefusals; ++r) {
@@ -348,6 +353,15 @@ int run_replay(int argc, char** argv) {
   std::fprintf(stderr, "chaincomp replay: %lld events, %lld commands on %s, %lld corrected, %lld rejected "
                "(%.0f commands/s)\n", events, commands, channel.c_str(), static_cast<long long>(k.published),
                rejected, commands / std::max(seconds, 1e-9));
+  // what the targets correct, and the objective (compensate.hpp) before and after, as RMS lengths
+  if (k.published) {
+    std::fprintf(stderr, "  targets: full %lld, partial %lld, uncorrected %lld, worse than the command %lld; "
+                 "objective RMS before %.6g um, after %.6g um (direction weight %.6g mm)\n",
+                 static_cast<long long>(k.targets_full), static_cast<long long>(k.targets_partial),
+                 static_cast<long long>(k.targets_uncorrected), static_cast<long long>(k.targets_worse),
+                 1e3 * std::sqrt(k.objective_before / k.published), 1e3 * std::sqrt(k.objective_after / k.published),
+                 config.compensator.direction_weight);
+  }
   if (!in.damage().empty()) {
     std::fprintf(stderr, "  damaged: %zu stretches of the log (%llu bytes) skipped, not events\n",
                  in.damage().size(), damaged_bytes);

@@ -31,7 +31,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "%s\n", error.c_str());
       return 2;
     }
-    std::printf("ok\n");
+    std::printf("ok\ndirection_weight %.17g\n", config.compensator.direction_weight);
     return 0;
   }
   if (std::string(argv[2]) == "thermal") {

@@ -318,7 +318,7 @@ TEST_CASE("review: NaN and Inf refused on every axis, -0 and subnormals as 0", "
 
 namespace {
 
-// The weighted residual compensate() minimises (point; kDirectionWeight x direction where
+// The weighted residual compensate() minimises (point; kDefaultDirectionWeight x direction where
 // corrected), from the model evaluated with exact_trig.
 template <class K>
 Eigen::VectorXd weighted_residual(const typename K::Model& m, const typename K::Pose& target,
@@ -328,7 +328,7 @@ Eigen::VectorXd weighted_residual(const typename K::Model& m, const typename K::
   const int rows = K::kCorrectsDirection ? 6 : 3;
   Eigen::VectorXd r(rows);
   r.head<3>() = actual.template head<3>() - target.template head<3>();
-  if (K::kCorrectsDirection) r.tail<3>() = chaincomp::kDirectionWeight * (actual.template segment<3>(3) - target.template segment<3>(3));
+  if (K::kCorrectsDirection) r.tail<3>() = chaincomp::kDefaultDirectionWeight * (actual.template segment<3>(3) - target.template segment<3>(3));
   return r;
 }
 

@@ -340,7 +340,7 @@ TEST_CASE("a clamped or ramped target carries its own residual and status, not t
 
 namespace {
 
-// The weighted error (point^2 + (kDirectionWeight angle)^2, mm^2) the pose at `axes` (axis
+// The weighted error (point^2 + (kDefaultDirectionWeight angle)^2, mm^2) the pose at `axes` (axis
 // units) leaves against the nominal pose at `command`: computed here from pose_exact and
 // pose_nominal, the direction as the angle between the tool directions, or with a frame the
 // angle between the frames (|Ra - Rt|_F = 2 sqrt2 sin(angle / 2)).
@@ -366,7 +366,7 @@ double weighted_error(const chaincomp::ModelEntry& e, const void* model, const d
     for (int k = 0; k < 3; ++k) d2 += (ya[k] - yt[k]) * (ya[k] - yt[k]);
     angle = 2 * std::asin(std::sqrt(d2 / 8));
   }
-  const double w = chaincomp::kDirectionWeight * angle;
+  const double w = chaincomp::kDefaultDirectionWeight * angle;
   return point + w * w;
 }
 
@@ -551,4 +551,58 @@ TEST_CASE("a command just inside a rejecting table's end is corrected while ramp
   chaincomp::Compensator comp(f.entry, f.model, config);
   chaincomp::Target t;
   CHECK_FALSE(comp.process(f.command(1, 100.5), t));
+}
+
+TEST_CASE("the counters sort the targets by what they correct and sum the objective before and after",
+          "[compensator][objective]") {
+  Fixture f;
+  const int n = 5, count = 50;
+  // The command's own objective at weight w (mm), from pose_exact and pose_nominal: the point
+  // error squared plus w times the change of the tool direction, squared (compensate.hpp).
+  auto command_objective = [&](const chaincomp::Command& c, double w) {
+    double q[8], actual[6], nominal[6], point = 0, direction = 0;
+    for (int i = 0; i < n; ++i) q[i] = c.axes[i] * f.entry.info->axes[i].to_internal;
+    f.entry.pose_exact(f.model, q, actual);
+    f.entry.pose_nominal(f.model, q, nominal);
+    for (int k = 0; k < 3; ++k) point += (actual[k] - nominal[k]) * (actual[k] - nominal[k]);
+    for (int k = 3; k < 6; ++k) direction += (actual[k] - nominal[k]) * (actual[k] - nominal[k]);
+    return point + w * w * direction;
+  };
+  for (auto& a : f.config.compensator.axes) a.max_correction_step = 1.0;  // no rate limit: the whole correction
+  for (const double w : {100.0, 25.0}) {
+    f.config.compensator.direction_weight = w;
+    for (const bool on : {true, false}) {
+      f.config.compensator.start_enabled = on;
+      chaincomp::Compensator comp(f.entry, f.model, f.config.compensator);
+      double before = 0;
+      chaincomp::Target t;
+      for (int k = 1; k <= count; ++k) {
+        const auto c = f.command(k, 10.0 + 0.01 * k);
+        REQUIRE(comp.process(c, t));
+        before += command_objective(c, w);
+      }
+      const auto& k = comp.counters();
+      REQUIRE(before > 1e-5);  // µm errors: a few µm^2 per command
+      CHECK(k.objective_before == Approx(before).epsilon(1e-9));
+      CHECK(k.targets_worse == 0);
+      if (on) {  // five axes hold point and direction: every target corrected in full
+        CHECK((k.targets_full == count && k.targets_partial == 0 && k.targets_uncorrected == 0));
+        CHECK(k.objective_after <= count * 2e-14);  // (0.1 nm)^2 + (w 1e-9 rad)^2 at most, each
+      } else {  // off: every target the command itself
+        CHECK((k.targets_full == 0 && k.targets_partial == 0 && k.targets_uncorrected == count));
+        CHECK(k.objective_after == Approx(before).epsilon(1e-9));
+      }
+    }
+  }
+}
+
+TEST_CASE("the direction weight is taken within 0.1 .. 10000 mm and refused outside", "[compensator][objective]") {
+  Fixture f;
+  chaincomp::Compensator comp(f.entry, f.model, f.config.compensator);
+  CHECK(comp.direction_weight() == 100.0);  // the documented default
+  for (const double bad : {0.0, 0.09, 10000.5, -5.0, std::nan(""), HUGE_VAL}) CHECK_FALSE(comp.set_direction_weight(bad));
+  CHECK(comp.direction_weight() == 100.0);
+  CHECK(comp.set_direction_weight(0.1));
+  CHECK(comp.set_direction_weight(25.0));
+  CHECK(comp.direction_weight() == 25.0);
 }

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "chaincomp/compensate.hpp"
 #include "chaincomp/lcm_node.hpp"
 #include "held_back_case.hpp"
 
@@ -81,7 +82,7 @@ TEST_CASE("commands over memq:// come back corrected, bad payloads are counted",
     // the same correction as the model's own compensate (converted to mm / deg)
     double q[5], corrected[5], residual[2];
     for (int i = 0; i < 5; ++i) q[i] = axes[i] * entry.info->axes[i].to_internal;
-    entry.compensate(model, nullptr, q, corrected, residual);
+    entry.compensate(model, nullptr, q, chaincomp::kDefaultDirectionWeight, corrected, residual, nullptr);
     for (int i = 0; i < 5; ++i) {
       CHECK(t.correction[i] == Approx((corrected[i] - q[i]) / entry.info->axes[i].to_internal).margin(1e-15));
       CHECK(t.axes[i] == Approx(axes[i] + t.correction[i]).margin(1e-12));

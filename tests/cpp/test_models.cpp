@@ -142,7 +142,7 @@ TEST_CASE("compensation puts the actual tool point on the nominal one", "[compen
       std::vector<double> corrected(na), target(ps), actual(ps), before(ps);
       double residual[2];
       const auto status = static_cast<chaincomp::Status>(
-          e.compensate(buf.bytes, nullptr, v.axes.data(), corrected.data(), residual));
+          e.compensate(buf.bytes, nullptr, v.axes.data(), chaincomp::kDefaultDirectionWeight, corrected.data(), residual, nullptr));
       e.pose_nominal(buf.bytes, v.axes.data(), target.data());
       e.pose_exact(buf.bytes, corrected.data(), actual.data());
       e.pose_exact(buf.bytes, v.axes.data(), before.data());
@@ -156,7 +156,7 @@ TEST_CASE("compensation puts the actual tool point on the nominal one", "[compen
         dir_before += (before[i] - target[i]) * (before[i] - target[i]);
       }
       // the documented objective (docs/guide/daemon.md): the direction wherever the pose has one
-      const double w2 = ps >= 6 ? chaincomp::kDirectionWeight * chaincomp::kDirectionWeight : 0.0;
+      const double w2 = ps >= 6 ? chaincomp::kDefaultDirectionWeight * chaincomp::kDefaultDirectionWeight : 0.0;
       const double objective_after = point_after + w2 * dir_after;
       const double objective_before = point_before + w2 * dir_before;
       point_after = std::sqrt(point_after);
@@ -193,7 +193,7 @@ TEST_CASE("compensation rejects a non-finite command without computing", "[compe
   std::vector<double> cmd(e.info->num_axes, 0.1), out(e.info->num_axes);
   cmd[2] = std::nan("");
   double residual[2];
-  CHECK(e.compensate(buf.bytes, nullptr, cmd.data(), out.data(), residual) ==
+  CHECK(e.compensate(buf.bytes, nullptr, cmd.data(), chaincomp::kDefaultDirectionWeight, out.data(), residual, nullptr) ==
         static_cast<int>(chaincomp::Status::kNonFiniteInput));
 }
 
@@ -217,7 +217,7 @@ TEST_CASE("near the tool-along-C singularity the correction stays bounded", "[co
     const double a = k == 0 ? 0.0 : 2.0 * deg * u(rng);
     const double cmd[5] = {300 * u(rng), 250 * u(rng), -200 + 150 * u(rng), a, 180 * deg * u(rng)};
     double out[5], residual[2], target[6], actual[6];
-    const auto status = static_cast<chaincomp::Status>(e.compensate(model, nullptr, cmd, out, residual));
+    const auto status = static_cast<chaincomp::Status>(e.compensate(model, nullptr, cmd, chaincomp::kDefaultDirectionWeight, out, residual, nullptr));
     INFO("A = " << a / deg << " deg, status " << chaincomp::status_name(status));
     REQUIRE((status == chaincomp::Status::kOk || status == chaincomp::Status::kResidual));
     residual_status += status == chaincomp::Status::kResidual;
@@ -256,8 +256,8 @@ TEST_CASE("a stream with a kept workspace corrects every command as a cold start
         cmd[i] = (mid + half * std::sin(0.002 * k * (i + 1) + phase + i)) * a.to_internal;
       }
       double rw[2], rc[2];
-      const int sw = e.compensate(buf.bytes, ws, cmd.data(), warm.data(), rw);
-      const int sc = e.compensate(buf.bytes, nullptr, cmd.data(), cold.data(), rc);
+      const int sw = e.compensate(buf.bytes, ws, cmd.data(), chaincomp::kDefaultDirectionWeight, warm.data(), rw, nullptr);
+      const int sc = e.compensate(buf.bytes, nullptr, cmd.data(), chaincomp::kDefaultDirectionWeight, cold.data(), rc, nullptr);
       INFO("command " << k);
       REQUIRE(sw == sc);
       ok += sw == static_cast<int>(chaincomp::Status::kOk);
@@ -321,8 +321,8 @@ TEST_CASE("a kept workspace through the singular pose: bounded, and a residual e
       const double cmd[5] = {100 * std::sin(t), 80 * std::cos(1.3 * t), -200 + 50 * std::sin(0.7 * t),
                              3 * std::cos(3 * t) * M_PI / 180, 2 * t};
       double warm[5], cold[5], rw[2], rc[2];
-      const int sw = e.compensate(buf.bytes, ws, cmd, warm, rw);
-      const int sc = e.compensate(buf.bytes, nullptr, cmd, cold, rc);
+      const int sw = e.compensate(buf.bytes, ws, cmd, chaincomp::kDefaultDirectionWeight, warm, rw, nullptr);
+      const int sc = e.compensate(buf.bytes, nullptr, cmd, chaincomp::kDefaultDirectionWeight, cold, rc, nullptr);
       INFO("seed " << seed << ", command " << k);
       REQUIRE(sw == sc);
       for (int i = 0; i < na; ++i) {

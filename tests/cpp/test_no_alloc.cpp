@@ -80,8 +80,8 @@ TEST_CASE("generated functions and compensate (cold and with a kept workspace) n
       e.pose_nominal(model, axes, out);
       e.pose_jacobian(model, axes, out, jac);
       for (int order = 1; order <= e.max_order; ++order) e.error(model, axes, order, out);
-      e.compensate(model, nullptr, axes, out, residual);
-      e.compensate(model, workspace, axes, out, residual);
+      e.compensate(model, nullptr, axes, chaincomp::kDefaultDirectionWeight, out, residual, nullptr);
+      e.compensate(model, workspace, axes, chaincomp::kDefaultDirectionWeight, out, residual, nullptr);
       sink += out[0] + jac[0];
     }
     CHECK(g_allocations - before == 0);
@@ -116,9 +116,9 @@ TEST_CASE("with 18 tables of 101 points attached, compensate and the poses never
     axes[0] = -350.0 + 700.0 * (k % 1000) / 1000.0;
     axes[1] = -250.0 + 500.0 * (k % 777) / 777.0;
     axes[2] = -390.0 + 380.0 * (k % 555) / 555.0;
-    ok += e->compensate(model, nullptr, axes, out, residual) == 0;
+    ok += e->compensate(model, nullptr, axes, chaincomp::kDefaultDirectionWeight, out, residual, nullptr) == 0;
     sink += out[0];
-    ok += e->compensate(model, workspace, axes, out, residual) == 0;
+    ok += e->compensate(model, workspace, axes, chaincomp::kDefaultDirectionWeight, out, residual, nullptr) == 0;
     e->pose_exact(model, axes, out);
     e->pose_jacobian(model, axes, out, jac);
     e->pose_jacobian_gain(model, axes, out, jac, gain);
@@ -181,7 +181,7 @@ TEST_CASE("decoding and applying params updates never allocates, nor does compen
     }
     REQUIRE(chaincomp::decode_params_update(p.b.data(), p.b.size(), static_cast<std::int64_t>(hash), u));
     applied += up.apply(u, 1, 10000LL * k);   // 10 ms of command time apart: each is applied
-    e.compensate(model, nullptr, axes, out, residual);
+    e.compensate(model, nullptr, axes, chaincomp::kDefaultDirectionWeight, out, residual, nullptr);
   }
   CHECK(g_allocations - before == 0);
   CHECK(applied == kUpdates);

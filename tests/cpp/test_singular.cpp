@@ -62,7 +62,7 @@ PathStats run_path(Machine& m, int steps, bool stream, const std::function<void(
   for (int k = 0; k <= steps; ++k) {
     path(double(k) / steps, cmd.data());
     double residual[2];
-    const auto status = static_cast<chaincomp::Status>(m.e.compensate(m.model, ws, cmd.data(), out.data(), residual));
+    const auto status = static_cast<chaincomp::Status>(m.e.compensate(m.model, ws, cmd.data(), chaincomp::kDefaultDirectionWeight, out.data(), residual, nullptr));
     INFO("command " << k << " of " << steps << ", status " << chaincomp::status_name(status));
     REQUIRE((status == chaincomp::Status::kOk || status == chaincomp::Status::kResidual));
     st.residual += status == chaincomp::Status::kResidual;
@@ -134,7 +134,7 @@ TEST_CASE("five_axis_ac through A = 0 (the tool along C): a continuous, bounded 
   for (int k = 0; k <= 400; ++k) {
     const double q[5] = {100, -20, -150, (-1 + k / 200.0) * deg, 45 * deg};
     double out[5], residual[2];
-    m.e.compensate(m.model, nullptr, q, out, residual);
+    m.e.compensate(m.model, nullptr, q, chaincomp::kDefaultDirectionWeight, out, residual, nullptr);
     CHECK(residual[0] < 1e-6);
   }
 }

@@ -287,7 +287,7 @@ TEST_CASE("compensation with the laser tables puts the tool point on the nominal
     const auto q = random_axes(info, rng);
     std::vector<double> out(info.num_axes), target(6), actual(6);
     double residual[2];
-    const auto status = static_cast<chaincomp::Status>(e.compensate(l->model, nullptr, q.data(), out.data(), residual));
+    const auto status = static_cast<chaincomp::Status>(e.compensate(l->model, nullptr, q.data(), chaincomp::kDefaultDirectionWeight, out.data(), residual, nullptr));
     e.pose_nominal(l->model, q.data(), target.data());
     e.pose_exact(l->model, out.data(), actual.data());  // tables evaluated at the corrected axes
     double d = 0;
@@ -326,18 +326,18 @@ TEST_CASE("a command outside a rejecting table is refused; poses there are NaN",
   e->prepare(params.data(), model);
   e->attach_varying(model, &v);
   double cmd[5] = {50, 0, -100, 0.3, 0.2}, out[5], residual[2], pose[6], target[6];
-  CHECK(e->compensate(model, nullptr, cmd, out, residual) == static_cast<int>(chaincomp::Status::kOk));
+  CHECK(e->compensate(model, nullptr, cmd, chaincomp::kDefaultDirectionWeight, out, residual, nullptr) == static_cast<int>(chaincomp::Status::kOk));
   // EXX = 3.5 um at X = 50: the X correction takes it back
   CHECK(out[0] - cmd[0] == Approx(-3.5e-3).margin(2e-6));
   e->pose_exact(model, cmd, pose);
   e->pose_nominal(model, cmd, target);
   CHECK(pose[0] - target[0] == Approx(3.5e-3).margin(1e-6));
   cmd[0] = 150;
-  CHECK(e->compensate(model, nullptr, cmd, out, residual) == static_cast<int>(chaincomp::Status::kOutsideTable));
+  CHECK(e->compensate(model, nullptr, cmd, chaincomp::kDefaultDirectionWeight, out, residual, nullptr) == static_cast<int>(chaincomp::Status::kOutsideTable));
   for (int i = 0; i < 5; ++i) CHECK(out[i] == cmd[i]);
   e->pose_exact(model, cmd, pose);
   CHECK(std::isnan(pose[0]));
   // prepare detaches: the constants alone again
   e->prepare(params.data(), model);
-  CHECK(e->compensate(model, nullptr, cmd, out, residual) == static_cast<int>(chaincomp::Status::kOk));
+  CHECK(e->compensate(model, nullptr, cmd, chaincomp::kDefaultDirectionWeight, out, residual, nullptr) == static_cast<int>(chaincomp::Status::kOk));
 }

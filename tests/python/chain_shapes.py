@@ -140,7 +140,24 @@ SHAPES = [
            offset("0", "0", "d6")],
           {"d1": ("mm", 90, 50, 200), "a2": ("mm", 425, 200, 600), "a3": ("mm", 390, 200, 600),
            "d6": ("mm", 80, 40, 150)}, tool_frame=True, corrects_all=True, singular={"q5": 0, "q3": 0}),
+    # a seven-joint arm (shoulder q1-q3, elbow q4, wrist q5-q7; a frame): more axes than the pose,
+    # the null space's turn left at the command. Singular: the elbow straight (q4 = 0), and q1
+    # on q3 (q2 = 0) or q5 on q7 (q6 = 0) where the other alignment leaves no spare joint
+    Shape("nw_arm7", [_deg(f"q{i}", -360, 360) for i in range(1, 8)],
+          [rotary("q1", "z"), offset("0", "0", "d1"), rotary("q2", "y"), rotary("q3", "z"), offset("0", "0", "a2"),
+           rotary("q4", "y"), rotary("q5", "z"), offset("0", "0", "a3"), rotary("q6", "y"), rotary("q7", "z"),
+           offset("0", "0", "d7")],
+          {"d1": ("mm", 340, 200, 400), "a2": ("mm", 400, 300, 500), "a3": ("mm", 400, 300, 500),
+           "d7": ("mm", 126, 80, 200)}, tool_frame=True, corrects_all=True, singular={"q2": 0, "q4": 0, "q6": 0}),
 ]
+# Fewer axes than the pose (a three-joint arm holding its tool's point and direction: three
+# axes for five conditions): where they cannot hold both, the direction weight decides the
+# compromise. Not among SHAPES: its optimum may move the point to turn the direction.
+ARM3 = Shape("nw_arm3", [_deg("q1", -360, 360), _deg("q2", -150, 150), _deg("q3", -150, 150)],
+             [rotary("q1", "z"), offset("0", "0", "d1"), rotary("q2", "y"), offset("0", "0", "a2"),
+              rotary("q3", "y"), offset("0", "0", "a3")],
+             {"d1": ("mm", 90, 50, 200), "a2": ("mm", 425, 200, 600), "a3": ("mm", 390, 200, 600)},
+             singular={"q3": 0})
 BY_NAME = {s.name: s for s in SHAPES}
 
 
@@ -188,8 +205,8 @@ def pose_error(shape, actual, nominal):
     return point, direction
 
 
-def objective(point, direction):
-    return point ** 2 + (WEIGHT * direction) ** 2
+def objective(point, direction, weight=WEIGHT):
+    return point ** 2 + (weight * direction) ** 2
 
 
 def far_from_singular(shape, q):

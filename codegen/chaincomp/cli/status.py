@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import struct
 import sys
@@ -181,6 +182,11 @@ def describe(status, heard_at: float, period: float | None, target, axes, now: f
                            "refused": dict(zip(PARAMS_REASONS, s.params_refused))},
         "readings": {"received": s.readings_received, "refused": dict(zip(READING_REASONS, s.readings_refused))},
         "control": {"received": s.control_received, "refused": s.control_refused},
+        # what the targets published correct, and the objective (mm^2, summed) before and after
+        "objective": {"direction_weight_mm": s.direction_weight, "full": s.targets_full,
+                      "partial": s.targets_partial, "uncorrected": s.targets_uncorrected,
+                      "worse": s.targets_worse, "before_sum_mm2": s.objective_before,
+                      "after_sum_mm2": s.objective_after},
         "latency_ns": {"window": s.window, "p50": s.latency_p50_ns, "p99": s.latency_p99_ns,
                        "p999": s.latency_p999_ns, "max": s.latency_max_ns},
         "recv_buf_bytes": s.recv_buf_bytes, "foreign_instance": f"{s.foreign_instance & 0xFFFFFFFFFFFFFFFF:016x}",
@@ -213,6 +219,16 @@ def _us(ns: int) -> str:
     return f"{ns / 1e3:.1f} µs" if ns < 1_000_000 else f"{ns / 1e6:.2f} ms"
 
 
+def _objective_line(o: dict, published: int) -> str:
+    """Full / partial / uncorrected targets and the objective's RMS (as a length) before and after."""
+    line = (f"  corrects  full {o['full']}  partial {o['partial']}  uncorrected {o['uncorrected']}  "
+            f"worse than the command {o['worse']}")
+    if published:
+        before, after = (1e3 * math.sqrt(max(o[k], 0.0) / published) for k in ("before_sum_mm2", "after_sum_mm2"))
+        line += f"  objective RMS {before:.3g} µm -> {after:.3g} µm (direction at {o['direction_weight_mm']:g} mm)"
+    return line
+
+
 def render_text(doc: dict) -> str:
     if not doc["daemons"]:
         return f"no chaincompd heard on {doc['url']}\n"
@@ -243,6 +259,7 @@ def render_text(doc: dict) -> str:
                f"{sum(d['readings']['refused'].values())}" if d["readings"]["received"] else ""),
             f"  targets   own heard back {c['own_targets_heard']}  foreign {c['foreign_targets']}"
             + (f" (last from instance {d['foreign_instance']})" if c["foreign_targets"] else ""),
+            _objective_line(d["objective"], c["published"]),
             f"  latency   p50 {_us(lat['p50'])}  p99 {_us(lat['p99'])}  p99.9 {_us(lat['p999'])}  "
             f"max {_us(lat['max'])}  (last {lat['window']} commands)" if lat["window"] else
             "  latency   no command published yet",

@@ -43,12 +43,22 @@ inline const char* status_name(Status s) noexcept {
 
 constexpr double kPointTolerance = 1e-7;      // mm: 0.1 nm
 constexpr double kDirectionTolerance = 1e-9;  // rad
-constexpr double kDirectionWeight = 100.0;    // mm per rad: a direction error counts as at 100 mm
+// The direction weight (mm per rad: a direction error counts as at this length from the tool
+// point), a run-time argument of compensate() (the runtime config's direction_weight): its
+// default and its range. Outside the range the normal equations lose the point's digits (the
+// direction rows 1e8 times heavier) or the direction's: compensate() takes the nearest end.
+constexpr double kDefaultDirectionWeight = 100.0;
+constexpr double kMinDirectionWeight = 0.1;
+constexpr double kMaxDirectionWeight = 10000.0;
+
+constexpr double valid_direction_weight(double weight) noexcept {
+  return !(weight >= kMinDirectionWeight) ? kMinDirectionWeight : weight > kMaxDirectionWeight ? kMaxDirectionWeight : weight;
+}
 
 // The objective compensation minimises (docs/guide/daemon.md, "The objective"): the point error
-// (mm) squared plus the direction (orientation) error (rad) weighted as at kDirectionWeight.
-constexpr double objective(double point, double direction) noexcept {
-  return point * point + kDirectionWeight * kDirectionWeight * direction * direction;
+// (mm) squared plus the direction (orientation) error (rad) weighted as at `weight` mm.
+constexpr double objective(double point, double direction, double weight = kDefaultDirectionWeight) noexcept {
+  return point * point + weight * weight * direction * direction;
 }
 // Largest correction compensate() will make, per axis kind: geometric errors need µm and
 // arcsec; more means a singular configuration (e.g. the tool axis along the C axis), where
@@ -323,7 +333,9 @@ struct Core {
   struct Result {
     Axes corrected;
     double residual_point = 0;      // mm
-    double residual_direction = 0;  // rad: the direction (with a frame: orientation) residual; 0 where not corrected
+    double residual_direction = 0;  // rad: the direction (with a frame: orientation) residual
+    // the same of the command itself (no correction): the objective before, beside the one after
+    double before_point = 0, before_direction = 0;
   };
 
   // Kept by a caller across the commands of a stream (of one model): a command near the last
@@ -344,16 +356,19 @@ struct Core {
     Axes last_command, last_corrected;
     Axes last_correction_change = Axes::Zero();  // from the command before
     Axes jacobian_axes;  // where the factorised Jacobian was taken
+    double warm_weight = 0;  // the direction weight the factorisation was taken with
     Trig command_trig, trig;  // at the command, at the current axes
   };
 
   // The warm start's rules, then solve(); see compensate<K> below.
-  static Status compensate(const Machine& m, State& ws, const Axes& command, Result& out) noexcept;
+  // `direction_weight`: the objective's (valid_direction_weight() of it is taken).
+  static Status compensate(const Machine& m, State& ws, const Axes& command, Result& out,
+                           double direction_weight = kDefaultDirectionWeight) noexcept;
   // One compensation from `start` (a warm start: the factorisation in ws is used) or, where
   // null, cold from the command. `clean`: the call ended undamped with every axis within
   // its bound.
   static Status solve(const Machine& m, State& ws, const Axes& command, const Axes* start, Result& out,
-                      bool& clean) noexcept;
+                      bool& clean, double weight) noexcept;
 };
 
 // The correction bound of an axis: per axis kind.
@@ -372,7 +387,7 @@ bool within_bounds(const Eigen::Matrix<double, N, 1>& q, const Eigen::Matrix<dou
 }
 
 // Gauss-Newton (chord) steps on |W r(q)|^2 (W the row weights: the direction or orientation
-// rows as at kDirectionWeight mm per rad); near a singular pose a second, damped pass
+// rows as at `weight` mm per rad); near a singular pose a second, damped pass
 // (kTrustRadius above). Where the Jacobian has a null space (a seven-joint arm; a six-joint
 // arm holding point and direction, which leaves the turn about the tool axis free) every
 // step removes the correction's part along it: of all corrections equally good, the one of
@@ -380,7 +395,7 @@ bool within_bounds(const Eigen::Matrix<double, N, 1>& q, const Eigen::Matrix<dou
 // starts from (the null-space rule).
 template <int N, unsigned Angles, int P, int R, bool O>
 Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& command, const Axes* start, Result& out,
-                               bool& clean) noexcept {
+                               bool& clean, double weight) noexcept {
   constexpr int n = N;
   constexpr int rows = R;
   constexpr bool kDirection = R == 6;  // the direction (or orientation) rows are corrected
@@ -394,7 +409,7 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
   constexpr bool kPull = kRedundant || (kDirection && n < dof);
   clean = false;
   out.corrected = command;
-  out.residual_point = out.residual_direction = 0;
+  out.residual_point = out.residual_direction = out.before_point = out.before_direction = 0;
   if (!command.allFinite()) return Status::kNonFiniteInput;
   // per axis: the correction bound and its inverse (constants: no division)
   Axes bound, inv_bound;
@@ -431,6 +446,19 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
     target_z = ws.target.template segment<3>(3);
     target_y = cross3(target_z, ws.target.template segment<3>(6));
   }
+  // The error left at the pose in ws.pose: the point, and the direction (orientation) wherever
+  // the pose has one, corrected by this shape or not (a three-axis machine's tilt is reported,
+  // never hidden as 0).
+  auto pose_error = [&](double& point, double& direction) {
+    point = (ws.pose.template head<3>() - ws.target.template head<3>()).norm();
+    direction = 0;
+    if constexpr (O) {
+      direction = orientation_residual(target_z, target_y, ws.pose.template segment<3>(3),
+                                       ws.pose.template segment<3>(6)).norm();
+    } else if constexpr (P >= 6) {
+      direction = (ws.pose.template segment<3>(3) - ws.target.template segment<3>(3)).norm();
+    }
+  };
   Square A;  // J^T J (lower triangle, with the tiny Levenberg term) of the last Jacobian
   bool damping = false;  // the steps are damped ones (the second pass)
   bool damped_factored = false;  // damped_ldlt holds A + lambda D of this Jacobian
@@ -440,10 +468,10 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
       for (int i = 0; i < n; ++i) {
         const Eigen::Vector3d jz = ws.jacobian.col(i).template segment<3>(3);
         const Eigen::Vector3d jx = ws.jacobian.col(i).template segment<3>(6);
-        J.col(i).template tail<3>() = kDirectionWeight * orientation_residual(target_z, target_y, jz, jx);
+        J.col(i).template tail<3>() = weight * orientation_residual(target_z, target_y, jz, jx);
       }
     } else if constexpr (kDirection) {
-      J.template bottomRows<3>() = kDirectionWeight * ws.jacobian.template middleRows<3>(3);
+      J.template bottomRows<3>() = weight * ws.jacobian.template middleRows<3>(3);
     }
     damped_factored = false;
     if (damping) return true;  // a damped step factorises its own matrix
@@ -483,12 +511,16 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
     d = damped_ldlt.solve(Eigen::Matrix<double, n, 1>(g));
     return true;
   };
+  // The command's own error (the objective before) from the pose there: cold, the Jacobian's.
   Axes q = command;
   if (start != nullptr) {
+    pose_at_command();
+    pose_error(out.before_point, out.before_direction);
     q = *start;
     pose_at(q);
   } else {
     jacobian_at(command, ws.command_trig);
+    pose_error(out.before_point, out.before_direction);
     if (!factorise()) return Status::kSingular;
   }
   Eigen::Matrix<double, rows, 1> r;
@@ -497,7 +529,7 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
     const double point = fraction * kPointTolerance;
     bool ok = v.template head<3>().squaredNorm() <= point * point;
     if constexpr (kDirection) {
-      const double direction = fraction * kDirectionTolerance * kDirectionWeight;
+      const double direction = fraction * kDirectionTolerance * weight;
       ok = ok && v.template tail<3>().squaredNorm() <= direction * direction;
     }
     return ok;
@@ -505,16 +537,16 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
   auto set_residual = [&]() {
     r.template head<3>() = ws.pose.template head<3>() - ws.target.template head<3>();
     if constexpr (O) {
-      r.template tail<3>() = kDirectionWeight * orientation_residual(target_z, target_y, ws.pose.template segment<3>(3),
+      r.template tail<3>() = weight * orientation_residual(target_z, target_y, ws.pose.template segment<3>(3),
                                                                       ws.pose.template segment<3>(6));
     } else if constexpr (kDirection) {
-      r.template tail<3>() = kDirectionWeight * (ws.pose.template segment<3>(3) - ws.target.template segment<3>(3));
+      r.template tail<3>() = weight * (ws.pose.template segment<3>(3) - ws.target.template segment<3>(3));
     }
   };
   bool clamped = false;  // an axis was held at its bound
-  // (a tenth of the smaller tolerance in weighted units: they are equal, 1e-7)^2
-  constexpr double kSettled = 0.1 * std::min(kPointTolerance, kDirectionTolerance * kDirectionWeight);
-  constexpr double kSettledChange = kSettled * kSettled;
+  // (a tenth of the smaller tolerance in weighted units: equal, 1e-7, at the default weight)^2
+  const double kSettled = 0.1 * std::min(kPointTolerance, kDirectionTolerance * weight);
+  const double kSettledChange = kSettled * kSettled;
   bool settled = false;  // the last pass ended within tolerance or on a step too small to matter
   // One pass of steps from q (ws.pose at q, a factorisation in ws.factor or from the
   // command), undamped or with `lambda`; kOk, or the failure.
@@ -608,19 +640,6 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
     if (failed != Status::kOk) return failed;
   }
   if (!q.allFinite() || !r.allFinite()) return Status::kNonFiniteOutput;
-  // The error left at the pose in ws.pose: the point, and the direction (orientation) wherever
-  // the pose has one, corrected by this shape or not (a three-axis machine's tilt is reported,
-  // never hidden as 0).
-  auto pose_error = [&](double& point, double& direction) {
-    point = (ws.pose.template head<3>() - ws.target.template head<3>()).norm();
-    direction = 0;
-    if constexpr (O) {
-      direction = orientation_residual(target_z, target_y, ws.pose.template segment<3>(3),
-                                       ws.pose.template segment<3>(6)).norm();
-    } else if constexpr (P >= 6) {
-      direction = (ws.pose.template segment<3>(3) - ws.target.template segment<3>(3)).norm();
-    }
-  };
   out.corrected = q;
   pose_error(out.residual_point, out.residual_direction);
   const bool ok = out.residual_point <= kPointTolerance && out.residual_direction <= kDirectionTolerance;
@@ -628,11 +647,9 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
   if (ok) return Status::kOk;
   // Never worse than no correction, by the objective the steps minimise: where the command
   // itself scores no worse, it is the answer.
-  double none_point = 0, none_direction = 0;
-  pose_at_command();
-  pose_error(none_point, none_direction);
+  const double none_point = out.before_point, none_direction = out.before_direction;
   if (std::isfinite(none_point) && std::isfinite(none_direction) &&
-      objective(none_point, none_direction) <= objective(out.residual_point, out.residual_direction)) {
+      objective(none_point, none_direction, weight) <= objective(out.residual_point, out.residual_direction, weight)) {
     out.corrected = command;
     out.residual_point = none_point;
     out.residual_direction = none_direction;
@@ -642,13 +659,16 @@ Status Core<N, Angles, P, R, O>::solve(const Machine& m, State& ws, const Axes& 
 }
 
 template <int N, unsigned Angles, int P, int R, bool O>
-Status Core<N, Angles, P, R, O>::compensate(const Machine& m, State& ws, const Axes& command, Result& out) noexcept {
+Status Core<N, Angles, P, R, O>::compensate(const Machine& m, State& ws, const Axes& command, Result& out,
+                                             double direction_weight) noexcept {
+  const double weight = valid_direction_weight(direction_weight);
   // Warm: the same model, near the last command, within the correction bound of where the
   // factorised Jacobian was taken (the chord still gains about two digits per step), and the
   // last correction extrapolated linearly (the start) within kWarmCorrectionLimit of the
   // bound. A command holding NaN fails these tests and is refused by solve().
   Axes start;
-  bool warm = ws.warm && ws.warm_model == m.identity &&
+  // (and the same weight: the factorisation was taken with it)
+  bool warm = ws.warm && ws.warm_model == m.identity && ws.warm_weight == weight &&
               within_bounds<N, Angles>(command, ws.last_command, kChordStepLimit) &&
               within_bounds<N, Angles>(command, ws.jacobian_axes);
   if (warm) {
@@ -657,16 +677,17 @@ Status Core<N, Angles, P, R, O>::compensate(const Machine& m, State& ws, const A
   }
   ws.warm = false;
   bool clean = false;
-  Status s = solve(m, ws, command, warm ? &start : nullptr, out, clean);
+  Status s = solve(m, ws, command, warm ? &start : nullptr, out, clean, weight);
   // A warm start that ends short of the tolerance is redone cold: a residual (fewer DOF than
   // errors, a singular pose) or a failure never depends on the commands before.
   const bool warm_result = warm && s == Status::kOk;
-  if (warm && !warm_result) s = solve(m, ws, command, nullptr, out, clean);
+  if (warm && !warm_result) s = solve(m, ws, command, nullptr, out, clean, weight);
   // The next call may start warm from a unique solution (none where a residual is left: the
   // chord's fixed point there depends on where its Jacobian was taken) of the whole problem.
   if (s != Status::kOk || !clean) return s;
   ws.warm = true;
   ws.warm_model = m.identity;
+  ws.warm_weight = weight;
   if (warm_result) {
     ws.last_correction_change = (out.corrected - command) - (ws.last_corrected - ws.last_command);
   } else {
@@ -757,16 +778,17 @@ struct ModelCalls {
 
 // Corrected axis commands such that the actual tool pose equals the nominal one at `command`
 // (the file's first lines); warm from the last call on `ws` where the rules in Core allow.
+// `direction_weight` (mm per rad): the objective's weight of the direction (orientation).
 template <class K>
 Status compensate(const typename K::Model& model, Workspace<K>& ws, const typename K::Axes& command,
-                  Result<K>& out) noexcept {
+                  Result<K>& out, double direction_weight = kDefaultDirectionWeight) noexcept {
   using C = CoreOf<K>;
   const VaryingErrors* varying = model.varying;
   if (varying != nullptr && command.allFinite()) {
     if (!within_ranges(*varying, command.data())) {
       ws.core.warm = false;
       out.corrected = command;
-      out.residual_point = out.residual_direction = 0;
+      out.residual_point = out.residual_direction = out.before_point = out.before_direction = 0;
       return Status::kOutsideTable;
     }
     ws.model = model;
@@ -778,7 +800,7 @@ Status compensate(const typename K::Model& model, Workspace<K>& ws, const typena
   const typename C::Machine machine{&model, &context, &Calls::pose_nominal,
                                     varying ? &Calls::pose_exact_varying : &Calls::pose_exact,
                                     varying ? &Calls::pose_jacobian_varying : &Calls::pose_jacobian};
-  return C::compensate(machine, ws.core, command, out);
+  return C::compensate(machine, ws.core, command, out, direction_weight);
 }
 
 }  // namespace chaincomp

@@ -51,6 +51,8 @@ struct CompensatorConfig {
   double ramp_time_s = 0.5;           // 0 -> 1 (and back) over this much command time
   bool clamp_out_of_limits = false;   // clamp commands into limits instead of rejecting them
   bool start_enabled = true;
+  // mm per rad: the objective's weight of the direction (compensate.hpp, kDefaultDirectionWeight)
+  double direction_weight = 100.0;
 };
 
 // The stream rule (stream_order.hpp): commands in order by seq, at most kMaxSeqJump ahead; a
@@ -81,6 +83,14 @@ struct Counters {
   std::int64_t stream_restarts = 0;  // restarts taken by the kRestartRun rule
   std::int64_t resets = 0;           // restarts asked for by reset()
   std::int64_t held_back = 0;        // limited corrections worse than none, stepped back towards none instead
+  // Targets published by what they correct: the whole pose within tolerance (status ok); a
+  // residual left with a correction made; a residual left and no correction (none scores
+  // better: compensate.hpp's never-worse rule, or compensation off). `worse`: scoring worse
+  // than the command by the objective (only where a limit holds the correction back).
+  std::int64_t targets_full = 0, targets_partial = 0, targets_uncorrected = 0, targets_worse = 0;
+  // The objective (mm^2, compensate.hpp's objective at the config's direction_weight) summed
+  // over the targets published: of the command itself (before) and of the target (after).
+  double objective_before = 0, objective_after = 0;
   std::array<std::int64_t, kNumReasons> rejected{};
 };
 
@@ -98,6 +108,10 @@ class Compensator {
     reject(Reject::kUndecodable, nullptr);
   }
   void set_enabled(bool on) noexcept { enabled_ = on; }
+  // The objective's direction weight from the next command on (mm per rad); false, unchanged,
+  // outside kMinDirectionWeight..kMaxDirectionWeight (compensate.hpp).
+  bool set_direction_weight(double mm) noexcept;
+  double direction_weight() const noexcept { return config_.direction_weight; }
   // A new stream (a control message's reset): the next command is accepted whatever its seq
   // and wherever it starts; the correction keeps its rate limit from the last one.
   void reset() noexcept;

@@ -61,11 +61,13 @@ struct ModelEntry {
   bool (*error)(const void* model, const double* axes, int order, double* pose) noexcept;
   int max_order;
   // Returns a chaincomp::Status code; residual[0] point (mm), residual[1] direction (rad),
-  // with a frame corrected in full the orientation residual (rad; compensate.hpp).
+  // with a frame corrected in full the orientation residual (rad; compensate.hpp); `before`
+  // (may be null) the same two of the command itself. `direction_weight`: the objective's, mm
+  // per rad (compensate.hpp; the runtime config's direction_weight).
   // `workspace`: null (every call starts cold), or one set up by init_workspace and kept
   // across the commands of a stream (each starts from the last correction: compensate.hpp).
-  int (*compensate)(const void* model, void* workspace, const double* command, double* corrected,
-                    double* residual) noexcept;
+  int (*compensate)(const void* model, void* workspace, const double* command, double direction_weight,
+                    double* corrected, double* residual, double* before) noexcept;
   std::size_t workspace_size;  // bytes of the workspace object init_workspace constructs
   std::size_t workspace_align;
   void (*init_workspace)(void* workspace) noexcept;

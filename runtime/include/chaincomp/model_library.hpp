@@ -15,7 +15,8 @@ namespace chaincomp {
 // Bump when ModelEntry, MachineInfo, AxisInfo, ParamInfo, VaryingErrors or ModelLibrary
 // change meaning. The sizes in kModelLayout also refuse a library whose structures changed
 // size while the number was forgotten. tools (CMake, chaincomp build) read this line.
-constexpr int kModelAbi = 2;
+// 3: compensate takes the direction weight and returns the command's own residual (before).
+constexpr int kModelAbi = 3;
 
 struct ModelLayout {
   std::uint32_t entry, info, axis, param, varying, varying_item;

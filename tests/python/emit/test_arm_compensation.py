@@ -27,7 +27,7 @@ from helpers import FRAME_ARMS as ARMS
 from model_library import Library, arr
 
 INT, VOID_P, DBL_P = ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(ctypes.c_double)
-COMPENSATE = ctypes.CFUNCTYPE(INT, VOID_P, VOID_P, DBL_P, DBL_P, DBL_P)
+COMPENSATE = ctypes.CFUNCTYPE(INT, VOID_P, VOID_P, DBL_P, ctypes.c_double, DBL_P, DBL_P, DBL_P)
 INIT = ctypes.CFUNCTYPE(None, VOID_P)
 BOUND = 0.0175   # rad: kMaxAngularCorrection
 
@@ -61,7 +61,7 @@ class Arm:
     def compensate(self, q, warm=False):
         """(status, corrected (n), residual (point mm, orientation rad)) for one command."""
         out, res = arr([0.0] * self.n), arr([0.0, 0.0])
-        s = self._compensate(self.model, self.workspace if warm else None, arr(list(q)), out, res)
+        s = self._compensate(self.model, self.workspace if warm else None, arr(list(q)), 100.0, out, res, None)
         return s, np.array(list(out)), np.array(list(res))
 
     def miss(self, command, corrected):

@@ -189,7 +189,7 @@ class _Entry(ctypes.Structure):
                 ("pose_exact", ctypes.CFUNCTYPE(None, _V, _P, _P)),
                 ("pose_nominal", ctypes.CFUNCTYPE(None, _V, _P, _P)),
                 ("pose_jacobian", _V), ("error", _V), ("max_order", ctypes.c_int),
-                ("compensate", ctypes.CFUNCTYPE(ctypes.c_int, _V, _V, _P, _P, _P)),
+                ("compensate", ctypes.CFUNCTYPE(ctypes.c_int, _V, _V, _P, ctypes.c_double, _P, _P, _P)),
                 ("workspace_size", ctypes.c_size_t), ("workspace_align", ctypes.c_size_t),
                 ("init_workspace", ctypes.CFUNCTYPE(None, _V)), ("num_errors", ctypes.c_int),
                 ("attach_varying", _V), ("pose_jacobian_gain", _V)]
@@ -233,11 +233,13 @@ class Loaded:
         self.entry.prepare(values.ctypes.data_as(_P), self.model_ptr)
         self.entry.init_workspace(self.ws_ptr)
 
-    def compensate(self, command, residual=None):
+    def compensate(self, command, residual=None, weight=100.0, before=None):
+        """(status, corrected); the residual (point, direction) into ``residual`` and the
+        command's own into ``before`` where given; ``weight`` the objective's direction weight (mm)."""
         q = np.ascontiguousarray(command, dtype=float)
         out, res = np.zeros(self.n), np.zeros(2) if residual is None else residual
-        s = self.entry.compensate(self.model_ptr, self.ws_ptr, q.ctypes.data_as(_P), out.ctypes.data_as(_P),
-                                  res.ctypes.data_as(_P))
+        s = self.entry.compensate(self.model_ptr, self.ws_ptr, q.ctypes.data_as(_P), weight, out.ctypes.data_as(_P),
+                                  res.ctypes.data_as(_P), None if before is None else before.ctypes.data_as(_P))
         return s, out
 
     def pose(self, fn, q):

@@ -232,3 +232,16 @@ def test_control_messages_are_counted():
     text = status.render_text(_doc(_status(control_received=7, control_refused=2), None))
     assert "kernel drops 0  control messages 7 (refused 2)\n" in text
     assert "control messages" not in status.render_text(_doc(_status(), None))
+
+
+def test_the_targets_and_the_objective_before_and_after():
+    """Counts by what the targets correct and the objective's RMS as a length: 97 targets whose
+    commands scored (4 µm)^2 each and the targets (1 µm)^2, worked out by hand."""
+    s = _status(targets_full=90, targets_partial=5, targets_uncorrected=2, targets_worse=0,
+                objective_before=97 * 0.004 ** 2, objective_after=97 * 0.001 ** 2, direction_weight=100.0)
+    d = _doc(s, None)["daemons"][0]
+    assert d["objective"] == {"direction_weight_mm": 100.0, "full": 90, "partial": 5, "uncorrected": 2, "worse": 0,
+                              "before_sum_mm2": 97 * 0.004 ** 2, "after_sum_mm2": 97 * 0.001 ** 2}
+    text = status.render_text(_doc(s, None))
+    assert ("  corrects  full 90  partial 5  uncorrected 2  worse than the command 0  "
+            "objective RMS 4 µm -> 1 µm (direction at 100 mm)") in text
