@@ -18,8 +18,9 @@ import lcm_harness as h
 from common import HERE, MACHINE, PARAMS, toolpath
 
 CHAINCOMP = os.path.join(h.ROOT, ".venv", "bin", "chaincomp")
-COUNTERS = ("received", "published", "clamped", "held_back", "clamped_input", "seq_gaps", "seq_missing",
-            "stream_restarts", "resets", "kernel_drops", "own_targets_heard", "foreign_targets")
+COUNTERS = ("received", "published", "unpublished", "clamped", "held_back", "clamped_input", "seq_gaps",
+            "seq_missing", "queue_dropped", "stream_restarts", "resets", "kernel_drops", "own_targets_heard",
+            "foreign_targets")
 REASONS = ("undecodable", "wrong machine", "wrong axis count", "non-finite", "out of limits",
            "step too large", "duplicate seq", "out-of-order seq", "compensation failed")
 AXIS_UNITS = (("X", 1000.0, "um"), ("Y", 1000.0, "um"), ("Z", 1000.0, "um"),
@@ -105,7 +106,11 @@ def main() -> int:
     for instance, final in finals.items():
         h.print_losses(final)
         got = shown[instance]
-        assert got["counters"] == {k: getattr(final, k) for k in COUNTERS}, (got["counters"], final.__dict__)
+        assert got["counters"] == {k: getattr(final, k) for k in COUNTERS}, got["counters"]
+        assert got["receipt_latency_ns"] == {"p50": final.receipt_p50_ns, "p99": final.receipt_p99_ns,
+                                             "max": final.receipt_max_ns}
+        # waiting included: never less than the compute time of the same commands' window
+        assert final.receipt_p50_ns >= final.latency_p50_ns > 0
         assert got["rejected"] == dict(zip(REASONS, final.rejected)), got["rejected"]
         assert got["latency_ns"] == {"window": final.window, "p50": final.latency_p50_ns, "p99": final.latency_p99_ns,
                                      "p999": final.latency_p999_ns, "max": final.latency_max_ns}

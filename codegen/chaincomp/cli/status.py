@@ -29,8 +29,9 @@ PARAMS_REASONS = ("undecodable", "wrong machine", "another instance", "bad count
                   "repeated name", "non-finite", "out of bound", "stale seq", "too frequent")
 # lcmt_chaincomp_status.readings_refused[i] (runtime/include/chaincomp/thermal.hpp)
 READING_REASONS = ("undecodable", "wrong machine", "bad value", "time not increasing")
-COUNTERS = ("received", "published", "clamped", "held_back", "clamped_input", "seq_gaps", "seq_missing",
-            "stream_restarts", "resets", "kernel_drops", "own_targets_heard", "foreign_targets")
+COUNTERS = ("received", "published", "unpublished", "clamped", "held_back", "clamped_input", "seq_gaps",
+            "seq_missing", "queue_dropped", "stream_restarts", "resets", "kernel_drops", "own_targets_heard",
+            "foreign_targets")
 FLAGS = ((1, "compensating"), (2, "ramping"), (4, "clamped"), (8, "residual"), (16, "clamped input"))
 
 
@@ -189,6 +190,11 @@ def describe(status, heard_at: float, period: float | None, target, axes, now: f
                       "after_sum_mm2": s.objective_after},
         "latency_ns": {"window": s.window, "p50": s.latency_p50_ns, "p99": s.latency_p99_ns,
                        "p999": s.latency_p999_ns, "max": s.latency_max_ns},
+        # from LCM's receive stamp to the target published: the waiting in the queues too
+        "receipt_latency_ns": {"p50": s.receipt_p50_ns, "p99": s.receipt_p99_ns, "max": s.receipt_max_ns},
+        # LCM's user-space queues: their capacity, and how often a message found its queue full
+        "queues": {"commands": {"capacity": s.queue_capacity, "found_full": s.queue_full},
+                   "control": {"capacity": s.control_queue_capacity, "found_full": s.control_queue_full}},
         "recv_buf_bytes": s.recv_buf_bytes, "foreign_instance": f"{s.foreign_instance & 0xFFFFFFFFFFFFFFFF:016x}",
         "model_hash": s.model_hash, "params_file": s.params_file, "params_hash": s.params_hash,
         "config_file": s.config_file, "allocations": s.allocations,
@@ -246,9 +252,11 @@ def render_text(doc: dict) -> str:
             f"status {d['status_age_s']:.1f} s ago",
             f"  commands  received {c['received']}  published {c['published']}  rejected {rejected}"
             + (f" ({reasons})" if reasons else "")
+            + (f"  unpublished {c['unpublished']}" if c["unpublished"] else "")
             + f"  clamped {c['clamped']} (held back {c['held_back']})  clamped input {c['clamped_input']}",
             f"  stream    seq gaps {c['seq_gaps']} ({c['seq_missing']} missing)  restarts {c['stream_restarts']}  "
-            f"resets {c['resets']}  kernel drops {c['kernel_drops']}"
+            f"resets {c['resets']}  kernel drops {c['kernel_drops']}  queue dropped {c['queue_dropped']} "
+            f"(full {d['queues']['commands']['found_full']} times, {d['queues']['commands']['capacity']} deep)"
             + (f"  control messages {d['control']['received']} (refused {d['control']['refused']})"
                if d["control"]["received"] else ""),
             f"  params    version {d['params_updates']['version']} (last seq {d['params_updates']['last_seq']})  "
@@ -261,7 +269,8 @@ def render_text(doc: dict) -> str:
             + (f" (last from instance {d['foreign_instance']})" if c["foreign_targets"] else ""),
             _objective_line(d["objective"], c["published"]),
             f"  latency   p50 {_us(lat['p50'])}  p99 {_us(lat['p99'])}  p99.9 {_us(lat['p999'])}  "
-            f"max {_us(lat['max'])}  (last {lat['window']} commands)" if lat["window"] else
+            f"max {_us(lat['max'])}  (last {lat['window']} commands)  receipt to publish p50 "
+            f"{_us(d['receipt_latency_ns']['p50'])}  p99 {_us(d['receipt_latency_ns']['p99'])}" if lat["window"] else
             "  latency   no command published yet",
         ]
         t = d["last_target"]
