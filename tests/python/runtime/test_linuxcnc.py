@@ -510,3 +510,45 @@ def test_realtime_component_takes_new_error_values_on_its_pins_bumplessly(rt_mod
     # (to the warm-started solve's last 1e-8 mm)
     np.testing.assert_allclose(corr[first_refused:], np.repeat(corr[-1][None, :], len(corr) - first_refused, axis=0),
                                rtol=0, atol=1e-7)
+
+
+WEIGHT_SCRIPT = """loadrt threads name1=t period1=1000000
+loadrt chaincomp_rt
+addf chaincomp-rt.update t
+start
+show param chaincomp-rt.direction-weight
+setp chaincomp-rt.direction-weight 25
+loadusr -w sleep 0.1
+show param chaincomp-rt.direction-weight
+setp chaincomp-rt.direction-weight 0.05
+loadusr -w sleep 0.1
+show param chaincomp-rt.direction-weight
+setp chaincomp-rt.direction-weight 20000
+loadusr -w sleep 0.1
+show param chaincomp-rt.direction-weight
+"""
+
+
+def test_realtime_component_takes_a_direction_weight_within_its_range(rt_module):
+    """The HAL parameter direction-weight starts at the documented default (100 mm), takes 25 mm,
+    and goes back to the value in use when set outside 0.1 .. 10000 mm (docs/guide/daemon.md)."""
+    import tempfile
+
+    folder = tempfile.mkdtemp(prefix="chaincomp-rt-weight-")
+    os.chmod(folder, 0o777)
+    script = os.path.join(folder, "weight.hal")
+    with open(script, "w") as f:
+        f.write(WEIGHT_SCRIPT)
+    os.chmod(script, 0o644)
+    cmd = ["halrun", "-f", script]
+    if os.geteuid() == 0:
+        cmd = ["runuser", "-u", cnc.USER, "--", *cmd]
+    with open(cnc.LOCK, "w") as lock:
+        import fcntl
+        fcntl.flock(lock, fcntl.LOCK_EX)  # halrun takes LinuxCNC's shared memory too
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=60, cwd=folder)
+    shutil.rmtree(folder, ignore_errors=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    # halcmd's rows: owner, type, direction, value, name
+    shown = [float(line.split()[3]) for line in proc.stdout.splitlines() if line.rstrip().endswith(".direction-weight")]
+    assert shown == [100.0, 25.0, 25.0, 25.0], proc.stdout
