@@ -177,6 +177,13 @@ int run_daemon(int argc, char** argv) {
                static_cast<long long>(k.clamped_input), static_cast<long long>(k.seq_gaps),
                static_cast<long long>(k.seq_missing), static_cast<long long>(k.stream_restarts),
                static_cast<long long>(k.resets), static_cast<long long>(node->kernel_drops()));
+  const auto& s = node->last_status();
+  std::fprintf(stderr, "chaincompd: accounted: unpublished %lld, queue dropped %lld (its queue found full %lld times); "
+               "latency: compute p50 %lld ns p99 %lld ns, receipt to publish p50 %lld ns p99 %lld ns (last %d)\n",
+               static_cast<long long>(s.unpublished), static_cast<long long>(s.queue_dropped),
+               static_cast<long long>(s.queue_full), static_cast<long long>(s.latency_p50_ns),
+               static_cast<long long>(s.latency_p99_ns), static_cast<long long>(s.receipt_p50_ns),
+               static_cast<long long>(s.receipt_p99_ns), s.window);
   node.reset();
   lcm_destroy(lcm);
   return 0;

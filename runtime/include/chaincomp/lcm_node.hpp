@@ -52,6 +52,7 @@ class LcmNode {
   LcmNode& operator=(const LcmNode&) = delete;
 
   void publish_status(bool final);
+  const chaincomp_lcm::lcmt_chaincomp_status& last_status() const { return status_msg_; }  // as last published
   // Take lcmt_params_update on the params channel and apply them through `updater` (which
   // changes the model this node compensates with); it outlives the node.
   void accept_params_updates(ParamsUpdater& updater);
