@@ -143,27 +143,22 @@ bool LogReader::next(LogEvent& ev) noexcept {
 }
 
 LogWriter::~LogWriter() {
-  std::string ignored;
-  if (fd_ >= 0) close(ignored);
+  if (fd_ >= 0) finish();  // not closed: file_ puts nothing in place
 }
 
 bool LogWriter::open(const std::string& path, std::string& error, bool direct) {
-  std::string ignored;
-  if (fd_ >= 0) close(ignored);
-  // Direct I/O where the filesystem takes it; plain writes otherwise.
-  fd_ = direct ? ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_DIRECT, 0644) : -1;
-  direct_ = fd_ >= 0;
-  if (fd_ < 0) fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd_ < 0) {
-    error = path + ": cannot create the log: " + std::strerror(errno);
-    return false;
-  }
+  if (fd_ >= 0) finish();
+  fd_ = -1;
+  if (!file_.open(path, error)) return false;
+  fd_ = file_.fd();
+  // Direct I/O where the filesystem takes it (a regular file); plain writes otherwise.
+  direct_ = direct && !file_.special() && fcntl(fd_, F_SETFL, fcntl(fd_, F_GETFL) | O_DIRECT) == 0;
   path_ = path;
   for (auto& b : buffers_) {
     if (!b) b.reset(static_cast<unsigned char*>(std::aligned_alloc(kBlock, kWriteBuffer)));
     if (!b) {
       error = path + ": no memory for the write buffers";
-      ::close(fd_);
+      file_.discard();
       fd_ = -1;
       return false;
     }
@@ -171,6 +166,7 @@ bool LogWriter::open(const std::string& path, std::string& error, bool direct) {
   filling_ = 0;
   used_ = written_ = 0;
   count_ = 0;
+  write_errno_ = 0;
   failed_ = invalid_ = false;
   handed_ = -1;
   stop_ = false;
@@ -211,6 +207,7 @@ bool LogWriter::write_all(const unsigned char* p, std::size_t n) noexcept {
       if (!direct_) continue;
     }
     if (k <= 0) {
+      write_errno_ = k < 0 ? errno : EIO;
       failed_ = true;
       break;
     }
@@ -253,8 +250,7 @@ bool LogWriter::write(std::int64_t timestamp, std::string_view channel, const vo
          append(data, static_cast<std::size_t>(datalen));
 }
 
-bool LogWriter::close(std::string& error) {
-  if (fd_ < 0) return true;
+void LogWriter::finish() noexcept {
   // direct I/O writes whole blocks: the last one padded, the file then cut to its length
   const std::size_t padded = direct_ ? (used_ + kBlock - 1) / kBlock * kBlock : used_;
   if (padded > 0) {
@@ -267,12 +263,27 @@ bool LogWriter::close(std::string& error) {
   }
   cv_.notify_all();
   writer_.join();
-  if (!failed_ && padded != used_ && ftruncate(fd_, static_cast<off_t>(written_ + used_)) != 0) failed_ = true;
-  if (::close(fd_) != 0) failed_ = true;
+  if (!failed_ && padded != used_ && ftruncate(fd_, static_cast<off_t>(written_ + used_)) != 0) {
+    write_errno_ = errno;
+    failed_ = true;
+  }
+}
+
+bool LogWriter::close(std::string& error) {
+  if (fd_ < 0) return true;
+  finish();
   fd_ = -1;
-  if (failed_) error = path_ + ": writing the log failed (disk full?)";
-  else if (invalid_) error = path_ + ": an event with an empty or too long channel, or a negative length, was refused";
-  return !failed_ && !invalid_;
+  if (failed_) {
+    file_.discard();
+    error = path_ + ": cannot write: " + std::strerror(write_errno_);
+    return false;
+  }
+  if (invalid_) {
+    file_.discard();
+    error = path_ + ": an event with an empty or too long channel, or a negative length, was refused";
+    return false;
+  }
+  return file_.commit(error);
 }
 
 }  // namespace chaincomp

@@ -1,9 +1,11 @@
 // chaincomp_replay: runs every command of an lcm-logger log through the daemon's compensator
 // (the same compiled code, the same runtime settings) and writes a corrected log and/or a CSV.
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <charconv>
 #include <chrono>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -16,6 +18,7 @@
 #include "chaincomp/event_log.hpp"
 #include "chaincomp/loaded_model.hpp"
 #include "chaincomp/lcm_node.hpp"
+#include "chaincomp/output_file.hpp"
 #include "chaincomp/params_io.hpp"
 #include "chaincomp/params_update.hpp"
 #include "chaincomp_lcm/lcmt_chaincomp_status.hpp"
@@ -164,9 +167,12 @@ int run_replay(int argc, char** argv) {
   chaincomp::LogWriter out;
   const bool write_log = !out_path.empty();
   if (write_log && !out.open(out_path, error)) return fail(error);
+  chaincomp::OutputFile csv_file;  // the CSV by the one writer's rules; stdio on a copy of its descriptor
   std::FILE* csv = nullptr;
-  if (!csv_path.empty() && !(csv = std::fopen(csv_path.c_str(), "w"))) {
-    return fail(csv_path + ": cannot create the CSV file");
+  if (!csv_path.empty()) {
+    if (!csv_file.open(csv_path, error)) return fail(error);
+    const int fd = dup(csv_file.fd());
+    if (fd < 0 || !(csv = fdopen(fd, "w"))) return fail(csv_path + ": cannot write: " + std::strerror(errno));
   }
   const int n = entry->info->num_axes;
   if (csv) {
@@ -304,11 +310,12 @@ int run_replay(int argc, char** argv) {
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   list_damage();
-  if (write_log && !out.close(error)) return fail(error);
-  if (csv) {
+  if (csv) {  // both written out before either is put in place
     const bool write_failed = std::ferror(csv) != 0;  // a failed fwrite of any line
-    if (std::fclose(csv) != 0 || write_failed) return fail(csv_path + ": writing the CSV file failed (disk full?)");
+    if (std::fclose(csv) != 0 || write_failed) return fail(csv_path + ": cannot write: " + std::strerror(errno));
   }
+  if (write_log && !out.close(error)) return fail(error);
+  if (csv && !csv_file.commit(error)) return fail(error);
 
   const auto& k = comp.counters();
   long long rejected = 0;

@@ -2,6 +2,7 @@
 #include <catch2/catch.hpp>
 #include <lcm/eventlog.h>
 
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cstdio>
@@ -9,6 +10,7 @@
 #include <vector>
 
 #include "chaincomp/event_log.hpp"
+#include "chaincomp/output_file.hpp"
 
 namespace {
 
@@ -94,13 +96,9 @@ TEST_CASE("the writer refuses an event no reader would take, and says so on clos
   CHECK_FALSE(out.write(4, "GOOD", data, -1));
   CHECK_FALSE(out.close(error));
   CHECK(error.find("refused") != std::string::npos);
-  chaincomp::LogReader in;
-  REQUIRE(in.open(path, error));
-  chaincomp::LogEvent ev;
-  int events = 0;
-  while (in.next(ev)) ++events;
-  CHECK(events == 1);  // the good event, and nothing of the refused ones
-  CHECK(in.damage().empty());
+  // a log that lost events is not put in place (output_file.hpp): no file, whole or partial
+  struct stat st {};
+  CHECK(::stat(path.c_str(), &st) != 0);
   std::remove(path.c_str());
 }
 
@@ -176,4 +174,56 @@ TEST_CASE("a log cut short or replaced while it is read ends cleanly (no SIGBUS)
     CHECK(in.damage()[0].offset + in.damage()[0].bytes == 5ull * (1 << 20) + 13);
   }
   std::remove(path.c_str());
+}
+
+// The one writer (output_file.hpp), by POSIX's rules: rename(2) replaces the name it is given,
+// so a temporary file renamed over a link's target leaves the link; a writer that never
+// commits must leave the target and its folder as they were.
+TEST_CASE("OutputFile: nothing in place until commit; links kept, a dangling one created where it points",
+          "[output_file]") {
+  char dir_template[] = "/tmp/chaincomp_output_XXXXXX";
+  REQUIRE(mkdtemp(dir_template) != nullptr);
+  const std::string dir = dir_template, target = dir + "/target", link = dir + "/link";
+  auto read = [](const std::string& p) {
+    std::string s;
+    if (std::FILE* f = std::fopen(p.c_str(), "rb")) {
+      char buf[64];
+      for (std::size_t n; (n = std::fread(buf, 1, sizeof buf, f)) > 0;) s.append(buf, n);
+      std::fclose(f);
+    }
+    return s;
+  };
+  auto entries = [&]() {
+    int n = 0;
+    for (const char* name : {"target", "link"}) {
+      struct stat st {};
+      n += ::lstat((dir + "/" + name).c_str(), &st) == 0;
+    }
+    return n;
+  };
+  std::string error;
+  REQUIRE(::symlink("target", link.c_str()) == 0);  // dangling: nothing at target yet
+  {
+    chaincomp::OutputFile out;
+    REQUIRE(out.open(link, error));
+    REQUIRE(::write(out.fd(), "abandoned", 9) == 9);
+  }  // not committed
+  CHECK(entries() == 1);  // the link alone: no target, no temporary file
+  {
+    chaincomp::OutputFile out;
+    REQUIRE(out.open(link, error));
+    REQUIRE(::write(out.fd(), "new", 3) == 3);
+    REQUIRE(out.commit(error));
+  }
+  struct stat st {};
+  REQUIRE(::lstat(link.c_str(), &st) == 0);
+  CHECK(S_ISLNK(st.st_mode));
+  CHECK(read(target) == "new");
+  CHECK(entries() == 2);
+  chaincomp::OutputFile folder;
+  CHECK_FALSE(folder.open(dir, error));  // a folder is not written into
+  CHECK(error == dir + ": cannot write: Is a directory");
+  std::remove(link.c_str());
+  std::remove(target.c_str());
+  CHECK(::rmdir(dir.c_str()) == 0);  // empty: no temporary file was left
 }

@@ -17,6 +17,8 @@
 #include <string_view>
 #include <vector>
 
+#include "chaincomp/output_file.hpp"
+
 namespace chaincomp {
 
 struct LogEvent {
@@ -89,12 +91,16 @@ class LogWriter {
   LogWriter& operator=(const LogWriter&) = delete;
   ~LogWriter();
 
-  // `direct`: try direct I/O first (tests turn it off to cover the plain path).
+  // `direct`: try direct I/O first (tests turn it off to cover the plain path). The log is
+  // written by OutputFile's rules: a temporary file put in place by close(), or a pipe or
+  // device written into.
   bool open(const std::string& path, std::string& error, bool direct = true);
   // false once a write has failed (the disk is full...), or for an event no reader would
   // take (empty or 1000+ byte channel, negative length, refused): see close().
   bool write(std::int64_t timestamp, std::string_view channel, const void* data, std::int32_t datalen) noexcept;
-  // Writes what is buffered and closes; false with `error` if any write failed.
+  // Writes what is buffered and puts the log in place; false with `error` if any write failed
+  // or an event was refused, and then nothing is put in place. The destructor of a writer not
+  // closed puts nothing in place either.
   bool close(std::string& error);
 
  private:
@@ -106,8 +112,11 @@ class LogWriter {
   void hand_over(std::size_t n) noexcept;  // the filled buffer to the writer thread
   void write_loop() noexcept;              // the writer thread
   bool write_all(const unsigned char* p, std::size_t n) noexcept;
+  void finish() noexcept;  // the buffered bytes written, the writer thread ended
 
-  int fd_ = -1;
+  OutputFile file_;
+  int fd_ = -1;                // file_'s descriptor while open
+  int write_errno_ = 0;        // the failed write's errno (the writer thread's; read after join)
   std::atomic<bool> direct_{false};  // the writer thread may fall back to plain writes
   std::string path_;
   std::unique_ptr<unsigned char, Free> buffers_[2];  // kWriteBuffer bytes each, block-aligned
