@@ -111,8 +111,8 @@ TEST_CASE("a kept workspace onto a rejecting table's end: outside exactly beyond
     const double s = k < 2000 ? k : 4000 - k;
     double cmd[5] = {99.0 + 7.5e-4 * s, 10.0, -50.0, 0.02 * std::cos(0.003 * k), 0.4 + 1e-3 * k};
     double warm[5], cold[5], rw[2], rc[2], actual[6], target[6];
-    const int sw = e->compensate(model, ws, cmd, warm, rw);
-    const int sc = e->compensate(model, nullptr, cmd, cold, rc);
+    const int sw = e->compensate(model, ws, cmd, chaincomp::kDefaultDirectionWeight, warm, rw, nullptr);
+    const int sc = e->compensate(model, nullptr, cmd, chaincomp::kDefaultDirectionWeight, cold, rc, nullptr);
     INFO("command " << k << " X " << cmd[0]);
     REQUIRE(sw == sc);
     if (cmd[0] > 100) {
