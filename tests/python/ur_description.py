@@ -1,7 +1,7 @@
 """Universal Robots' ROS 2 description in numpy and text, written here from its source: the truth
 the UR calibration tests compare chaincomp against. Never import chaincomp here.
 
-UniversalRobots/Universal_Robots_ROS2_Description (BSD-3-Clause): config/ur5e/default_kinematics.yaml
+UniversalRobots/Universal_Robots_ROS2_Description (BSD-3-Clause): config/ur5e/ and ur3e/default_kinematics.yaml
 for the numbers; urdf/inc/ur_common.xacro (read_model_data) and urdf/ur_macro.xacro for their
 meaning: each entry of the kinematics file is the <origin xyz rpy> of one of the six joints,
 each turning about its z, after base_link -> base_link_inertia (rpy 0 0 pi) and before
@@ -24,6 +24,11 @@ UR5E = {"shoulder": (0, 0, 0.1625, 0, 0, 0), "upper_arm": (0, 0, 0, 1.570796327,
         "wrist_2": (0, -0.0997, -2.044881182297852e-11, 1.570796327, 0, 0),
         "wrist_3": (0, 0.09959999999999999, -2.042830148012698e-11, 1.570796326589793, 3.141592653589793,
                     3.141592653589793)}
+# config/ur3e/default_kinematics.yaml
+UR3E = {"shoulder": (0, 0, 0.15185, 0, 0, 0), "upper_arm": (0, 0, 0, 1.570796327, 0, 0),
+        "forearm": (-0.24355, 0, 0, 0, 0, 0), "wrist_1": (-0.2132, 0, 0.13105, 0, 0, 0),
+        "wrist_2": (0, -0.08535, -1.750557762378351e-11, 1.570796327, 0, 0),
+        "wrist_3": (0, 0.0921, -1.8890025766262e-11, 1.570796326589793, 3.141592653589793, 3.141592653589793)}
 TOOL = (30.0, -20.0, 120.0)   # mm in tool0
 
 
