@@ -6,6 +6,7 @@ from __future__ import annotations
 import shlex
 import sys
 
+from ..analysis.calibration_report import write_report
 from ..errors import ChaincompError
 from ..measure import probe as P
 from ..measure.calibration import _write_loadable
@@ -15,6 +16,7 @@ from ..model.machine import Symbol
 from ..model.params import parse_value
 from ..model.units import UNITS
 from ..output import write_files
+from .calibration_report import calibration_of_probe, check_report
 from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, add_seed_argument,
                      check_output, length, load, names, number, to_json)
 from .probe_simulate import add_sphere_arguments, run_simulate, sphere_of
@@ -84,6 +86,10 @@ def add_parser(sub) -> None:
     f.add_argument("-o", "--output", metavar="params.yaml",
                    help="write the identified errors as a params file of the machine (the sphere left out), for "
                         "eval, export and chaincompd; never one of the inputs")
+    f.add_argument("--report", metavar="OUT.html",
+                   help="also write a calibration report: one self-contained HTML file (set-up, the positions "
+                        "probed, each centre's residual before and after, dispersion per rotary axis, values with "
+                        "uncertainties and correlations, backlash, what a sphere cannot see, figures)")
     add_format_argument(f)
     f.set_defaults(run=run_fit)
 
@@ -145,7 +151,7 @@ def run_plan(args) -> int:
                        "touches": len(plan.touches), "condition_number": f.condition, "rank": f.rank,
                        "uncertainty_per_um": {n: {"value": g, "unit": u} for n, (g, u) in P.noise_gain(f).items()},
                        "unidentifiable": P.gauge_explanations(machine, plan.valuation),
-                       "units": "internal (mm, rad)", "written": list(files)}))
+                       "units": "internal (mm, rad)", "notes": plan.notes, "written": list(files)}))
     else:
         print(P.plan_text(plan, list(files)))
     return 0
@@ -155,6 +161,7 @@ def run_fit(args) -> int:
     machine = load(args.machine)
     sphere = sphere_of(machine, args)
     check_output(args.output, args.machine, args.plan, args.hold, *args.logs)
+    check_report(args.report, args.output, args.machine, args.plan, args.hold, *args.logs)
     tolerance = length(machine, "--radius-tolerance", args.radius_tolerance, positive=True)
     plan = P.read_plan(args.plan, machine) if args.plan else None
     assume = check_errors(machine, names(",".join(args.assume_zero)), "--assume-zero")
@@ -167,4 +174,8 @@ def run_fit(args) -> int:
         _write_loadable(args.output, params_yaml(P.production_fit(pf), f"sphere probing: {source}", held), machine)
         if args.format == "text":
             print(f"wrote {args.output}")
+    if args.report:
+        write_report(args.report, calibration_of_probe(pf, source))
+        if args.format == "text":
+            print(f"wrote {args.report}")
     return 0

@@ -285,66 +285,92 @@ def valuation(machine: Machine, axes: Axes, sphere: Sphere, positions: list[dict
 def make_plan(machine: Machine, sphere: Sphere, positions: list[dict] | None = None,
               per_axis: int = DEFAULT_PER_AXIS, backlash_step: float = 0.0,
               clearance: float = DEFAULT_CLEARANCE, held: dict | None = None, assume_zero=()) -> Plan:
-    """The rotary positions (given, or the default grid) with their touches, every one within
-    the axes' limits; refused (NoAnswer) when the set is near-singular."""
+    """The rotary positions with their touches. Of the default grid, a position some touch of
+    which would leave an axis' limits is left out (a note says which); given positions must all
+    be reachable. Refused (NoAnswer) when the set is near-singular."""
     held = held or {}
     axes = machine_axes(machine)
     model = HeldModel(machine, held)
-    if positions is None:
+    given = positions is not None
+    if not given:
         positions = default_positions(axes, per_axis, backlash_step)
-    if len(positions) < 2:
-        raise ChaincompError("a plan needs at least two rotary positions")
     k = len(positions)
     rot = {a.name: np.array([p[a.name] for p in positions]) for a in axes.rotary}
     s0 = np.array(sphere.centre, float)
-    value = valuation(machine, axes, sphere, positions, held, assume_zero)
-    centres = value.centres
+    centres = inverse_kinematics(machine, model, axes, rot, np.tile(s0, (k, 1)))
     # the tool's direction in the workpiece frame (up the spindle), at each position
     vals = {a.name: centres[:, i] for i, a in enumerate(axes.linear)}
     vals.update(rot)
     frames = np.broadcast_to(pose_frames(machine, model, vals, held), (k, 9))
     up = frames[:, 3:6] if machine.direction is not None else np.tile([0.0, 0.0, 1.0], (k, 1))
     # the tool axis' linear axis: the one moving the tool point most along the tool direction
-    move = np.array([np.broadcast_to(pose_points(machine, model, {**vals, a.name: vals[a.name] + 1.0}, held),
-                                     (k, 3))[0] - np.broadcast_to(pose_points(machine, model, vals, held), (k, 3))[0]
-                     for a in axes.linear])
-    along = move @ up[0]
-    tool_axis = axes.linear[int(np.argmax(np.abs(along)))]
-    lo, hi = tool_axis.limits
-    retract = (tool_axis.name, tool_axis.to_internal(hi if along[int(np.argmax(np.abs(along)))] > 0 else lo))
+    here = np.broadcast_to(pose_points(machine, model, vals, held), (k, 3))[0]
+    along = np.array([(np.broadcast_to(pose_points(machine, model, {**vals, a.name: vals[a.name] + 1.0}, held),
+                                       (k, 3))[0] - here) @ up[0] for a in axes.linear])
+    j = int(np.argmax(np.abs(along)))
+    tool_axis = axes.linear[j]
+    retract = (tool_axis.name, tool_axis.to_internal(tool_axis.limits[1] if along[j] > 0 else tool_axis.limits[0]))
+    kept, touches, notes = [], [], []
+    for i, pos in enumerate(positions):
+        these = _touches_at(machine, model, axes, sphere, pos, up[i], clearance, backlash_step, len(kept))
+        outside = _outside(machine, axes, these, backlash_step)
+        if outside:
+            where = (f"position {i + 1} ({_where(machine, axes, pos)}) would take {outside[0]} to {outside[1]:g} "
+                     f"{machine.symbol(outside[0]).unit.name}, outside its limits {list(machine.symbol(outside[0]).limits)}")
+            if given:
+                raise ChaincompError(f"--positions: {where}; move the sphere (--sphere) or choose other positions")
+            notes.append(f"left out: {where}")
+            continue
+        kept.append(pos)
+        touches += these
+    if len(kept) < 2:
+        raise ChaincompError(f"{len(kept)} rotary positions within the limits; at least two are needed"
+                             + (f" ({notes[0]}{' and more' if len(notes) > 1 else ''})" if notes else "")
+                             + ": move the sphere (--sphere) or give positions (--positions)")
+    value = valuation(machine, axes, sphere, kept, held, assume_zero)
+    plan = Plan(machine, sphere, axes, kept, touches, retract, value, backlash_step, notes)
+    _refuse_singular(value.fit, f"these {len(kept)} positions", gain=noise_gain(value.fit))
+    return plan
+
+
+def _touches_at(machine, model, axes: Axes, sphere: Sphere, pos: dict, up: np.ndarray, clearance: float,
+                backlash_step: float, index: int) -> list[Touch]:
+    """A position's touches (TOUCHES around the tool direction ``up``), each approach's."""
+    s0 = np.array(sphere.centre, float)
     h = sphere.contact + clearance
-    touches: list[Touch] = []
-    approaches = ("+", "-") if backlash_step > 0 else ("+",)
-    for i in range(k):
-        kz = up[i] / np.linalg.norm(up[i])
-        e1 = np.cross(kz, [1.0, 0, 0] if abs(kz[0]) < 0.9 else [0, 1.0, 0])
-        e1 /= np.linalg.norm(e1)
-        e2 = np.cross(kz, e1)
-        dirs = [math.cos(lat) * (math.cos(az) * e1 + math.sin(az) * e2) + math.sin(lat) * kz for lat, az in TOUCHES]
-        # per touch: above the start (clear of the sphere), the start, the target past the surface
-        pts = []
-        for d in dirs:
-            start = s0 + h * d
-            pts += [start + h * kz, start, s0 + (sphere.contact - clearance) * d]
-        lin = inverse_kinematics(machine, model, axes, {n: v[i] for n, v in rot.items()}, np.array(pts))
-        for approach in approaches:
-            for t in range(len(dirs)):
-                start = {a.name: lin[3 * t + 1, j] for j, a in enumerate(axes.linear)}
-                start.update(positions[i])
-                touches.append(Touch(i, approach, start, lin[3 * t + 2], lin[3 * t]))
+    kz = up / np.linalg.norm(up)
+    e1 = np.cross(kz, [1.0, 0, 0] if abs(kz[0]) < 0.9 else [0, 1.0, 0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(kz, e1)
+    dirs = [math.cos(lat) * (math.cos(az) * e1 + math.sin(az) * e2) + math.sin(lat) * kz for lat, az in TOUCHES]
+    # per touch: above the start (clear of the sphere), the start, the target past the surface
+    pts = []
+    for d in dirs:
+        start = s0 + h * d
+        pts += [start + h * kz, start, s0 + (sphere.contact - clearance) * d]
+    lin = inverse_kinematics(machine, model, axes, pos, np.array(pts))
+    out = []
+    for approach in ("+", "-") if backlash_step > 0 else ("+",):
+        for t in range(len(dirs)):
+            start = {a.name: lin[3 * t + 1, j] for j, a in enumerate(axes.linear)}
+            start.update(pos)
+            out.append(Touch(index, approach, start, lin[3 * t + 2], lin[3 * t]))
+    return out
+
+
+def _outside(machine: Machine, axes: Axes, touches: list[Touch], backlash_step: float):
+    """(axis, value in its declared unit) of the first value of these touches (their starts,
+    targets and points above, the rotary axes' backlash approach) beyond an axis' limits."""
     for t in touches:
         for a in machine.axes:
-            at = [t.start[a.name]] + ([t.target[axes.linear.index(a)], t.above[axes.linear.index(a)]]
-                                      if a in axes.linear else [])
-            worst = max((a.from_internal(x) for x in at), key=lambda x: max(x - a.limits[1], a.limits[0] - x))
-            if not a.limits[0] - 1e-9 <= worst <= a.limits[1] + 1e-9:
-                raise ChaincompError(f"the plan leaves {a.name}'s limits [{a.limits[0]:g}, {a.limits[1]:g}] "
-                                     f"{a.unit.name} at position {t.position + 1} "
-                                     f"({_where(machine, axes, positions[t.position])}): {a.name} would be "
-                                     f"{worst:g}; move the sphere (--sphere) or choose other positions (--positions)")
-    plan = Plan(machine, sphere, axes, positions, touches, retract, value, backlash_step)
-    _refuse_singular(value.fit, f"these {k} positions", gain=noise_gain(value.fit))
-    return plan
+            if a in axes.linear:
+                at = [t.start[a.name], t.target[axes.linear.index(a)], t.above[axes.linear.index(a)]]
+            else:
+                at = [t.start[a.name] + s * backlash_step for s in (-1, 0, 1)]
+            for x in (a.from_internal(v) for v in at):
+                if not a.limits[0] - 1e-9 <= x <= a.limits[1] + 1e-9:
+                    return a.name, x
+    return None
 
 
 def noise_gain(fit: Fit) -> dict[str, tuple[float, str]]:
@@ -864,6 +890,8 @@ def to_json(pf: ProbeFit, source: str) -> dict:
         "estimates": {n: {"value": f.estimates[n], "uncertainty": f.uncertainties[n]} for n in names
                       if n not in NUISANCE},
         "correlations": [{"errors": [a, b], "value": c} for a, b, c in f.correlations],
+        "correlation_matrix": None if f.correlation is None else {   # of the estimates, the sphere's too
+            "names": list(f.estimates), "values": [list(map(float, r)) for r in f.correlation]},
         "unidentifiable": pf.gauge,
         "held": {n: (v if isinstance(v, float) else "varying") for n, v in pf.held.items()},
         "assumed_zero": [n for n in f.assumed_zero if n not in pf.held],
@@ -923,6 +951,7 @@ def plan_text(plan: Plan, outputs: list[str]) -> str:
     if gauge:
         lines.append("not identifiable by probing a sphere (gauge freedoms, fixed at 0 by the fit):")
         lines += [f"  {why}" for why in gauge.values()]
+    lines += [f"note: {n}" for n in plan.notes]
     lines += [f"wrote {o}" for o in outputs]
     return "\n".join(lines)
 
