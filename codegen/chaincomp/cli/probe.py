@@ -24,8 +24,8 @@ from .probe_simulate import add_sphere_arguments, run_simulate, sphere_of
 
 def _hold_argument(p) -> None:
     p.add_argument("--hold", metavar="P.yaml",
-                   help="hold the errors (and constants) this params file gives at its values, tables included "
-                        "(e.g. the linear axes' from a laser calibration): not fitted")
+                   help="hold the errors this params file gives at its values, tables along an axis included "
+                        "(e.g. the linear axes' from a laser calibration): not fitted, and written as given with -o")
 
 
 def add_parser(sub) -> None:

@@ -1249,7 +1249,11 @@ def held_values(machine, path: str | None, assume_zero=()) -> dict:
     read); an error both held and assumed zero is refused."""
     if not path:
         return {}
-    held = {n: v for n, v in load_params(path, machine).items() if machine.symbol(n).role == "error"}
+    held = load_params(path, machine)
+    constants = [n for n in held if machine.symbol(n).role != "error"]
+    if constants:
+        raise ChaincompError(f"--hold {path}: {constants[0]} is a constant of {machine.name}, not an error: --hold "
+                             f"takes errors (a constant's value belongs in the machine file)")
     both = [n for n in held if n in assume_zero]
     if both:
         raise ChaincompError(f"--hold {path}: {both[0]} is also assumed zero (--assume-zero): give it once")

@@ -72,3 +72,9 @@ def test_hold_and_assume_zero_of_one_error(tmp_path):
     err = refused(tmp_path, "probe", "plan", NUTATING, *SPHERE, "--hold", str(tmp_path / "h.yaml"),
                   "--assume-zero", "EX0C")
     assert "EX0C is also assumed zero" in err
+
+
+def test_hold_of_a_constant(tmp_path):
+    (tmp_path / "h.yaml").write_text("machine: nutating_bc45\nvalues:\n  L: 90 mm\n")
+    err = refused(tmp_path, "probe", "plan", NUTATING, *SPHERE, "--hold", str(tmp_path / "h.yaml"))
+    assert "L is a constant of nutating_bc45, not an error" in err
