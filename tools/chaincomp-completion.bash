@@ -159,7 +159,7 @@ _chaincomp() {
             probe) words='plan fit simulate';;
             --per-axis) words='2 3 4 5 6 7 8 9 10 11 12';;
             --format) words='text json';;
-            *) words='-h --help --sphere --radius --stylus --positions --per-axis --backlash-step --clearance --feed --log-name --gcode --csv --hold --assume-zero --format --json --plan --radius-tolerance -o --output --params --noise --backlash --seed'; [[ $cur == -* ]] || return 0;;
+            *) words='-h --help --sphere --radius --stylus --positions --per-axis --backlash-step --clearance --feed --log-name --gcode --csv --hold --assume-zero --format --json --plan --radius-tolerance -o --output --report --params --noise --backlash --seed'; [[ $cur == -* ]] || return 0;;
           esac;;
         *) return 0;;
         esac

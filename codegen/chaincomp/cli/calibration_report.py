@@ -1,5 +1,5 @@
-"""identify's fit as the numbers of a calibration report (analysis.calibration_report): what a
-verb that fits a machine's errors hands to ``--report FILE.html``."""
+"""A fit as the numbers of a calibration report (analysis.calibration_report): what identify and
+probe fit hand to ``--report OUT.html``."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ import numpy as np
 from ..analysis.calibration_report import Calibration, Dispersion, Residual, Value
 from ..errors import ChaincompError
 from ..measure.identify import COMPONENTS, OBSERVED, Fit, Table, _shown
+from ..measure.probe import NUISANCE, ProbeFit
 from ..model.display import display_unit
 from .common import check_output
 
@@ -89,3 +90,58 @@ def calibration_of(fit: Fit, table: Table, setup: list[tuple[str, str]], units: 
         "axis here, as KinematicsOpt's measured and optimised dispersion).",
         dispersion, values, fit.correlation.tolist() if fit.correlation is not None else None, not_seen,
         summary, warnings)
+
+
+def calibration_of_probe(pf: ProbeFit, source: str, units: str = "people") -> Calibration:
+    """The report's numbers of a probing fit: per rotary position the distance of its sphere
+    centre from where the model puts the sphere, before the fit (every error zero or held, the
+    sphere where it fits best) and after it; per rotary axis KinematicsOpt's dispersion (the
+    largest distance between two centres as that axis turns alone). The sphere's own offset is
+    a nuisance parameter: in the summary, not among the values."""
+    f, m = pf.fit, pf.machine
+    unit, angle = display_unit("length", units), display_unit("angle", units)
+    rotary = list(pf.positions[0]) if pf.positions else []
+
+    def at(p: dict) -> str:
+        return ", ".join(f"{n} = {m.symbol(n).from_internal(v):.6g} {m.symbol(n).unit.name}" for n, v in p.items())
+
+    residuals = [Residual(at(p), float(np.linalg.norm(b)) / unit.to_internal, float(np.linalg.norm(a)) / unit.to_internal)
+                 for p, b, a in zip(pf.positions, pf.residuals_before, pf.residuals_after)]
+    dispersion = [Dispersion(k, b / unit.to_internal, a / unit.to_internal) for k, (b, a) in pf.dispersion.items()]
+    byname = {p.name: p for p in f.params}
+    names = list(f.estimates)
+    keep = [i for i, n in enumerate(names) if n not in NUISANCE]
+    values = []
+    for i in keep:
+        factor, u = _shown(f, byname[names[i]], units)
+        values.append(Value(names[i], f.estimates[names[i]] / factor, f.uncertainties[names[i]] / factor, u))
+    plan_columns = [f"{n} [{m.symbol(n).unit.name}]" for n in rotary] + ["approaches", "touches", "probed radius [mm]"]
+    plan = []
+    for p in pf.positions:
+        cs = [c for c in pf.centres if c.group.rotary == p]
+        plan.append([f"{m.symbol(n).from_internal(p[n]):.6g}" for n in rotary]
+                    + [" ".join(c.group.approach for c in cs), str(sum(len(c.group.points) for c in cs)),
+                       ", ".join(f"{c.radius:.4f}" for c in cs)])
+    summary = [("sphere centres", f"{len(pf.centres)} at {len(pf.positions)} rotary positions"),
+               ("rank, condition number", f"{f.rank}, {f.condition:.4g} (Jacobian columns scaled to unit norm)"),
+               ("rms centre residual after the fit", f"{f.rms / unit.to_internal:.4g} {unit.name}"),
+               ("sphere's offset from its nominal place (x, y, z)",
+                ", ".join(f"{x / unit.to_internal:.4g}" for x in pf.sphere_offset) + f" {unit.name}"),
+               ("Gauss-Newton", f"{'converged' if f.converged else 'NOT converged'} after {f.iterations} iterations "
+                                "on the exact model")]
+    summary += [(f"rotary backlash of {n}", f"{v / angle.to_internal:.4g} ± {s / angle.to_internal:.2g} {angle.name}")
+                for n, (v, s) in pf.backlash.items()]
+    setup = [("probe logs", source),
+             ("sphere's nominal centre", ", ".join(f"{x:g}" for x in pf.sphere.centre) + f" {m.length_unit}"),
+             ("sphere radius, stylus radius", f"{pf.sphere.radius:g} {m.length_unit}, {pf.sphere.stylus:g} "
+                                              f"{m.length_unit}"),
+             ("held at given values (--hold)", ", ".join(pf.held) or "none")]
+    not_seen = list(pf.gauge.items()) + [(n, "assumed zero (--assume-zero): not fitted")
+                                         for n in f.assumed_zero if n not in pf.held and n not in pf.gauge]
+    correlation = f.correlation[np.ix_(keep, keep)].tolist() if f.correlation is not None else None
+    return Calibration(
+        "chaincomp probe fit", m.name, now(), setup, plan_columns, plan, unit.name, residuals,
+        "Per rotary axis the largest distance between two sphere centres of positions that differ in that axis "
+        "alone (how far the sphere seemed to move as the axis turned: KinematicsOpt's measured and optimised "
+        "dispersion), and over all positions.",
+        dispersion, values, correlation, not_seen, summary, [f"note: {n}" for n in f.notes])

@@ -114,3 +114,34 @@ def test_values_are_the_params_files_and_the_unseen_are_named(noiseless):
     unseen = [r[0] for r in _table_after(page, "What these measurements could not see")]
     assert sorted(unseen) == ["DY", "ThetaAv"]
     assert np.isfinite([float(x) for x in re.findall(r"class=n>(-?[0-9.e+-]+)<", page)]).all()
+
+
+NUTATING_TRUTH = {"EU0B": 12, "EV0B": -8, "EAU0B": 15, "EAV0B": -10, "EX0C": 6, "EY0C": -9, "EA0C": 12, "EB0C": 20}
+
+
+def test_probe_fit_report_has_the_true_values_backlash_and_what_a_sphere_cannot_see(tmp_path):
+    """probe fit --report on the nutating table, probed (simulated, 1 µm) with known errors (µm,
+    arcsec), a backlash of B of 0.005 deg (18 arcsec) and the sphere 0.1, 0.2 mm off: the values are
+    those errors within 4 sigma, the backlash 18 arcsec within 4 sigma, and the two zero angles a
+    sphere cannot see (C's turns the part, B's is C's tilt about y: test_probe reasons both) are
+    named, not given a value."""
+    machine = machine_path("nutating_bc45")
+    sphere = ["--sphere", "50,30,80", "--radius", "12.5", "--stylus", "2"]
+    truth, plan, log, report = tmp_path / "t.yaml", tmp_path / "plan.csv", tmp_path / "probe.log", tmp_path / "r.html"
+    truth.write_text(yaml.safe_dump({"machine": "nutating_bc45", "values": NUTATING_TRUTH}))
+    cli("probe", "plan", machine, *sphere, "--backlash-step", "5", "--csv", plan)
+    cli("probe", "simulate", machine, plan, "--sphere", "50.1,30.2,80", "--radius", "12.5", "--stylus", "2",
+        "--params", truth, "--backlash", "B=0.005", "-o", log)
+    proc = cli("probe", "fit", machine, log, "--plan", plan, *sphere, "--report", report)
+    assert f"wrote {report}" in proc.stdout
+    page = report.read_text(encoding="utf-8")
+    shown = {r[0]: (float(r[1]), float(r[2])) for r in _table_after(page, "Identified values")}
+    assert set(shown) == set(NUTATING_TRUTH)
+    for name, (value, u) in shown.items():
+        assert abs(value - NUTATING_TRUTH[name]) <= 4 * u, name
+    backlash = re.search(r"rotary backlash of B</th><td>(\S+) ± (\S+) arcsec", page)
+    assert abs(float(backlash.group(1)) - 18.0) <= 4 * float(backlash.group(2))
+    assert sorted(r[0] for r in _table_after(page, "What these measurements could not see")) == ["EB0B", "EC0C"]
+    dispersion = {r[0]: (float(r[1]), float(r[2])) for r in _table_after(page, "Dispersion per axis")}
+    assert set(dispersion) == {"B", "C", "all"} and all(a < b / 5 for b, a in dispersion.values())
+    assert page.count("<svg") == 4

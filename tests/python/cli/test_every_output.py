@@ -113,6 +113,8 @@ CASES = [
          lambda i: ["probe", "simulate", NUTATING, i["probe_plan"], *SPHERE], "probe.txt"),
     Case("probe-fit", "probe fit", "--output", lambda i: ["probe", "fit", NUTATING, i["probe_log"], *SPHERE],
          "fit.yaml"),
+    Case("probe-fit-report", "probe fit", "--report", lambda i: ["probe", "fit", NUTATING, i["probe_log"], *SPHERE],
+         "r.html", kind="html"),
 ]
 IDS = [c.id for c in CASES]
 OUTPUT_OPTIONS = ("--output", "--plot", "--html", "--csv")
