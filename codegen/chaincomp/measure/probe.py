@@ -419,14 +419,15 @@ def gcode(plan: Plan, log_name: str, feed: float, command: str) -> str:
     lin = axes.linear
     letter = axes.letters
     zero = " ".join(f"{letter[a.name]}0" for a in m.axes)
-    out = [f"({gcode_comment(f'chaincomp probe plan for {m.name}: {command}')})",
-           f"({gcode_comment(f'{len(plan.positions)} rotary positions, {len(plan.touches)} touches; the sphere at ' + _sphere_text(plan.sphere))})",
+    out = [*_comments(f"chaincomp probe plan for {m.name}: {command}"),
+           *_comments(f"{len(plan.positions)} rotary positions, {len(plan.touches)} touches; the sphere at "
+                      + _sphere_text(plan.sphere)),
            "(the tool is the probe: the machine file's tool point at the stylus ball's centre)",
            "G21 G90 G94 G40 G49 G92.1",
            f"G10 L2 P9 {zero} (no work offset: G59.3 zeroed and used by this program only)",
            "G59.3",
            f"F{feed:.1f}",
-           f"(PROBEOPEN {gcode_comment(log_name)})"]
+           f"(PROBEOPEN {gcode_comment(log_name)[:GCODE_LINE - 12]})"]
     retract_axis, retract_to = plan.retract
     ra = m.symbol(retract_axis)
     last = None
@@ -434,7 +435,8 @@ def gcode(plan: Plan, log_name: str, feed: float, command: str) -> str:
         key = (t.position, t.approach)
         if key != last:
             pos = plan.positions[t.position]
-            out.append(f"({gcode_comment(f'position {t.position + 1} of {len(plan.positions)}: ' + _where(m, axes, pos) + (f', approach {t.approach}' if plan.backlash_step else ''))})")
+            out += _comments(f"position {t.position + 1} of {len(plan.positions)}: " + _where(m, axes, pos)
+                             + (f", approach {t.approach}" if plan.backlash_step else ""))
             out.append(f"G0 {letter[retract_axis]}{_gcode_value(ra, retract_to)}")
             if plan.backlash_step:
                 step = -plan.backlash_step if t.approach == "+" else plan.backlash_step
@@ -451,6 +453,16 @@ def gcode(plan: Plan, log_name: str, feed: float, command: str) -> str:
     out += [f"G0 {letter[retract_axis]}{_gcode_value(ra, retract_to)}", "(PROBECLOSE)", "M2", ""]
     # a move to where the probe already is (the top touch starts where it is above) is left out
     return "\n".join(line for k, line in enumerate(out) if k == 0 or line != out[k - 1])
+
+
+GCODE_LINE = 256   # LinuxCNC reads at most this many characters a line (G-code overview, "Format of a line")
+
+
+def _comments(text: str) -> list[str]:
+    """``text`` as G-code comment lines, each within GCODE_LINE characters."""
+    t = gcode_comment(text)
+    width = GCODE_LINE - 2
+    return [f"({t[i:i + width]})" for i in range(0, max(len(t), 1), width)]
 
 
 def _sphere_text(s: Sphere) -> str:

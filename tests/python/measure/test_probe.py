@@ -208,10 +208,13 @@ def test_gcode_program_touches_the_sphere(tmp_path):
     parentheses, PROBEOPEN/PROBECLOSE logging): every G38.2 move starts clear of the sphere and
     reaches the contact distance R + r before its end point, on the nominal model written here;
     the program zeroes and selects G59.3, cancels the tool length offset and ends with M2."""
-    ngc, csv = tmp_path / "plan.ngc", tmp_path / "plan.csv"
+    long = tmp_path / ("x" * 200)
+    long.mkdir()
+    ngc, csv = long / "plan.ngc", long / "plan.csv"      # a command line longer than a G-code line
     run_cli("probe", "plan", NUTATING, "--sphere", "50,30,80", "--radius", "12.5", "--stylus", "2",
             "--gcode", str(ngc), "--csv", str(csv), "--log-name", "cal(1).txt")
     lines = ngc.read_text().splitlines()
+    assert max(len(line) for line in lines) <= 256     # LinuxCNC's longest line ("Format of a line")
     assert "(PROBEOPEN cal[1].txt)" in lines and lines[-1] == "M2" and "(PROBECLOSE)" in lines
     assert "G59.3" in lines and any(line.startswith("G10 L2 P9 X0 Y0 Z0 B0 C0") for line in lines)
     assert any("G49" in line.split() for line in lines)
