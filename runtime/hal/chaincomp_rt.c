@@ -13,14 +13,16 @@
  *   chaincomp-rt.clamped             bit out    the correction was limited in size or rate
  *   chaincomp-rt.fault               bit out    the last command was refused: the correction is held
  *   chaincomp-rt.reject-reason       s32 out    -1, or why the last command was refused (chaincompd's reasons)
- *   chaincomp-rt.rejected            s32 out    commands refused so far
+ *   chaincomp-rt.rejected            s32 out    commands refused so far (the counters stop at 2^31-1)
  *   chaincomp-rt.status              s32 out    compensate's status of the last target (0 ok, 1 residual)
  *   chaincomp-rt.residual-point      float out  mm left at the last target (by the model)
  *   chaincomp-rt.cost-ns             s32 out    time of the last call (compensation included), ns
  *   chaincomp-rt.cost-max-ns         s32 out    largest cost-ns so far (write 0 to restart it)
  *   chaincomp-rt.error.NAME          float in   each constant error of the machine, in its declared unit (um,
  *                                               arcsec, ...), the params file's value at load
- *   chaincomp-rt.params-seq          s32 in     change it to apply every error pin at once (all or none)
+ *   chaincomp-rt.params-seq          s32 in     change it to apply every error pin at once (all or none); any
+ *                                               change is a new set (a pin holds a level: nothing to reorder or
+ *                                               replay, so no order to lock out; a restart from 1, a wrap)
  *   chaincomp-rt.params-version      s32 out    sets applied so far
  *   chaincomp-rt.params-refused      s32 out    sets refused so far
  *   chaincomp-rt.params-reason       s32 out    -1, or why the last set was refused (chaincompd's params reasons)
@@ -62,6 +64,11 @@ static int num_axes, num_errors;
 static hal_s32_t last_params_seq;
 static long long utime_ns;  /* command time: the sum of the servo periods */
 
+/* A counter pin one up, stopping at its largest value (s32 overflow is undefined). */
+static void count(hal_s32_t *n) {
+  if (*n < 0x7fffffff) *n += 1;
+}
+
 static void update(void *arg, long period) {
   double cmd[CCRT_MAX_AXES], corr[CCRT_MAX_AXES];
   struct ccrt_result r;
@@ -75,11 +82,7 @@ static void update(void *arg, long period) {
     last_params_seq = *pins->params_seq;
     for (i = 0; i < num_errors; ++i) values[i] = *pins->error[i];
     reason = ccrt_set_errors(values, utime_ns / 1000);
-    if (reason < 0) {
-      *pins->params_version += 1;
-    } else {
-      *pins->params_refused += 1;
-    }
+    count(reason < 0 ? pins->params_version : pins->params_refused);
     *pins->params_reason = reason;
   }
   if (pins->direction_weight != ccrt_direction_weight() && ccrt_set_direction_weight(pins->direction_weight) != 0)
@@ -94,7 +97,7 @@ static void update(void *arg, long period) {
     *pins->fault = 0;
   } else {
     *pins->fault = 1;  /* the last correction stays on the pins */
-    *pins->rejected += 1;
+    count(pins->rejected);
   }
   *pins->reject_reason = r.reject;
   *pins->ramp = r.ramp;

@@ -512,6 +512,52 @@ def test_realtime_component_takes_new_error_values_on_its_pins_bumplessly(rt_mod
                                rtol=0, atol=1e-7)
 
 
+# issue 39 item 6: a hostile params-seq (the largest s32, its wrap to the smallest) then a
+# restarted run from 1; a command jump (refused) then the stream followed again
+STREAM_SETS = [(2147483647, 24.0), (-2147483648, 12.0), (1, 30.0), (2, 18.0), (3, None)]  # None: the params file's
+STREAM_SCRIPT = HAL_HEAD.replace("CFG", "fffffsss") + """net version chaincomp-rt.params-version => sampler.0.pin.5
+net refused chaincomp-rt.params-refused => sampler.0.pin.6
+net rejected chaincomp-rt.rejected => sampler.0.pin.7
+{cmds}
+start
+loadusr -w sleep 0.2
+setp chaincomp-rt.enable 1
+loadusr -w sleep 0.8
+{sets}
+setp chaincomp-rt.joint.0.pos-cmd {jump}
+loadusr -w sleep 0.1
+setp chaincomp-rt.joint.0.pos-cmd {x}
+loadusr -w sleep 0.6
+loadusr -w {record}
+"""
+
+
+def test_realtime_component_is_not_locked_out_by_a_hostile_seq_or_a_restart(rt_module, machine, params):
+    """chaincomp_rt under halrun: params-seq set to 2^31-1, then wrapped to -2^31, then a run
+    restarted from 1: every change applies its set (none refused, nothing locked out), each
+    settling where the true machine with that set's values puts the tool on the nominal
+    point; a command jump past max_step is refused (with the step back) and the stream followed again."""
+    exx_um = params["EXX"] * 1e3
+    sets = "\n".join(f"setp chaincomp-rt.error.EXX {exx_um if v is None else v}\nsetp chaincomp-rt.params-seq {seq}\n"
+                     "loadusr -w sleep 0.25" for seq, v in STREAM_SETS)
+    rows = halrun_rows(STREAM_SCRIPT.replace("{sets}", sets), 2800)  # the first 2.8 s: the script sleeps 2.85 s
+    corr, version, refused, rejected = rows[:, 0:5] * 1e-6, rows[:, 5], rows[:, 6], rows[:, 7]
+    assert version[-1] == len(STREAM_SETS) and refused[-1] == 0
+    q = np.array(COMMAND)
+    for k, (_, v) in enumerate(STREAM_SETS):
+        # the last row of set k (before the next set, or before the jump for the last one)
+        end = int(np.argmax(version >= k + 2)) - 1 if k + 1 < len(STREAM_SETS) else int(np.argmax(rejected >= 1)) - 1
+        assert end > int(np.argmax(version >= k + 1)) + 100
+        values = dict(params, EXX=(params["EXX"] if v is None else v * 1e-3))
+        point, _ = cnc.tool_errors(machine, values, q[None, :], q[None, :] + corr[end][None, :])
+        assert np.linalg.norm(point) < 1e-6, (k, np.linalg.norm(point))
+    # a lone spike is refused and so is the step back from it (compensator.cpp: a jump is measured
+    # from the previous valid command, accepted or not), then the stream is followed again
+    assert rejected[-1] == 2
+    point, _ = cnc.tool_errors(machine, params, q[None, :], q[None, :] + corr[-1][None, :])
+    assert np.linalg.norm(point) < 1e-6
+
+
 WEIGHT_SCRIPT = """loadrt threads name1=t period1=1000000
 loadrt chaincomp_rt
 addf chaincomp-rt.update t
