@@ -145,3 +145,14 @@ def test_probe_fit_report_has_the_true_values_backlash_and_what_a_sphere_cannot_
     dispersion = {r[0]: (float(r[1]), float(r[2])) for r in _table_after(page, "Dispersion per axis")}
     assert set(dispersion) == {"B", "C", "all"} and all(a < b / 5 for b, a in dispersion.values())
     assert page.count("<svg") == 4
+
+
+def test_a_report_over_an_input_or_not_named_html_is_refused_and_nothing_written(tmp_path):
+    meas = tmp_path / "m.csv"
+    machine = machine_path("angle_head")
+    cli("simulate-measurements", machine, "--params", f"{PARAMS}/angle_head-fig3.yaml", "--seed", "1", "-o", meas)
+    before = meas.read_bytes()
+    for report, message in ((meas, "--report"), (tmp_path / "r.txt", "must end in .html")):
+        proc = cli("identify", machine, meas, "--assume-zero", "DY,ThetaAv", "--report", report, check=False)
+        assert proc.returncode == 2 and message in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert meas.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["m.csv"]
