@@ -304,7 +304,16 @@ TEST_CASE("status carries only what the node put there: nodes built over memory 
     CHECK(s.params_received == 0);
     CHECK(s.rejected[static_cast<int>(chaincomp::Reject::kDuplicateSeq)] == 1);
     s.utime = s.uptime_us = s.instance_id = 0;
+    // every command accounted for: 20 sent, the duplicate rejected, the rest published
+    CHECK(s.received == 20);
+    CHECK(s.published == 19);
+    CHECK(s.unpublished == 0);
+    CHECK(s.queue_dropped == 0);
+    // from the publish (memq's receive stamp, µs) to the target published: not negative
+    CHECK(s.receipt_p50_ns >= 0);
+    CHECK(s.receipt_max_ns >= s.receipt_p50_ns);
     s.latency_p50_ns = s.latency_p99_ns = s.latency_p999_ns = s.latency_max_ns = 0;
+    s.receipt_p50_ns = s.receipt_p99_ns = s.receipt_max_ns = 0;
     std::vector<unsigned char> masked(s.getEncodedSize());
     REQUIRE(s.encode(masked.data(), 0, static_cast<int>(masked.size())) == static_cast<int>(masked.size()));
     return masked;

@@ -277,6 +277,7 @@ def masked_status(final) -> bytes:
     instance and the latency measured."""
     final.utime = final.uptime_us = final.instance_id = 0
     final.latency_p50_ns = final.latency_p99_ns = final.latency_p999_ns = final.latency_max_ns = 0
+    final.receipt_p50_ns = final.receipt_p99_ns = final.receipt_max_ns = 0
     return final.encode()
 
 
