@@ -42,6 +42,10 @@
 #include "chaincomp/params_io.hpp"
 #include "chaincomp/varying.hpp"
 
+// five_axis_ac's compensate on the solver before issue #40 (compensate_before_40.cpp)
+int before40_compensate_five_axis_ac(const void* model, const double* command, double* corrected, double* residual,
+                                     bool warm) noexcept;
+
 namespace {
 
 constexpr int kMaxAxes = 8;
@@ -349,20 +353,20 @@ int baseline_compensate(const Chain& actual, const Chain& nominal, const double*
       J.template topRows<3>() = jm.template topRows<3>();
       if constexpr (ORI) {
         for (int j = 0; j < N; ++j)
-          J.col(j).template tail<3>() = chaincomp::kDirectionWeight *
+          J.col(j).template tail<3>() = chaincomp::kDefaultDirectionWeight *
               chaincomp::orientation_residual(target_z, target_y, jm.col(j).template segment<3>(3),
                                               jm.col(j).template segment<3>(6));
       } else if constexpr (DIR) {
-        J.template bottomRows<3>() = chaincomp::kDirectionWeight * jm.template middleRows<3>(3);
+        J.template bottomRows<3>() = chaincomp::kDefaultDirectionWeight * jm.template middleRows<3>(3);
       }
     }
     for (int i = 0; i < 3; ++i) r[i] = pose[i] - target[i];
     if constexpr (ORI) {
-      r.template tail<3>() = chaincomp::kDirectionWeight *
+      r.template tail<3>() = chaincomp::kDefaultDirectionWeight *
           chaincomp::orientation_residual(target_z, target_y, Eigen::Map<const Eigen::Vector3d>(pose + 3),
                                           Eigen::Map<const Eigen::Vector3d>(pose + 6));
     } else if constexpr (DIR) {
-      for (int i = 3; i < 6; ++i) r[i] = chaincomp::kDirectionWeight * (pose[i] - target[i]);
+      for (int i = 3; i < 6; ++i) r[i] = chaincomp::kDefaultDirectionWeight * (pose[i] - target[i]);
     }
     if (step == kBaselineSteps) break;
     Square A = J.transpose() * J;
@@ -374,7 +378,7 @@ int baseline_compensate(const Chain& actual, const Chain& nominal, const double*
   if (!q.allFinite() || !r.allFinite()) return static_cast<int>(Status::kNonFiniteOutput);
   out = q;
   residual[0] = r.template head<3>().norm();
-  if constexpr (DIR) residual[1] = r.template tail<3>().norm() / chaincomp::kDirectionWeight;
+  if constexpr (DIR) residual[1] = r.template tail<3>().norm() / chaincomp::kDefaultDirectionWeight;
   const bool ok = residual[0] <= chaincomp::kPointTolerance && residual[1] <= chaincomp::kDirectionTolerance;
   return static_cast<int>(ok ? Status::kOk : Status::kResidual);
 }
@@ -534,7 +538,7 @@ std::string bench_tables(const Options& opt) {
     if (models[m] == nullptr) continue;
     for (int s = 0; s < opt.samples; ++s) {
       double corr[kMaxAxes], res[2], target[6], actual[6];
-      const int st = e->compensate(models[m], nullptr, q_at(s), corr, res);
+      const int st = e->compensate(models[m], nullptr, q_at(s), chaincomp::kDefaultDirectionWeight, corr, res, nullptr);
       e->pose_nominal(models[m], q_at(s), target);
       e->pose_exact(models[m], corr, actual);
       double d = 0;
@@ -553,7 +557,7 @@ std::string bench_tables(const Options& opt) {
   const int S = opt.samples, B = opt.batches;
   const double ms = opt.batch_ms;
   auto comp = [&](const void* model) {
-    return [&, model](int s) { const int st = e->compensate(model, nullptr, q_at(s), corr, res); escape(corr); return corr[0] + st; };
+    return [&, model](int s) { const int st = e->compensate(model, nullptr, q_at(s), chaincomp::kDefaultDirectionWeight, corr, res, nullptr); escape(corr); return corr[0] + st; };
   };
   auto pose = [&](const void* model) {
     return [&, model](int s) { e->pose_exact(model, q_at(s), out); escape(out); return out[0]; };
@@ -666,7 +670,7 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
   {
     double cg[kMaxAxes], cb[kMaxAxes], rg[2], rb[2];
     for (int s = 0; s < opt.samples; ++s) {
-      const int sg = e.compensate(model, nullptr, q_at(s), cg, rg);
+      const int sg = e.compensate(model, nullptr, q_at(s), chaincomp::kDefaultDirectionWeight, cg, rg, nullptr);
       const int sb = baseline_compensate<PS, DIR, ORI>(spec.actual, spec.nominal, q_at(s), cb, rb);
       status_mismatch += sg != sb;
       gen_ok += sg == 0;
@@ -713,8 +717,34 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
                            [&](int s) { e.pose_jacobian(model, q_at(s), out, jac); escape(jac); return out[0] + jac[0]; },
                            [&](int s) { baseline_jacobian<PS>(spec.actual, q_at(s), out, jac); escape(jac); return out[0] + jac[0]; }));
   rows.push_back(timed_row("compensate",
-                           [&](int s) { const int st = e.compensate(model, nullptr, q_at(s), corr, res); escape(corr); return corr[0] + st; },
+                           [&](int s) { const int st = e.compensate(model, nullptr, q_at(s), chaincomp::kDefaultDirectionWeight, corr, res, nullptr); escape(corr); return corr[0] + st; },
                            [&](int s) { const int st = baseline_compensate<PS, DIR, ORI>(spec.actual, spec.nominal, q_at(s), corr, res); escape(corr); return corr[0] + st; }));
+
+  // Issue #40's timing check: today's compensate (as the row above: cold, through the registry)
+  // beside the solver before its never-worse rule ("baseline"), alternated in the same run, after
+  // checking that both land on the same corrections.
+  double before40_diff = -1;
+  if (std::strcmp(info.name, "five_axis_ac") == 0) {
+    before40_diff = 0;
+    for (int s = 0; s < opt.samples; ++s) {
+      double cn[kMaxAxes], co[kMaxAxes], rn[2], ro[2];
+      const int sn = e.compensate(model, nullptr, q_at(s), chaincomp::kDefaultDirectionWeight, cn, rn, nullptr);
+      const int so = before40_compensate_five_axis_ac(model, q_at(s), co, ro, false);
+      for (int i = 0; i < N; ++i) before40_diff = std::max(before40_diff, sn == so ? std::abs(cn[i] - co[i]) : HUGE_VAL);
+    }
+    rows.push_back(timed_row("compensate_before_40",
+                             [&](int s) { const int st = e.compensate(model, nullptr, q_at(s), chaincomp::kDefaultDirectionWeight, corr, res, nullptr); escape(corr); return corr[0] + st; },
+                             [&](int s) { const int st = before40_compensate_five_axis_ac(model, q_at(s), corr, res, false); escape(corr); return corr[0] + st; }));
+  }
+  // and along the stream with a kept workspace each (warm starts), as chaincompd calls it
+  std::vector<unsigned char> ws40_storage;
+  void* ws40 = chaincomp::aligned_slot(ws40_storage, e.workspace_size, e.workspace_align);
+  e.init_workspace(ws40);
+  if (before40_diff >= 0) {
+    rows.push_back(timed_row("compensate_stream_before_40",
+                             [&](int s) { const int st = e.compensate(model, ws40, p_at(s), chaincomp::kDefaultDirectionWeight, corr, res, nullptr); escape(corr); return corr[0] + st; },
+                             [&](int s) { const int st = before40_compensate_five_axis_ac(model, p_at(s), corr, res, true); escape(corr); return corr[0] + st; }));
+  }
 
   // the stream with a kept workspace (warm starts) lands where a cold start lands
   double stream_diff = 0;
@@ -722,14 +752,14 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
   for (int pass = 0; pass < 2; ++pass) {
     for (int s = 0; s < opt.samples; ++s) {
       double cw[kMaxAxes], cc[kMaxAxes], rw[2], rc[2];
-      const int sw = e.compensate(model, ws, p_at(s), cw, rw);
-      const int sc = e.compensate(model, nullptr, p_at(s), cc, rc);
+      const int sw = e.compensate(model, ws, p_at(s), chaincomp::kDefaultDirectionWeight, cw, rw, nullptr);
+      const int sc = e.compensate(model, nullptr, p_at(s), chaincomp::kDefaultDirectionWeight, cc, rc, nullptr);
       stream_mismatch += sw != sc;
       for (int i = 0; i < N; ++i) stream_diff = std::max(stream_diff, std::abs(cw[i] - cc[i]));
     }
   }
   rows.push_back(timed_row("compensate_stream",
-                           [&](int s) { const int st = e.compensate(model, ws, p_at(s), corr, res); escape(corr); return corr[0] + st; },
+                           [&](int s) { const int st = e.compensate(model, ws, p_at(s), chaincomp::kDefaultDirectionWeight, corr, res, nullptr); escape(corr); return corr[0] + st; },
                            [&](int s) { const int st = baseline_compensate<PS, DIR, ORI>(spec.actual, spec.nominal, p_at(s), corr, res); escape(corr); return corr[0] + st; }));
 
   std::string j = "{\"machine\":\"" + std::string(info.name) + "\",\"num_axes\":" + std::to_string(N) +
@@ -754,7 +784,9 @@ std::string bench_machine(const MachineSpec& spec, const chaincomp::ModelEntry& 
                   ",\"compensate_max_residual_point_generated\":" + num(comp_res_gen) +
                   ",\"compensate_max_residual_point_baseline\":" + num(comp_res_base) +
                   ",\"stream_max_axis_diff_warm_vs_cold\":" + num(stream_diff) +
-                  ",\"stream_status_mismatches\":" + std::to_string(stream_mismatch) + "},\"timings\":{";
+                  ",\"stream_status_mismatches\":" + std::to_string(stream_mismatch) +
+                  ",\"before_40_max_axis_diff\":" + (before40_diff >= 0 ? num(before40_diff) : std::string("null")) +
+                  "},\"timings\":{";
   for (std::size_t i = 0; i < rows.size(); ++i) {
     if (i) j += ",";
     j += "\"" + std::string(rows[i].fn) + "\":{\"generated\":" + stats_json(rows[i].gen) +
