@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "chaincomp/compensate.hpp"
 #include "chaincomp/model_info.hpp"
 #include "chaincomp/params_io.hpp"
 #include "chaincomp/params_update.hpp"
