@@ -9,8 +9,8 @@ import sys
 from ..analysis.calibration_report import write_report
 from ..errors import ChaincompError, NoAnswer, OutsideLimit
 from ..measure.calibration import _write_loadable, slide_axis
-from ..measure.identify import (COMPONENTS, DIRECTIONS, HUBER_K, MAX_SMOOTH, ROTATION, HeldModel, Vary, held_values, identify,
-                        outside_limits, params_yaml, read_table, to_json, to_text)
+from ..measure.identify import (COMPONENTS, DIRECTIONS, HUBER_K, MAX_SMOOTH, ROTATION, HeldModel, Vary, held_values,
+                        identify, outside_limits, params_yaml, read_table, to_json, to_text)
 from ..measure.protocol import check_errors
 from ..model.display import add_units_argument
 from ..model.machine import Symbol
@@ -249,7 +249,8 @@ def run(args) -> int:
     if args.report:
         setup = [("machine file", args.machine), ("measurements", args.measurements),
                  ("sigma", args.sigma or "estimated from the residuals"),
-                 ("assumed zero", ", ".join(assume) or "none"), ("held (--hold)", args.hold or "none"), ("fitted as varying", ", ".join(args.vary) or "none"),
+                 ("assumed zero", ", ".join(assume) or "none"), ("held (--hold)", args.hold or "none"),
+                 ("fitted as varying", ", ".join(args.vary) or "none"),
                  ("minimal set", "yes" if args.minimal else "no"), ("params written", args.output or "none")]
         write_report(args.report, calibration_of(fit, table, setup, args.units))
         if args.format == "text":

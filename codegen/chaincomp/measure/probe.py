@@ -315,8 +315,9 @@ def make_plan(machine: Machine, sphere: Sphere, positions: list[dict] | None = N
         these = _touches_at(machine, model, axes, sphere, pos, up[i], clearance, backlash_step, len(kept))
         outside = _outside(machine, axes, these, backlash_step)
         if outside:
-            where = (f"position {i + 1} ({_where(machine, axes, pos)}) would take {outside[0]} to {outside[1]:g} "
-                     f"{machine.symbol(outside[0]).unit.name}, outside its limits {list(machine.symbol(outside[0]).limits)}")
+            a = machine.symbol(outside[0])
+            where = (f"position {i + 1} ({_where(machine, axes, pos)}) would take {a.name} to {outside[1]:g} "
+                     f"{a.unit.name}, outside its limits [{a.limits[0]:g}, {a.limits[1]:g}]")
             if given:
                 raise ChaincompError(f"--positions: {where}; move the sphere (--sphere) or choose other positions")
             notes.append(f"left out: {where}")
@@ -440,7 +441,8 @@ def gcode(plan: Plan, log_name: str, feed: float, command: str) -> str:
             out.append(f"G0 {letter[retract_axis]}{_gcode_value(ra, retract_to)}")
             if plan.backlash_step:
                 step = -plan.backlash_step if t.approach == "+" else plan.backlash_step
-                out.append("G0 " + " ".join(f"{letter[n]}{_gcode_value(m.symbol(n), v + step)}" for n, v in pos.items()))
+                out.append("G0 " + " ".join(f"{letter[n]}{_gcode_value(m.symbol(n), v + step)}"
+                                            for n, v in pos.items()))
             out.append("G0 " + " ".join(f"{letter[n]}{_gcode_value(m.symbol(n), v)}" for n, v in pos.items()))
             out.append("G0 " + " ".join(f"{letter[a.name]}{_gcode_value(a, t.above[i])}" for i, a in enumerate(lin)
                                         if a.name != retract_axis))
@@ -918,8 +920,8 @@ def to_text(pf: ProbeFit, source: str) -> str:
     um = 1000.0
     lines = [f"probe fit {m.name} from {source}: {len(pf.centres)} sphere centres at {len(pf.positions)} rotary "
              f"positions; {len([n for n in f.fitted if n not in NUISANCE])} errors and the sphere's position fitted",
-             "probed sphere radius: " + (f"{min(c.radius for c in pf.centres):.4f} to "
-                                         f"{max(c.radius for c in pf.centres):.4f} mm (nominal {pf.sphere.radius:.4f})")]
+             f"probed sphere radius: {min(c.radius for c in pf.centres):.4f} to "
+             f"{max(c.radius for c in pf.centres):.4f} mm (nominal {pf.sphere.radius:.4f})"]
     touch = np.concatenate([c.residuals for c in pf.centres])
     if touch.size:
         lines.append(f"touches: rms {um * math.sqrt(float(np.mean(touch ** 2))):.3g} µm from their position's sphere")

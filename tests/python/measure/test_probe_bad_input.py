@@ -55,7 +55,8 @@ def test_a_csv_with_an_unknown_column(tmp_path):
     (["--positions", "A=0,C=0"], "expected AXIS=VALUE for the rotary axes B, C"),
     (["--sphere", "1,2"], "--sphere: expected X,Y,Z"),
     (["--sphere", "5000,0,0"], "0 rotary positions within the limits"),
-    (["--sphere", "500,0,0", "--positions", "B=0,C=0;B=90,C=0"], "--positions: position 1 (B = 0, C = 0) would take X to"),
+    (["--sphere", "500,0,0", "--positions", "B=0,C=0;B=90,C=0"],
+     "--positions: position 1 (B = 0, C = 0) would take X to"),
 ])
 def test_plan_options(tmp_path, args, message):
     sphere = [a for a in SPHERE if a not in ("--sphere", "50,30,80")] if "--sphere" in args else SPHERE
