@@ -102,6 +102,7 @@ def test_jar_decodes_a_corrected_target_and_a_status(decoder, tmp_path):
     t.status, t.compute_ns, t.instance_id, t.machine = 1, 12_345, -987_654_321_012, "five_axis_ac"
     s = T.lcmt_chaincomp_status()
     s.received, s.rejected, s.final, s.machine = 1000, [0, 1, 2, 3, 4, 5, 6, 7, 8], True, "vmc_xyz"
+    s.targets_partial, s.objective_before, s.direction_weight = 7, 2.5e-5, 100.0
     (tmp_path / "t.bin").write_bytes(t.encode())
     (tmp_path / "s.bin").write_bytes(s.encode())
     got_t, got_s = decoder(tmp_path / "t.bin", tmp_path / "s.bin")
@@ -119,6 +120,8 @@ def test_jar_decodes_a_corrected_target_and_a_status(decoder, tmp_path):
     assert got_s["type"] == "chaincomp_lcm.lcmt_chaincomp_status"
     assert got_s["final_"] == "true" and int(got_s["received"]) == 1000
     assert got_s["rejected"] == "[0, 1, 2, 3, 4, 5, 6, 7, 8]" and got_s["machine"] == "vmc_xyz"
+    assert int(got_s["targets_partial"]) == 7 and float(got_s["objective_before"]) == 2.5e-5
+    assert float(got_s["direction_weight"]) == 100.0
     assert got_s["same_bytes"] == "true"
 
 
