@@ -147,16 +147,47 @@ std::string sha256_file(const std::string& path) {
   return out;
 }
 
-// Whether the cached library at `path` is the one `chaincomp build` made there: its SHA-256
-// is the one recorded beside it (PATH.sha256, sha256sum's format). A library truncated or
-// overwritten since crashed every start (SIGBUS, SIGILL) until the folder was deleted by hand.
-bool cache_intact(const std::string& path) {
+enum class Digest { kIntact, kNoRecord, kDiffers };
+
+// Whether the library at `path` is the one `chaincomp build` made: its SHA-256 is the one
+// recorded beside it (PATH.sha256, sha256sum's format, as `sha256sum -c` checks it). A library
+// truncated or overwritten since crashed every start (SIGBUS, SIGILL); dlopen runs it, so this
+// comes first, for the cache and for --model alike.
+Digest library_digest(const std::string& path) {
   std::ifstream in(path + ".sha256", std::ios::binary);
+  if (!in) return Digest::kNoRecord;
   std::string recorded(200, '\0');
   in.read(&recorded[0], static_cast<std::streamsize>(recorded.size()));
   recorded.resize(static_cast<std::size_t>(in.gcount()));
   const std::string digest = sha256_file(path);
-  return !digest.empty() && recorded == digest + "  " + path.substr(path.rfind('/') + 1) + "\n";
+  const bool same = !digest.empty() && recorded == digest + "  " + path.substr(path.rfind('/') + 1) + "\n";
+  return same ? Digest::kIntact : Digest::kDiffers;
+}
+
+bool cache_intact(const std::string& path) { return library_digest(path) == Digest::kIntact; }
+
+// --model LIB.so: checked as the cache is, with advice for a library copied without its digest
+// or changed since. A file that is not there is left to dlopen's message.
+bool model_digest_ok(const std::string& path, const std::string& machine_path, std::string& error) {
+  if (access(path.c_str(), F_OK) != 0) return true;
+  const std::size_t slash = path.rfind('/');
+  const std::string folder = slash == std::string::npos ? "." : path.substr(0, slash);
+  const std::string name = path.substr(slash == std::string::npos ? 0 : slash + 1);
+  switch (library_digest(path)) {
+    case Digest::kIntact:
+      return true;
+    case Digest::kNoRecord:
+      error = path + ": no " + name + ".sha256 beside it, the digest chaincomp build records (build -o DIR copies "
+              "both): copy the two together, or for a library you built and trust record it with "
+              "(cd " + folder + " && sha256sum " + name + " > " + name + ".sha256)";
+      return false;
+    case Digest::kDiffers:
+      break;
+  }
+  error = path + ": not the library recorded in " + name + ".sha256 (its SHA-256 differs: truncated or overwritten "
+          "since it was built): copy it again with its .sha256, or rebuild it with chaincomp build " + machine_path +
+          " -o " + folder;
+  return false;
 }
 
 }  // namespace
@@ -242,7 +273,9 @@ const ModelEntry* open_model(const std::string& machine_path, const std::string&
   std::string text, name;
   if (!read_machine_file(machine_path, text, name, error)) return nullptr;
   if (!library_path.empty()) {
-    const ModelEntry* e = load_model_library(library_path, machine_path, name, text, nullptr, error);
+    const ModelEntry* e = model_digest_ok(library_path, machine_path, error)
+                              ? load_model_library(library_path, machine_path, name, text, nullptr, error)
+                              : nullptr;
     if (e == nullptr) error = "--model: " + error;
     return e;
   }

@@ -2,6 +2,8 @@
 // (the build itself and its loading are tested end to end in tests/python/emit/test_build.py).
 #include <catch2/catch.hpp>
 
+#include <unistd.h>
+
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
@@ -55,11 +57,37 @@ TEST_CASE("the cache folder follows XDG_CACHE_HOME, else HOME", "[open_model]") 
   if (old_xdg) setenv("XDG_CACHE_HOME", keep.c_str(), 1); else unsetenv("XDG_CACHE_HOME");
 }
 
-TEST_CASE("a --model file that is not a library is refused in one line", "[open_model]") {
+// --model LIB.so is checked as the cache is, before dlopen runs any of it: LIB.so.sha256 beside
+// it in sha256sum's format. The advice of the refusal is run here as given (coreutils' sha256sum
+// writes the record): after it the file reaches dlopen, which refuses what is not a library.
+TEST_CASE("a --model file is checked against its .sha256 first; one that is not a library is refused",
+          "[open_model]") {
+  char dir_template[] = "/tmp/chaincomp_model_XXXXXX";
+  REQUIRE(mkdtemp(dir_template) != nullptr);
+  const std::string dir = dir_template, lib = dir + "/notlib.so";
+  {
+    std::ofstream(lib, std::ios::binary) << read(kMachine);  // not a library at all
+  }
   std::string error;
-  CHECK(chaincomp::open_model(kMachine, kMachine, error) == nullptr);
-  CHECK(error.rfind("--model: " + kMachine + ": cannot load: ", 0) == 0);
+  CHECK(chaincomp::open_model(kMachine, lib, error) == nullptr);
+  const std::string advice = "(cd " + dir + " && sha256sum notlib.so > notlib.so.sha256)";
+  CHECK(error == "--model: " + lib + ": no notlib.so.sha256 beside it, the digest chaincomp build records (build -o "
+                 "DIR copies both): copy the two together, or for a library you built and trust record it with " +
+                 advice);
+  REQUIRE(std::system(advice.c_str()) == 0);
+  CHECK(chaincomp::open_model(kMachine, lib, error) == nullptr);
+  CHECK(error.rfind("--model: " + lib + ": cannot load: ", 0) == 0);
   CHECK(error.find('\n') == std::string::npos);
+  {
+    std::ofstream(lib, std::ios::binary | std::ios::app) << "changed";  // after its digest was recorded
+  }
+  CHECK(chaincomp::open_model(kMachine, lib, error) == nullptr);
+  CHECK(error == "--model: " + lib + ": not the library recorded in notlib.so.sha256 (its SHA-256 differs: truncated "
+                 "or overwritten since it was built): copy it again with its .sha256, or rebuild it with chaincomp "
+                 "build " + kMachine + " -o " + dir);
+  std::remove(lib.c_str());
+  std::remove((lib + ".sha256").c_str());
+  CHECK(::rmdir(dir.c_str()) == 0);
 }
 
 // The solver compiled once per shape (compensate.hpp's Core) serves a model through the

@@ -265,9 +265,15 @@ def _compile(machine, source: bytes, tc: Toolchain, folder: str) -> None:
 
 
 def copy_to(path: str, folder: str) -> str:
-    """A copy of the library at ``path`` in ``folder`` (for --model on another computer), by
-    the one writer: a reader never sees half of it."""
-    return _copy_into(path, folder, 0o777, create=True)
+    """A copy of the library at ``path`` in ``folder`` (for --model on another computer) with
+    its digest beside it (NAME.so.sha256, which --model checks before loading), by the one
+    writer: a reader never sees half of either."""
+    target = os.path.join(folder, os.path.basename(path))
+    with open(path, "rb") as f:
+        data = f.read()
+    digest = f"{hashlib.sha256(data).hexdigest()}  {os.path.basename(path)}\n"
+    write_files({target: data, target + ".sha256": digest}, folder=folder, mode=0o777)
+    return target
 
 
 def _copy_into(path: str, folder: str, mode: int, create: bool = False) -> str:

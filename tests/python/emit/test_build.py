@@ -184,6 +184,45 @@ def test_cached_build_is_reused_and_copied(built, tmp_path):
     assert copy == str(tmp_path / "out" / "test_trunnion.so")
     with open(copy, "rb") as a, open(built["path"], "rb") as b:
         assert a.read() == b.read()
+    # with its digest, which coreutils' sha256sum -c accepts and --model checks before loading
+    assert sorted(os.listdir(tmp_path / "out")) == ["test_trunnion.so", "test_trunnion.so.sha256"]
+    assert subprocess.run(["sha256sum", "-c", "--status", "test_trunnion.so.sha256"], cwd=tmp_path / "out").returncode == 0
+
+
+@pytest.mark.slow
+def test_a_model_library_given_directly_is_checked_against_its_digest(built, tmp_path):
+    """chaincompd --model LIB.so (and replay's): a copy made by build -o loads; without its
+    .sha256 or changed since, it is refused before dlopen, and the refusal's advice works."""
+    out = tmp_path / "out"
+    assert chaincomp(built["env"], "build", built["machine"], "-o", str(out)).returncode == 0
+    lib = str(out / "test_trunnion.so")
+    args = ("--machine", built["machine"], "--params", params_of(built["machine"]), "--model", lib)
+    log = tmp_path / "axes.lcmlog"
+    assert chaincomp(built["env"], "simulate-log", built["machine"], "-o", str(log), "--seconds", "0.01").returncode == 0
+    replay = [os.path.join(ROOT, "build", "bin", "chaincomp_replay"), *args, "--in", str(log), "--quiet"]
+    assert subprocess.run(replay, capture_output=True, env=built["env"], timeout=60).returncode == 0
+
+    os.remove(lib + ".sha256")
+    proc = daemon(built["env"], *args)
+    assert proc.returncode == 2
+    advice = f"(cd {out} && sha256sum test_trunnion.so > test_trunnion.so.sha256)"
+    assert proc.stderr == (f"chaincompd: error: --model: {lib}: no test_trunnion.so.sha256 beside it, the digest "
+                           "chaincomp build records (build -o DIR copies both): copy the two together, or for a "
+                           f"library you built and trust record it with {advice}\n")
+    subprocess.run(advice, shell=True, check=True)
+    assert subprocess.run(replay, capture_output=True, env=built["env"], timeout=60).returncode == 0
+
+    with open(lib, "r+b") as f:   # truncated, as a full disk leaves a copy: it crashed the start (SIGBUS)
+        f.truncate(os.path.getsize(lib) // 2)
+    for program in (daemon(built["env"], *args),
+                    subprocess.run(replay, capture_output=True, text=True, env=built["env"], timeout=60)):
+        assert program.returncode == 2, program.stderr
+        assert program.stderr.strip().splitlines()[-1].endswith(
+            f"--model: {lib}: not the library recorded in test_trunnion.so.sha256 (its SHA-256 differs: truncated or "
+            f"overwritten since it was built): copy it again with its .sha256, or rebuild it with chaincomp build "
+            f"{built['machine']} -o {out}")
+    assert chaincomp(built["env"], "build", built["machine"], "-o", str(out)).returncode == 0   # the advice
+    assert subprocess.run(replay, capture_output=True, env=built["env"], timeout=60).returncode == 0
 
 
 @pytest.mark.slow
@@ -214,6 +253,14 @@ def daemon(env, *args):
     return subprocess.run([DAEMON, *args], capture_output=True, text=True, timeout=60, env=env)
 
 
+def recorded(path: str) -> str:
+    """PATH with PATH.sha256 beside it, written by coreutils' sha256sum as the refusal of a
+    library without one advises (--model checks it before loading)."""
+    folder, name = os.path.split(path)
+    subprocess.run(f"sha256sum {name} > {name}.sha256", shell=True, cwd=folder, check=True)
+    return path
+
+
 def test_library_of_another_machine_is_refused(built, tmp_path):
     (tmp_path / "r.yaml").write_text(CONFIG_TEXT)
     proc = daemon(built["env"], "--machine", machine_path("five_axis_ac"), "--params",
@@ -234,7 +281,7 @@ def _fake_library(tmp_path, abi_expr: str) -> str:
     out = str(tmp_path / "fake.so")
     subprocess.run(["c++", "-std=c++17", "-shared", "-fPIC", "-I", os.path.join(ROOT, "runtime", "include"),
                     "-isystem", "/usr/include/eigen3", str(src), "-o", out], check=True)
-    return out
+    return recorded(out)
 
 
 @pytest.mark.slow
@@ -249,8 +296,10 @@ def test_library_of_another_abi_is_refused(built, tmp_path):
                            f"rebuild it with chaincomp build {built['machine']}\n")
 
 
-def test_a_library_without_the_entry_point_is_refused(built):
-    other = os.path.join(ROOT, "build", "runtime", "libchaincomp_alloc_counter.so")
+def test_a_library_without_the_entry_point_is_refused(built, tmp_path):
+    other = str(tmp_path / "libchaincomp_alloc_counter.so")
+    shutil.copy(os.path.join(ROOT, "build", "runtime", "libchaincomp_alloc_counter.so"), other)
+    recorded(other)
     proc = daemon(built["env"], "--machine", built["machine"], "--params", params_of(built["machine"]),
                   "--model", other)
     assert proc.returncode == 2
@@ -304,6 +353,7 @@ def test_daemon_on_a_built_machine_then_a_changed_constant(built, tmp_path):
     assert "max point error" in out and "heap allocations after warm-up 0" in out
     old = str(tmp_path / "old.so")
     shutil.copy(built["path"], old)
+    recorded(old)
 
     # one constant changes: the tool length L, 100 -> 120 mm
     with open(machine) as f:
