@@ -31,6 +31,8 @@ Compensator::Compensator(const ModelEntry& entry, const void* model, const Compe
 
 bool Compensator::reject(Reject r, Reject* why) noexcept {
   ++counters_.rejected[static_cast<int>(r)];
+  if (in_gap_) ++refused_in_gap_;
+  in_gap_ = false;
   if (why != nullptr) *why = r;
   return false;
 }
@@ -44,21 +46,24 @@ bool Compensator::set_direction_weight(double mm) noexcept {
 void Compensator::reset() noexcept {
   ++counters_.resets;
   order_.reset();
-  have_seen_ = have_top_ = false;
+  have_seen_ = false;
+  refused_in_gap_ = 0;
 }
 
-// Gaps: a seq beyond the highest one received skips commands that never arrived; one more
-// than kMaxSeqJump ahead is no gap (the stream rule refuses it) and moves nothing.
-void Compensator::count_gap(std::int64_t seq) noexcept {
-  const std::uint64_t ahead = ahead_by(top_seq_, seq);
-  if (have_top_ && ahead > kMaxSeqJump) return;
-  if (have_top_ && ahead > 1) {
-    ++counters_.seq_gaps;
-    const auto room = static_cast<std::uint64_t>(INT64_MAX - counters_.seq_missing);
-    counters_.seq_missing += static_cast<std::int64_t>(std::min(ahead - 1, room));
-  }
-  if (!have_top_ || ahead > 0) top_seq_ = seq;
-  have_top_ = true;
+// Gaps, counted when a command is taken: the seq values between it and the last one taken,
+// less the commands refused meanwhile that were ahead of that one (received, not missing: a
+// NaN, a spike; a hostile seq refused far ahead, up to kMaxSeqJump, is one of them, so it
+// neither skips 2^31 values nor hides the gaps after it). A restart or the first command of
+// a stream is no gap.
+void Compensator::count_gap(std::int64_t seq, bool restarting) noexcept {
+  const std::uint64_t ahead = ahead_by(order_.last(), seq);
+  const std::uint64_t refused = static_cast<std::uint64_t>(refused_in_gap_);
+  refused_in_gap_ = 0;
+  in_gap_ = false;
+  if (restarting || !order_.known() || ahead <= 1 + refused) return;
+  ++counters_.seq_gaps;
+  const auto room = static_cast<std::uint64_t>(INT64_MAX - counters_.seq_missing);
+  counters_.seq_missing += static_cast<std::int64_t>(std::min(ahead - 1 - refused, room));
 }
 
 // The stream rule (stream_order.hpp) on seq; a command continues a restart run when its utime
@@ -75,7 +80,6 @@ bool Compensator::seq_ok(const Command& in, const std::array<double, kMaxAxes>& 
   if (v == StreamOrder::Verdict::kSame) return reject(Reject::kDuplicateSeq, why);
   if (v != StreamOrder::Verdict::kRestart) return reject(Reject::kOutOfOrderSeq, why);
   restarting = true;   // counted when the command is taken
-  top_seq_ = in.seq;
   seen_axes_ = before;  // the run's own last step is the one the step check sees
   have_seen_ = true;
   return true;
@@ -117,7 +121,8 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
   const AxisInfo* info = entry_.info->axes;
   if (in.machine != std::string_view(entry_.info->name)) return reject(Reject::kWrongMachine, why);
   if (in.num_axes != n_) return reject(Reject::kWrongAxisCount, why);
-  count_gap(in.seq);
+  const std::uint64_t ahead = ahead_by(order_.last(), in.seq);
+  in_gap_ = order_.known() && ahead >= 1 && ahead <= kMaxSeqJump;
   std::array<double, kMaxAxes> cmd = in.axes;
   for (int i = 0; i < n_; ++i) {
     if (!std::isfinite(cmd[i])) return reject(Reject::kNonFinite, why);
@@ -256,6 +261,7 @@ bool Compensator::process(const Command& in, Target& out, Reject* why) noexcept 
   }
 
   have_last_ = true;
+  count_gap(in.seq, restarting);
   order_.accept(in.seq);
   if (restarting) ++counters_.stream_restarts;
   ++(published == Status::kOk ? counters_.targets_full

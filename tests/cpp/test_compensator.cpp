@@ -265,6 +265,31 @@ TEST_CASE("reset starts a new stream at once; gaps in seq are counted", "[compen
   CHECK(k.rejected[static_cast<int>(chaincomp::Reject::kStepTooLarge)] == 0);
 }
 
+TEST_CASE("a hostile seq refused far ahead (within kMaxSeqJump) neither counts 2^31 commands missing nor "
+          "hides the gaps after it", "[compensator][stream]") {
+  Fixture f;
+  chaincomp::Compensator comp(f.entry, f.model, f.config.compensator);
+  int accepted = 0;
+  for (int seq = 1; seq <= 10; ++seq) run(comp, f.command(seq), &accepted);
+  auto hostile = f.command(11);
+  hostile.seq = 10 + (std::int64_t(1) << 31);
+  hostile.axes[0] = std::nan("");  // refused: not the stream's
+  run(comp, hostile, &accepted);
+  for (int seq : {11, 12, 15, 16}) run(comp, f.command(seq), &accepted);   // 13, 14 lost
+  CHECK(accepted == 14);
+  // 13 and 14: one gap of two, counted from the last command taken, not from the hostile seq
+  const auto& k = comp.counters();
+  CHECK(k.seq_gaps == 1);
+  CHECK(k.seq_missing == 2);
+  // a command refused within a gap is received, not missing
+  auto bad = f.command(18);
+  bad.axes[0] = std::nan("");
+  run(comp, bad, &accepted);
+  run(comp, f.command(19), &accepted);  // 17 lost
+  CHECK(k.seq_gaps == 2);
+  CHECK(k.seq_missing == 3);
+}
+
 TEST_CASE("machine names are compared exactly: an empty name or one with a NUL inside is refused",
           "[compensator]") {
   Fixture f;

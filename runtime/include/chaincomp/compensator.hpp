@@ -125,7 +125,7 @@ class Compensator {
  private:
   bool reject(Reject r, Reject* why) noexcept;
   bool seq_ok(const Command& in, const std::array<double, kMaxAxes>& cmd, bool& restarting, Reject* why) noexcept;
-  void count_gap(std::int64_t seq) noexcept;
+  void count_gap(std::int64_t seq, bool restarting) noexcept;
   void residual_at(const double* q, const std::array<double, kMaxAxes>& target, double* residual) const noexcept;
 
   const ModelEntry& entry_;
@@ -143,8 +143,10 @@ class Compensator {
   bool have_seen_ = false;  // a valid command has been seen (for the step check)
   std::int64_t last_utime_ = 0;
   std::array<double, kMaxAxes> seen_axes_{}, last_correction_{};
-  bool have_top_ = false;   // top_seq_ holds the highest seq received (gap counting)
-  std::int64_t top_seq_ = 0;
+  // Gap counting: the command in process is 1 .. kMaxSeqJump ahead of the last taken one, and
+  // how many such were refused since that one (received: not missing).
+  bool in_gap_ = false;
+  std::int64_t refused_in_gap_ = 0;
   std::int64_t run_utime_ = 0;  // the restart run's last command (its own tests: utime, step)
   std::array<double, kMaxAxes> run_axes_{};
   Counters counters_;
