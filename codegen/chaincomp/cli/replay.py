@@ -20,13 +20,16 @@ def add_parser(sub) -> None:
                                    "event, utime, seq, result, commanded, corrected, correction, residuals, "
                                    "flags, status. Rejected records are listed and counted by reason; targets "
                                    "the limits clamped, those of them held back towards no correction, and "
-                                   "commands clamped into limits are counted; --format json prints that "
+                                   "commands clamped into limits are counted; the targets are counted as "
+                                   "full, partial or uncorrected, with the objective (|point|^2 + "
+                                   "(direction_weight * direction)^2) before and after; --format json prints that "
                                    "summary as one JSON object on standard output.")
     add_machine_argument(p, alias=True)
     p.add_argument("input", metavar="IN.lcmlog", help="lcm-logger log of commands")
     p.add_argument("--model", metavar="LIB.so", help="a model library made by chaincomp build for this machine file")
     p.add_argument("--params", required=True, metavar="P.yaml", help="error values (configs/params/*.yaml)")
-    p.add_argument("--config", metavar="R.yaml", help="runtime settings (default: built-in defaults)")
+    p.add_argument("--config", metavar="R.yaml", help="runtime settings, direction_weight among them (default: built-in "
+                   "defaults)")
     p.add_argument("--thermal", metavar="T.yaml", help="a thermal model (chaincomp thermal fit): the log's "
                    "temperature readings drive its errors, as chaincompd --thermal does")
     p.add_argument("-o", "--output", metavar="OUT.lcmlog", help="corrected log")
