@@ -94,6 +94,7 @@ SHAPES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("shape", SHAPES, ids=[s[0] for s in SHAPES])
 def test_growth_through_the_chain_refused_at_its_element(tmp_path, shape):
     _, n, angle, translate, order = shape
@@ -134,6 +135,7 @@ def test_the_nominal_count_is_a_lower_bound_of_the_true_expansion(tmp_path):
     assert counts == v
 
 
+@pytest.mark.slow
 def test_generate_takes_straight_line_code_instead(tmp_path):
     """generate does not need the expansion (long chains get straight-line code): the same
     machine is generated, quickly."""
