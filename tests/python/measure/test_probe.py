@@ -24,6 +24,9 @@ plan expects it.
 
 import math
 import os
+import re
+import shutil
+import subprocess
 
 import numpy as np
 import pytest
@@ -322,3 +325,26 @@ def test_radius_off_refused(tmp_path, machines):
     r = cli("probe", "fit", NUTATING, str(tmp_path / "log.txt"), "--sphere", "50,30,80", "--radius", "12.5",
             "--stylus", "2", "-o", str(out), check=False)
     assert r.returncode == 4 and "12.5100 mm" in r.stderr and "+10.0 µm" in r.stderr and not out.exists()
+
+
+@pytest.mark.skipif(shutil.which("rs274") is None, reason="LinuxCNC's rs274 is not installed (tools/setup-linuxcnc)")
+def test_linuxcnc_interpreter_runs_the_program(tmp_path):
+    """LinuxCNC's own interpreter (rs274, the standalone RS274/NGC interpreter of the linuxcnc
+    package) runs the program in batch mode without an error: one STRAIGHT_PROBE per touch of the
+    CSV plan, aimed at its target at its rotary values, under a zero G59.3 offset and no tool
+    length offset (so the probe log holds machine coordinates)."""
+    ngc, csv, canon = tmp_path / "p.ngc", tmp_path / "p.csv", tmp_path / "canon.txt"
+    cli("probe", "plan", NUTATING, "--sphere", "50,30,80", "--radius", "12.5", "--stylus", "2", "--backlash-step",
+        "2deg", "--gcode", str(ngc), "--csv", str(csv))
+    r = subprocess.run(["rs274", "-g", str(ngc), str(canon)], stdin=subprocess.DEVNULL, capture_output=True,
+                       text=True, cwd=tmp_path, timeout=300)
+    text = canon.read_text()
+    assert r.returncode == 0, r.stdout + r.stderr + text[-500:]
+    assert "SET_G5X_OFFSET(9, 0.0000, 0.0000, 0.0000, 0.0000, 0.0000, 0.0000)" in text
+    assert "USE_TOOL_LENGTH_OFFSET(0.0000 0.0000 0.0000, 0.0000 0.0000 0.0000, 0.0000 0.0000 0.0000)" in text
+    probes = [[float(v) for v in m.split(",")] for m in re.findall(r"STRAIGHT_PROBE\(([^)]*)\)", text)]
+    touches = P.read_plan(str(csv), load_machine(NUTATING))
+    assert len(probes) == len(touches) == 16 * 6 * 2
+    for (x, y, z, a, b, c), t in zip(probes, touches):
+        assert np.allclose([x, y, z], t.target, atol=6e-5)
+        assert (b, c) == pytest.approx((math.degrees(t.start["B"]), math.degrees(t.start["C"])), abs=6e-5)
