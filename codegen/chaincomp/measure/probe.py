@@ -457,7 +457,9 @@ def gcode(plan: Plan, log_name: str, feed: float, command: str) -> str:
     return "\n".join(line for k, line in enumerate(out) if k == 0 or line != out[k - 1])
 
 
-GCODE_LINE = 256   # LinuxCNC reads at most this many characters a line (G-code overview, "Format of a line")
+# LinuxCNC's reader (rs274ngc read_text: fgets into LINELEN = 255 characters, a read of 254 refused as
+# "Command too long", the newline counted) takes at most 252 characters a line; rs274 -g agrees
+GCODE_LINE = 252
 
 
 def _comments(text: str) -> list[str]:

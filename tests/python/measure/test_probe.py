@@ -217,7 +217,7 @@ def test_gcode_program_touches_the_sphere(tmp_path):
     run_cli("probe", "plan", NUTATING, "--sphere", "50,30,80", "--radius", "12.5", "--stylus", "2",
             "--gcode", str(ngc), "--csv", str(csv), "--log-name", "cal(1).txt")
     lines = ngc.read_text().splitlines()
-    assert max(len(line) for line in lines) <= 256     # LinuxCNC's longest line ("Format of a line")
+    assert max(len(line) for line in lines) <= 252     # LinuxCNC's longest line (rs274ngc read_text, LINELEN 255)
     assert "(PROBEOPEN cal[1].txt)" in lines and lines[-1] == "M2" and "(PROBECLOSE)" in lines
     assert "G59.3" in lines and any(line.startswith("G10 L2 P9 X0 Y0 Z0 B0 C0") for line in lines)
     assert any("G49" in line.split() for line in lines)
@@ -333,11 +333,14 @@ def test_linuxcnc_interpreter_runs_the_program(tmp_path):
     package) runs the program in batch mode without an error: one STRAIGHT_PROBE per touch of the
     CSV plan, aimed at its target at its rotary values, under a zero G59.3 offset and no tool
     length offset (so the probe log holds machine coordinates)."""
-    ngc, csv, canon = tmp_path / "p.ngc", tmp_path / "p.csv", tmp_path / "canon.txt"
-    cli("probe", "plan", NUTATING, "--sphere", "50,30,80", "--radius", "12.5", "--stylus", "2", "--backlash-step",
+    long = tmp_path / ("x" * 200)   # the command in the first comment: lines as long as they get
+    long.mkdir()
+    ngc, csv, canon = long / "p.ngc", long / "p.csv", tmp_path / "canon.txt"
+    run_cli("probe", "plan", NUTATING, "--sphere", "50,30,80", "--radius", "12.5", "--stylus", "2", "--backlash-step",
         "2deg", "--gcode", str(ngc), "--csv", str(csv))
-    r = subprocess.run(["rs274", "-g", str(ngc), str(canon)], stdin=subprocess.DEVNULL, capture_output=True,
-                       text=True, cwd=tmp_path, timeout=300)
+    # by its name in its folder: rs274 keeps the program's path in LINELEN (255) characters
+    r = subprocess.run(["rs274", "-g", ngc.name, str(canon)], stdin=subprocess.DEVNULL, capture_output=True,
+                       text=True, cwd=long, timeout=300)
     text = canon.read_text()
     assert r.returncode == 0, r.stdout + r.stderr + text[-500:]
     assert "SET_G5X_OFFSET(9, 0.0000, 0.0000, 0.0000, 0.0000, 0.0000, 0.0000)" in text
