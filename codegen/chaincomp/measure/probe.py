@@ -424,7 +424,7 @@ def gcode(plan: Plan, log_name: str, feed: float, command: str) -> str:
            *_comments(f"{len(plan.positions)} rotary positions, {len(plan.touches)} touches; the sphere at "
                       + _sphere_text(plan.sphere)),
            "(the tool is the probe: the machine file's tool point at the stylus ball's centre)",
-           "G21 G90 G94 G40 G49 G92.1",
+           "G21 G90 G94 G40 G49 G92.1 G61",   # exact path: no blending near the sphere nor past a limit
            f"G10 L2 P9 {zero} (no work offset: G59.3 zeroed and used by this program only)",
            "G59.3",
            f"F{feed:.1f}",

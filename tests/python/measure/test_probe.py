@@ -344,6 +344,8 @@ def test_linuxcnc_interpreter_runs_the_program(tmp_path):
     text = canon.read_text()
     assert r.returncode == 0, r.stdout + r.stderr + text[-500:]
     assert "SET_G5X_OFFSET(9, 0.0000, 0.0000, 0.0000, 0.0000, 0.0000, 0.0000)" in text
+    # G61: every move ends where programmed (a blended retract overshot the tool axis' limit under LinuxCNC)
+    assert "SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)" in text
     assert "USE_TOOL_LENGTH_OFFSET(0.0000 0.0000 0.0000, 0.0000 0.0000 0.0000, 0.0000 0.0000 0.0000)" in text
     probes = [[float(v) for v in m.split(",")] for m in re.findall(r"STRAIGHT_PROBE\(([^)]*)\)", text)]
     touches = P.read_plan(str(csv), load_machine(NUTATING))
