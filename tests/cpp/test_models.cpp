@@ -130,12 +130,12 @@ static bool corrects_whole_pose(const chaincomp::MachineInfo& info) {
 }
 
 TEST_CASE("compensation puts the actual tool point on the nominal one", "[compensate]") {
-  int near_singular = 0;
   for (std::size_t m = 0; m < chaincomp::model_count(); ++m) {
     const chaincomp::ModelEntry& e = *chaincomp::model_at(m);
     const auto& info = *e.info;
     const int ps = info.pose_size, na = info.num_axes;
     INFO("machine " << info.name);
+    int near_singular = 0;
     ModelBuffer buf;
     for (const Vector& v : read_vectors(info.name, na, info.num_params, ps)) {
       e.prepare(v.params.data(), buf.bytes);
@@ -179,9 +179,10 @@ TEST_CASE("compensation puts the actual tool point on the nominal one", "[compen
         if (status != chaincomp::Status::kOk) ++near_singular;
       }
     }
+    // A few of a machine's 40 random commands fall near a singular pose (the tool along C, or
+    // a nutating table at its largest tilt, B = 180 deg); nearly all are corrected fully.
+    CHECK(near_singular <= 2);
   }
-  // A few random commands fall near a singular pose; nearly all are corrected fully.
-  CHECK(near_singular <= 2);
 }
 
 TEST_CASE("compensation rejects a non-finite command without computing", "[compensate]") {
