@@ -150,13 +150,16 @@ class Run:
 
 def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeout: float = 120.0,
         work: str | None = None, params: str | None = None, stale_ms: float = 50.0,
-        program: str | None = None, comp: dict[int, str] | None = None, matrixkins: str | None = None) -> Run:
+        program: str | None = None, comp: dict[int, str] | None = None, matrixkins: str | None = None,
+        route_hal: str = "", after_hal: str = "") -> Run:
     """One run of the configuration's program. `env`: the driver's settings (drive.py);
     `params`: the bridge's chaincompd params (default the machine's demo params); `stale_ms`:
     the bridge's stale age; `program`: G-code text in place of the configuration's program.ngc;
     `comp` (route comp): joint number -> its COMP_FILE (type 1, chaincomp export's);
     `matrixkins` (route matrixkins): chaincomp export's HAL file of C_xx..C_zz, sourced after
-    route-off.hal, with KINEMATICS = matrixkins in place of trivkins."""
+    route-off.hal, with KINEMATICS = matrixkins in place of trivkins; `route_hal`: HAL text added to
+    the route's file (its functions run before the drives are computed); `after_hal`: HAL text
+    run last (after record.hal: its functions see each period's drive positions)."""
     if route not in ROUTES:
         raise ValueError(f"route {route!r}: expected one of {', '.join(ROUTES)}")
     if (route == "comp") != bool(comp):
@@ -180,6 +183,12 @@ def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeo
             raise ValueError(f"{ini}: expected one KINEMATICS line, found {n}")
         with open(ini, "w") as f:
             f.write(text)
+    with open(os.path.join(work, "route.hal"), "a") as f:
+        f.write("\n" + route_hal)
+    if after_hal:
+        with open(os.path.join(work, "after.hal"), "w") as f:
+            f.write(after_hal)
+        _add_halfile(os.path.join(work, f"{config}.ini"), "after.hal")
     if program is not None:
         with open(os.path.join(work, "program.ngc"), "w") as f:
             f.write(program)
@@ -227,6 +236,16 @@ def run(route: str, config: str = "five_axis_ac", env: dict | None = None, timeo
         with open(os.path.join(work, "events.txt")) as f:
             events = [json.loads(line) for line in f if line.strip()]
     return Run(work, rows, events, log, proc.returncode, route)
+
+
+def _add_halfile(ini: str, name: str) -> None:
+    """One more [HAL]HALFILE, after the last one."""
+    with open(ini) as f:
+        lines = f.read().splitlines()
+    last = max(i for i, line in enumerate(lines) if line.startswith("HALFILE ="))
+    lines.insert(last + 1, f"HALFILE = {name}")
+    with open(ini, "w") as f:
+        f.write("\n".join(lines) + "\n")
 
 
 def _add_comp_files(ini: str, comp: dict[int, str], work: str) -> None:

@@ -4,7 +4,9 @@ compensation files and matrixkins' matrix written by `chaincomp export` (no daem
 where this LinuxCNC has it), and the tool-point error the
 simulated true machine makes along the path: max and RMS at the dwells and in motion, the
 bridge's lag, the realtime component's cost, the comp files' measured error against the
-exporter's prediction, and a plot."""
+exporter's prediction, and a plot. With --probing: sphere probing end to end instead
+(configs/linuxcnc/probing.py): plan, LinuxCNC probes the simulated true machine, fit,
+chaincomp_rt with the fitted params, probe again; the dispersion of both probings."""
 
 from __future__ import annotations
 
@@ -126,10 +128,19 @@ def main(argv=None) -> int:
     p.add_argument("--routes", help="comma list of off, bridge, rt, comp, matrixkins (default all; matrixkins "
                                     "only where this LinuxCNC has it: 2.10 and later)")
     p.add_argument("--format", choices=("text", "json"), default="text", help="output format (default text)")
+    p.add_argument("--probing", action="store_true",
+                   help="sphere probing instead: probe plan, LinuxCNC probes the simulated true machine, probe fit, "
+                        "chaincomp_rt with the fitted params, probe again (about 4 minutes)")
     args = p.parse_args(argv)
     reason = cnc.unavailable()
     if reason:
         raise SystemExit(f"linuxcnc-demo: {reason}")
+    if args.probing:
+        import probing
+
+        r = probing.route()
+        print(json.dumps(r) if args.format == "json" else probing.report(r))
+        return 0
     no_matrixkins = cnc.matrixkins_unavailable()
     if args.routes is None:
         routes = [r for r in cnc.ROUTES if r != "matrixkins" or not no_matrixkins]

@@ -7,6 +7,7 @@ linuxcnc module lives there). Environment, set by cnc.py:
   CHAINCOMP_EVENTS    file for the driver's own timeline (JSON lines; default events.txt)
   CHAINCOMP_SETTLE_S  seconds to wait after homing (the correction ramps in), default 1.0
   CHAINCOMP_AT_S      'SECONDS:COMMAND' run with sh that many seconds after the program starts
+  CHAINCOMP_TIMEOUT_S how long the program may run, default 60 (a probing program runs longer)
 """
 import json
 import os
@@ -17,7 +18,7 @@ import time
 
 import linuxcnc
 
-TIMEOUT_S = 60.0
+TIMEOUT_S = float(os.environ.get("CHAINCOMP_TIMEOUT_S", "60"))
 
 
 def main() -> int:
