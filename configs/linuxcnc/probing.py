@@ -93,24 +93,39 @@ def compensation_hal(module: str = MODULE) -> str:
     pin = module.replace("_", "-")
     lines = [f"loadrt {module}", f"addf {pin}.update servo-thread"]
     for n in range(cnc.N_JOINTS):
-        lines += [f"net j{n}-cmd => {pin}.joint.{n}.pos-cmd", f"net j{n}-corr {pin}.joint.{n}.correction => offset.{n}.offset"]
+        lines += [f"net j{n}-cmd => {pin}.joint.{n}.pos-cmd",
+                  f"net j{n}-corr {pin}.joint.{n}.correction => offset.{n}.offset"]
     return "\n".join(lines + [f"setp {pin}.enable 1"]) + "\n"
 
 
-def run_probing(program: str, route_hal: str, label: str, log: str) -> float:
-    """One run of the probing program; its probe log copied to `log`; the seconds it took."""
-    say(f"LinuxCNC runs the probing program: {label}")
+# LinuxCNC's own race (linuxcnc/linuxcnc issues 263, 662, 3650; a fix proposed upstream): task may
+# read the line after a G38.2 before motion has taken the probe move, and stops the program with
+# this error; here about once in a few hundred touches. The run is repeated when it happens.
+QUEUE_RACE = "Queue is not empty after probing"
+ATTEMPTS = 3
+
+
+def run_probing(program: str, route_hal: str, label: str, log: str) -> tuple[float, int]:
+    """One run of the probing program, its probe log copied to `log`: the seconds it took and
+    how many runs LinuxCNC's race (QUEUE_RACE) stopped before it."""
     start = time.monotonic()
-    # settle 2 s: the compensation ramps in over 0.5 s after homing
-    run = cnc.run("off", program=program, route_hal=route_hal, after_hal=probe_hal(), timeout=900.0,
-                  env={"CHAINCOMP_TIMEOUT_S": "600", "CHAINCOMP_SETTLE_S": "2.0"})
-    written = os.path.join(run.work, "probe-log.txt")
-    if run.returncode != 0 or not os.path.exists(written):
-        raise SystemExit(f"linuxcnc-demo: the probing run in {run.work} failed:\n{run.log[-2000:]}")
-    shutil.copy(written, log)
-    if not os.environ.get("CHAINCOMP_KEEP_RUNS"):   # the recorder's samples: tens of MB
-        shutil.rmtree(run.work, ignore_errors=True)
-    return time.monotonic() - start
+    for attempt in range(ATTEMPTS):
+        say(f"LinuxCNC runs the probing program: {label}")
+        # settle 2 s: the compensation ramps in over 0.5 s after homing
+        run = cnc.run("off", program=program, route_hal=route_hal, after_hal=probe_hal(), timeout=900.0,
+                      env={"CHAINCOMP_TIMEOUT_S": "600", "CHAINCOMP_SETTLE_S": "2.0"})
+        written = os.path.join(run.work, "probe-log.txt")
+        if run.returncode == 0 and os.path.exists(written) and not any(e["event"] == "error" for e in run.events):
+            shutil.copy(written, log)
+            if not os.environ.get("CHAINCOMP_KEEP_RUNS"):   # the recorder's samples: tens of MB
+                shutil.rmtree(run.work, ignore_errors=True)
+            return time.monotonic() - start, attempt
+        if QUEUE_RACE not in run.log or attempt == ATTEMPTS - 1:
+            raise SystemExit(f"linuxcnc-demo: the probing run in {run.work} failed:\n{run.log[-2000:]}")
+        say(f"LinuxCNC stopped the program with '{QUEUE_RACE}' (its own race): running it again")
+        if not os.environ.get("CHAINCOMP_KEEP_RUNS"):
+            shutil.rmtree(run.work, ignore_errors=True)
+    raise AssertionError("unreachable")
 
 
 def fit(log: str, plan_csv: str, out: str | None = None) -> dict:
@@ -120,12 +135,14 @@ def fit(log: str, plan_csv: str, out: str | None = None) -> dict:
 
 
 def route() -> dict:
-    """The whole loop; the figures (mm, s)."""
+    """The whole loop; its figures (um, s) and files."""
     folder = tempfile.mkdtemp(prefix="chaincomp-demo-probing-")
     os.chmod(folder, 0o755)
     t0 = time.monotonic()
     say("building sphere_probe: the true machine (five_axis_ac, demo params) in the servo thread")
-    install(build_sphere_probe(MACHINE, TRUE_PARAMS))
+    built = build_sphere_probe(MACHINE, TRUE_PARAMS)
+    install(built)
+    shutil.rmtree(os.path.dirname(built), ignore_errors=True)
     ngc, plan_csv = os.path.join(folder, "probe.ngc"), os.path.join(folder, "plan.csv")
     say("chaincomp probe plan")
     subprocess.run([CHAINCOMP, "probe", "plan", MACHINE, "--sphere", ",".join(map(str, SPHERE)), "--radius",
@@ -134,7 +151,7 @@ def route() -> dict:
     with open(ngc) as f:
         program = f.read()
     log1, log2 = os.path.join(folder, "probe-log-1.txt"), os.path.join(folder, "probe-log-2.txt")
-    run1_s = run_probing(program, "", "no compensation", log1)
+    run1_s, raced1 = run_probing(program, "", "no compensation", log1)
     fitted = os.path.join(folder, "five_axis_ac-probed.yaml")
     say("chaincomp probe fit")
     first = fit(log1, plan_csv, fitted)
@@ -142,23 +159,25 @@ def route() -> dict:
     out = subprocess.run([CHAINCOMP, "build", "--linuxcnc", MACHINE, "--params", fitted, "--name", MODULE],
                          stdout=subprocess.PIPE, text=True, check=True).stdout.split()[0]
     install(out)
-    run2_s = run_probing(program, compensation_hal(), f"{MODULE} with the fitted params", log2)
+    run2_s, raced2 = run_probing(program, compensation_hal(), f"{MODULE} with the fitted params", log2)
     second = fit(log2, plan_csv)
     d1, d2 = first["dispersion"]["all"]["before"], second["dispersion"]["all"]["before"]
+    per_axis = {k: (v["before"] * 1e3, second["dispersion"][k]["before"] * 1e3) for k, v in first["dispersion"].items()}
     return {"folder": folder, "first_um": d1 * 1e3, "fitted_um": first["dispersion"]["all"]["after"] * 1e3,
-            "second_um": d2 * 1e3, "ratio": d2 / d1, "per_axis_um": {k: (v["before"] * 1e3, second["dispersion"][k]["before"] * 1e3)
-                                                                    for k, v in first["dispersion"].items()},
-            "run_s": [run1_s, run2_s], "total_s": time.monotonic() - t0, "fitted": fitted, "logs": [log1, log2],
+            "second_um": d2 * 1e3, "ratio": d2 / d1, "per_axis_um": per_axis,
+            "run_s": [run1_s, run2_s], "queue_races": raced1 + raced2, "total_s": time.monotonic() - t0, "fitted": fitted, "logs": [log1, log2],
             "plan": plan_csv}
 
 
 def report(r: dict) -> str:
+    off = sum((a - b) ** 2 for a, b in zip(TRUE_SPHERE, SPHERE)) ** 0.5
     lines = ["sphere probing through LinuxCNC: five_axis_ac (trivkins), the true machine = the exact model with "
-             "five_axis_ac-demo.yaml, the sphere 0.25 mm off its nominal place",
+             f"five_axis_ac-demo.yaml, the sphere {off:.2f} mm off its nominal place",
              "dispersion of the sphere centre (largest distance between two centres as the axis turns alone), um:",
              f"  {'axis':6s} {'1st probing':>12s} {'2nd, compensated':>17s}"]
     lines += [f"  {k:6s} {a:12.3f} {b:17.3f}" for k, (a, b) in r["per_axis_um"].items()]
     lines += [f"the fit's own prediction after it: {r['fitted_um']:.3f} um; second / first: {r['ratio']:.3f}",
-              f"LinuxCNC runs {r['run_s'][0]:.0f} s and {r['run_s'][1]:.0f} s; the whole route {r['total_s']:.0f} s; "
+              f"LinuxCNC runs {r['run_s'][0]:.0f} s and {r['run_s'][1]:.0f} s (runs repeated after LinuxCNC's probing "
+              f"race: {r['queue_races']}); the whole route {r['total_s']:.0f} s; "
               f"files in {r['folder']}"]
     return "\n".join(lines)
