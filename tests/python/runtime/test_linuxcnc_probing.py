@@ -6,6 +6,7 @@ params -> the program again. About 4 minutes; skipped without LinuxCNC or root (
 into LinuxCNC's module folder)."""
 
 import os
+import shutil
 import sys
 
 import numpy as np
@@ -28,7 +29,10 @@ STEP_MM = probing.FEED / 60.0 * 1e-3   # the probing move in one 1 ms servo peri
 
 @pytest.fixture(scope="module")
 def route():
-    return probing.route()
+    r = probing.route()
+    yield r
+    if not os.environ.get("CHAINCOMP_KEEP_RUNS"):
+        shutil.rmtree(r["folder"], ignore_errors=True)
 
 
 def test_second_probing_shows_the_dispersion_down_to_a_fifth_or_less(route):
