@@ -47,23 +47,46 @@ def add_deprecated(p, old: str, replacement: str, dest: str, **kwargs) -> None:
     p.add_argument(old, dest=dest, action=DeprecatedAlias, replacement=replacement, **kwargs)
 
 
+# Verbs whose machine file was once --machine: main() moves that option's value to the first
+# argument before parsing (hoist_machine_option), so the file stays a required positional and
+# argparse never has an optional positional before another (which made "replay M.yaml --model
+# LIB IN.lcmlog" fail: argparse gave the first chunk M.yaml to IN.lcmlog).
+MACHINE_ONCE_AN_OPTION: set[str] = set()
+
+
 def add_machine_argument(p, optional: bool = False, alias: bool = False) -> None:
     """The machine file, the first positional argument of every verb that takes one. alias: also
-    --machine (the older spelling of replay and laser-to-params; resolve_machine joins the two)."""
-    p.add_argument("machine", metavar="MACHINE.yaml", nargs="?" if optional or alias else None,
+    --machine (the older spelling of replay and laser-to-params), moved into place by
+    hoist_machine_option; it stays in the parser for --help and the grammar's walk."""
+    p.add_argument("machine", metavar="MACHINE.yaml", nargs="?" if optional else None,
                    help="machine description (configs/machines/*.yaml)")
     if alias:
+        MACHINE_ONCE_AN_OPTION.add(p.prog.split()[-1])
         add_deprecated(p, "--machine", "the first argument (MACHINE.yaml)", "machine_option", metavar="MACHINE.yaml")
 
 
-def resolve_machine(args) -> None:
-    """args.machine from the positional or from --machine, given exactly once."""
-    if args.machine and args.machine_option:
-        raise ChaincompError(f"--machine {args.machine_option}: the machine is already given as the first "
-                             f"argument ({args.machine}); give it once")
-    args.machine = args.machine or args.machine_option
-    if not args.machine:
-        raise ChaincompError("a machine file is needed: give it as the first argument (or --machine)")
+def hoist_machine_option(argv: list[str]) -> list[str]:
+    """``VERB ... --machine M ...`` as ``VERB M ...`` with the deprecation warning, for the verbs
+    of MACHINE_ONCE_AN_OPTION; any other command line unchanged. A file given twice becomes two
+    arguments, which argparse refuses as it refuses any extra argument."""
+    if not argv or argv[0] not in MACHINE_ONCE_AN_OPTION:
+        return argv
+    rest, found = [], []
+    tokens = iter(argv[1:])
+    for token in tokens:
+        if token == "--":
+            rest += [token, *tokens]
+        elif token == "--machine":
+            found.append(next(tokens, None))
+        elif token.startswith("--machine="):
+            found.append(token.split("=", 1)[1])
+        else:
+            rest.append(token)
+    if not found or None in found:   # none, or one without its value: argparse says which
+        return argv
+    print(f"chaincomp {argv[0]}: warning: --machine is deprecated and will be removed in {REMOVED_IN}: "
+          f"use the first argument (MACHINE.yaml)", file=sys.stderr)
+    return [argv[0], *found, *rest]
 
 
 def add_format_argument(p, choices: tuple[str, ...] = ("text", "json"), default: str | None = "text",

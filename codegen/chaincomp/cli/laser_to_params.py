@@ -16,7 +16,7 @@ from ..escape import one_line
 from ..model.params_merge import merge
 from ..model.varying import INTERPOLATIONS, MAX_TABLE_KNOTS, OUTSIDE
 from ..symbolic.numeric import ExactModel
-from .common import add_machine_argument, check_output, load, resolve_machine
+from .common import add_machine_argument, check_output, load
 from .iso230_2 import add_columns_arguments, read
 
 _FIELD = {"mean": ("mean", "mean bidirectional deviations x̄_i"),
@@ -145,7 +145,6 @@ def entry_lines(machine: Machine, error: str, axis: str, targets, values, unit: 
 
 
 def run(args) -> int:
-    resolve_machine(args)
     check_output(args.output, args.runs, args.machine, args.merge)
     machine = load(args.machine)
     try:

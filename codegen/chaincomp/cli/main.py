@@ -88,8 +88,9 @@ def _join_signed_values(argv: list[str]) -> list[str]:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv[0] if argv and argv[0] in VERB_MODULES else None)
+    from .common import hoist_machine_option   # filled by the verbs build_parser imported
     try:
-        args = parser.parse_args(_join_signed_values(argv))
+        args = parser.parse_args(_join_signed_values(hoist_machine_option(argv)))
     except SystemExit as exc:   # --help, or a bad option (already reported in one line)
         return exc.code if isinstance(exc.code, int) else 0
     debug = os.environ.get("CHAINCOMP_DEBUG") == "1"

@@ -8,7 +8,7 @@ import subprocess
 from ..emit.buildtree import binary
 from ..errors import ChaincompError
 from ..output import staged
-from .common import _same_file, add_format_argument, add_machine_argument, check_output, load, resolve_machine
+from .common import _same_file, add_format_argument, add_machine_argument, check_output, load
 
 
 def add_parser(sub) -> None:
@@ -40,7 +40,6 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    resolve_machine(args)
     if os.path.isdir(args.input):
         raise ChaincompError(f"{args.input}: is a folder, expected a log file")
     if not os.path.isfile(args.input):

@@ -250,7 +250,7 @@ def test_simulate_calibration_at_the_knot_limit_loads_back(ws, capsys):
     # the C++ loader too: replay a few commands with it (the compiled compensator reads the tables)
     log, csv_path = ws["out"] + ".lcmlog", ws["out"] + ".csv"
     assert run(capsys, ["simulate-log", ws["five"], "-o", log, "--seconds", "0.01"])[0] == 0
-    proc = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "replay", log, "--machine", ws["five"],
+    proc = subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "replay", ws["five"], log,
                            "--params", out, "--csv", csv_path], capture_output=True, text=True, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr
     with open(csv_path, encoding="utf-8") as f:
@@ -322,13 +322,14 @@ def test_replay_checks_machine_and_outputs_before_the_binary(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_bytes(b"name: caf\xe9\n")
 
-    def replay(*args):
-        return subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "replay", str(log), *map(str, args)],
+    def replay(machine, *args):
+        return subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "replay", str(machine), str(log),
+                               *map(str, args)],
                               capture_output=True, text=True, cwd=ROOT, timeout=120)
-    proc = replay("--machine", bad, "--params", params)
+    proc = replay(bad, "--params", params)
     assert proc.returncode == 2 and f"{bad}:1: not UTF-8 text (byte 0xe9)" in proc.stderr, proc.stderr
-    proc = replay("--machine", machine, "--params", params, "-o", log)
+    proc = replay(machine, "--params", params, "-o", log)
     assert proc.returncode == 2 and "is also an input" in proc.stderr, proc.stderr
-    proc = replay("--machine", machine, "--params", params, "-o", tmp_path / "o", "--csv", tmp_path / "o")
+    proc = replay(machine, "--params", params, "-o", tmp_path / "o", "--csv", tmp_path / "o")
     assert proc.returncode == 2 and "is also the -o output" in proc.stderr, proc.stderr
     assert log.read_bytes() == b"not a log, never read"

@@ -82,7 +82,7 @@ CASES = [
     Case("build", "build", "--output", lambda i: ["build", VMC], "vmc_xyz.so", True, kind="bytes"),
     Case("iso230-2", "iso230-2", "--plot", lambda i: ["iso230-2", RUNS], "iso.png", kind="png"),
     Case("laser-to-params", "laser-to-params", "--output",
-         lambda i: ["laser-to-params", RUNS, "--machine", FIVE, "--error", "EXX"], "l.yaml"),
+         lambda i: ["laser-to-params", FIVE, RUNS, "--error", "EXX"], "l.yaml"),
     Case("import-urdf", "import-urdf", "--output", lambda i: ["import-urdf", i["urdf"], "--base", "base", "--tip", "tip"],
          "u.yaml"),
     Case("export-urdf", "export-urdf", "--output",

@@ -315,7 +315,7 @@ def _replay_exact(built, machine, tmp_path, extra=()):
     cfg.write_text(CONFIG_TEXT)
     proc = chaincomp(built["env"], "simulate-log", machine, "-o", str(log), "--seconds", "0.5")
     assert proc.returncode == 0, proc.stderr
-    proc = chaincomp(built["env"], "replay", str(log), "--machine", machine, "--params", params_of(machine),
+    proc = chaincomp(built["env"], "replay", machine, str(log), "--params", params_of(machine),
                      "--config", str(cfg), "--csv", str(csv), *extra)
     assert proc.returncode == 0, proc.stderr
     head = csv.read_text().splitlines()[0].split(",")

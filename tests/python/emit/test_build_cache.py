@@ -113,7 +113,7 @@ def test_replay_rebuilds_a_changed_library_before_loading_it(cache, how, tmp_pat
     other = _built(env, cache["paths"]["cache_other"][0])
     for each in glob.glob(os.path.join(os.path.dirname(os.path.dirname(library)), "cache_trunnion-*", "*.so")):
         CORRUPTIONS[how](each, other)   # every key's: replay's compiled-in key is the one it reads
-    proc = chaincomp(env, "replay", str(log), "--machine", machine, "--params", params_of(machine),
+    proc = chaincomp(env, "replay", machine, str(log), "--params", params_of(machine),
                      "--config", str(cfg), "--csv", str(csv))
     assert proc.returncode == 0, proc.stderr
     assert "building it again" in proc.stderr and "compiled in" in proc.stderr, proc.stderr

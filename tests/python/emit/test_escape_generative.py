@@ -332,7 +332,7 @@ def test_a_meaning_cannot_write_a_value_into_a_params_file(tmp_path):
         s["meaning"] = "x\n  EZX: 999 um\n\u2028  EYZ: 5 um #"
     machine = _write(tmp_path, doc)
     out = tmp_path / "laser.yaml"
-    res = cli("laser-to-params", RUNS, "--machine", machine, "--error", "EXX", "-o", str(out), check=False)
+    res = cli("laser-to-params", machine, RUNS, "--error", "EXX", "-o", str(out), check=False)
     assert res.returncode == 0, res.stderr
     assert list(yaml.safe_load(out.read_text(encoding="utf-8"))["values"]) == ["EXX"]
     out = tmp_path / "calibration.yaml"

@@ -334,7 +334,7 @@ def logs(tmp_path_factory):
 
 def replay_csv(name, log, tmp_path):
     out = tmp_path / "replay.csv"
-    run_cli("replay", log, "--machine", machine_path(name), "--params", params_file(name), "--config", E2E_CONFIG,
+    run_cli("replay", machine_path(name), log, "--params", params_file(name), "--config", E2E_CONFIG,
             "--csv", str(out))
     with open(out) as f:
         return list(csv.DictReader(f))

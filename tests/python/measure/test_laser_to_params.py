@@ -71,7 +71,7 @@ def table_at(params, error, t_internal):
 ])
 def test_round_trip_within_the_noise(tmp_path, capsys, machine, truth, error, axis, targets):
     csv = simulate(tmp_path / "runs.csv", machine, truth, error, targets, seed=sum(map(ord, error)))
-    code, err = run(capsys, csv, "--machine", MACHINE, "--error", error, "-o", tmp_path / "p.yaml")
+    code, err = run(capsys, MACHINE, csv, "--error", error, "-o", tmp_path / "p.yaml")
     assert code == 0, err
     got = load_params(str(tmp_path / "p.yaml"), machine)
     assert set(got) == {error}
@@ -91,7 +91,7 @@ def test_one_direction_keeps_its_reversal(tmp_path, capsys, machine, truth):
     t = targets
     for direction, offset in (("up", BACKLASH / 2), ("down", -BACKLASH / 2)):
         out = tmp_path / f"{direction}.yaml"
-        code, err = run(capsys, csv, "--machine", MACHINE, "--error", "EXX", "--direction", direction, "-o", out)
+        code, err = run(capsys, MACHINE, csv, "--error", "EXX", "--direction", direction, "-o", out)
         assert code == 0, err
         got = load_params(str(out), machine)
         diff = (table_at(got, "EXX", t) - table_at(truth, "EXX", t)) / 1e-3 - offset
@@ -103,7 +103,7 @@ def test_the_model_reproduces_the_measurement(tmp_path, capsys, machine, truth):
     bidirectional deviation computed here from the CSV."""
     targets = np.linspace(-400, 400, 11)
     csv = simulate(tmp_path / "runs.csv", machine, truth, "EXX", targets, seed=4)
-    assert run(capsys, csv, "--machine", MACHINE, "--error", "EXX", "-o", tmp_path / "p.yaml")[0] == 0
+    assert run(capsys, MACHINE, csv, "--error", "EXX", "-o", tmp_path / "p.yaml")[0] == 0
     rows = [r.split(",") for r in csv.read_text().splitlines()[1:]]
     mean = [np.mean([float(r[3]) for r in rows if float(r[0]) == t]) for t in targets]
     params = load_params(str(tmp_path / "p.yaml"), machine)
@@ -124,7 +124,7 @@ def test_merge_replaces_one_table_and_keeps_every_other_line(tmp_path, capsys, m
     targets = np.linspace(-400, 400, 41)
     csv = simulate(tmp_path / "runs.csv", machine, truth, "EXX", targets)
     out = tmp_path / "merged.yaml"
-    code, err = run(capsys, csv, "--machine", MACHINE, "--error", "EXX", "--merge", LASER, "-o", out)
+    code, err = run(capsys, MACHINE, csv, "--error", "EXX", "--merge", LASER, "-o", out)
     assert code == 0, err
     with open(LASER) as f:
         old = f.read().splitlines()
@@ -145,7 +145,7 @@ def test_merge_replaces_one_table_and_keeps_every_other_line(tmp_path, capsys, m
             assert merged[name] == value
     # merging the same runs again into the result gives the same text (the added comment goes too)
     again = tmp_path / "again.yaml"
-    assert run(capsys, csv, "--machine", MACHINE, "--error", "EXX", "--merge", out, "-o", again)[0] == 0
+    assert run(capsys, MACHINE, csv, "--error", "EXX", "--merge", out, "-o", again)[0] == 0
     assert again.read_text() == out.read_text()
 
 
@@ -153,7 +153,7 @@ def test_merge_adds_a_table_in_place_of_a_constant_and_a_new_entry(tmp_path, cap
     base = load_params(DEMO, machine)
     csv = simulate(tmp_path / "runs.csv", machine, truth, "EBX", np.linspace(-400, 400, 9))
     one = tmp_path / "one.yaml"
-    assert run(capsys, csv, "--machine", MACHINE, "--error", "EBX", "--merge", DEMO, "-o", one)[0] == 0
+    assert run(capsys, MACHINE, csv, "--error", "EBX", "--merge", DEMO, "-o", one)[0] == 0
     got = load_params(str(one), machine)
     assert isinstance(got["EBX"], Table) and got["EBX"].units[1].name == "arcsec"
     assert {k: v for k, v in got.items() if k != "EBX"} == {k: v for k, v in base.items() if k != "EBX"}
@@ -162,7 +162,7 @@ def test_merge_adds_a_table_in_place_of_a_constant_and_a_new_entry(tmp_path, cap
     lean.write_text("# my constants\nmachine: five_axis_ac\nvalues:\n  EC0Y: 4 arcsec   # squareness\n"
                     "  Ocx: 0.005 mm\n\n# the end\n")
     two = tmp_path / "two.yaml"
-    assert run(capsys, csv, "--machine", MACHINE, "--error", "EBX", "--merge", lean, "-o", two)[0] == 0
+    assert run(capsys, MACHINE, csv, "--error", "EBX", "--merge", lean, "-o", two)[0] == 0
     text = two.read_text().splitlines()
     assert text[:5] == lean.read_text().splitlines()[:5] and text[-2:] == ["", "# the end"]
     got = load_params(str(two), machine)
@@ -184,7 +184,7 @@ def test_sign_convention_of_the_machine_is_checked(tmp_path, capsys):
     csv.write_text("target [mm],run,direction,deviation [um]\n" + "".join(
         f"{t},{j},{d},{0.01 * t + (0.3 if d == 'up' else -0.3) + 0.05 * j}\n"
         for j in (1, 2, 3) for d in ("up", "down") for t in targets))
-    code, err = run(capsys, csv, "--machine", m, "--error", "EXX", "-o", tmp_path / "p.yaml")
+    code, err = run(capsys, m, csv, "--error", "EXX", "-o", tmp_path / "p.yaml")
     assert code == 0, err
     assert "warning" in err and "opposite sign of ISO 230-1" in err
     params = load_params(str(tmp_path / "p.yaml"), machine)
@@ -210,7 +210,7 @@ def _refused(capsys, *argv):
 ])
 def test_refusals(tmp_path, capsys, machine, truth, options, message):
     csv = simulate(tmp_path / "runs.csv", machine, truth, "EXX", np.linspace(-400, 400, 5))
-    line = _refused(capsys, csv, "--machine", MACHINE, *options, "-o", tmp_path / "p.yaml")
+    line = _refused(capsys, MACHINE, csv, *options, "-o", tmp_path / "p.yaml")
     assert line.startswith("chaincomp laser-to-params: error: ") and message in line, line
     assert not (tmp_path / "p.yaml").exists()
 
@@ -218,7 +218,7 @@ def test_refusals(tmp_path, capsys, machine, truth, options, message):
 def test_an_error_no_channel_measures_is_refused(tmp_path, capsys, machine, truth):
     """Squareness of Y to X turns Y's travel: at Y = 0 it moves nothing."""
     csv = simulate(tmp_path / "runs.csv", machine, truth, "EBX", np.linspace(-300, 300, 5))
-    line = _refused(capsys, csv, "--machine", MACHINE, "--error", "EC0Y", "--axis", "Y", "-o", tmp_path / "p.yaml")
+    line = _refused(capsys, MACHINE, csv, "--error", "EC0Y", "--axis", "Y", "-o", tmp_path / "p.yaml")
     assert "--error EC0Y: at the reference pose it moves the tool relative to the workpiece by [0.0, 0.0, 0.0]" in line
 
 
@@ -226,7 +226,7 @@ def test_output_that_is_an_input_is_refused(tmp_path, capsys, machine, truth):
     csv = simulate(tmp_path / "runs.csv", machine, truth, "EXX", np.linspace(-400, 400, 5))
     p0 = tmp_path / "p0.yaml"
     p0.write_text("machine: five_axis_ac\nvalues:\n  EC0Y: 4 arcsec\n")
-    line = _refused(capsys, csv, "--machine", MACHINE, "--error", "EXX", "--merge", p0, "-o", p0)
+    line = _refused(capsys, MACHINE, csv, "--error", "EXX", "--merge", p0, "-o", p0)
     assert f"-o {p0}: is also an input ({p0}); refusing to overwrite it" in line
     assert p0.read_text() == "machine: five_axis_ac\nvalues:\n  EC0Y: 4 arcsec\n"
 
@@ -235,10 +235,10 @@ def test_a_broken_merge_file_is_reported_as_itself(tmp_path, capsys, machine, tr
     csv = simulate(tmp_path / "runs.csv", machine, truth, "EXX", np.linspace(-400, 400, 5))
     p0 = tmp_path / "p0.yaml"
     p0.write_text("machine: five_axis_ac\nvalues:\n  EC0Y: 4 furlong\n")
-    line = _refused(capsys, csv, "--machine", MACHINE, "--error", "EXX", "--merge", p0, "-o", tmp_path / "p.yaml")
+    line = _refused(capsys, MACHINE, csv, "--error", "EXX", "--merge", p0, "-o", tmp_path / "p.yaml")
     assert line.startswith(f"chaincomp laser-to-params: error: {p0}:3: values.EC0Y: ")
     p0.write_text("machine: five_axis_ac\nvalues: {EC0Y: 4 arcsec}\n")
-    line = _refused(capsys, csv, "--machine", MACHINE, "--error", "EXX", "--merge", p0, "-o", tmp_path / "p.yaml")
+    line = _refused(capsys, MACHINE, csv, "--error", "EXX", "--merge", p0, "-o", tmp_path / "p.yaml")
     assert f"{p0}:2: values: --merge: 'values' must be a block mapping" in line
 
 
@@ -250,7 +250,7 @@ def test_daemon_loads_the_merged_file(tmp_path, capsys, machine, truth):
     table stops it earlier, naming the file)."""
     csv = simulate(tmp_path / "runs.csv", machine, truth, "EXX", np.linspace(-400, 400, 41))
     out = tmp_path / "merged.yaml"
-    assert run(capsys, csv, "--machine", MACHINE, "--error", "EXX", "--merge", LASER, "-o", out)[0] == 0
+    assert run(capsys, MACHINE, csv, "--error", "EXX", "--merge", LASER, "-o", out)[0] == 0
     config = tmp_path / "r.yaml"
     config.write_text('lcm_url: "bogus://nowhere"\n')
     broken = tmp_path / "broken.yaml"
@@ -276,7 +276,7 @@ def test_rotary_axis_angular_positioning(tmp_path, capsys):
     csv.write_text("target [deg],run,direction,deviation [arcsec]\n" + "".join(
         f"{t},{j},{d},{true[t] + (0.4 if d == 'up' else -0.4) + 0.01 * j}\n"
         for j in (1, 2, 3, 4) for d in ("up", "down") for t in targets))
-    code, err = run(capsys, csv, "--machine", path, "--error", "EC0C", "--axis", "C", "-o", tmp_path / "p.yaml")
+    code, err = run(capsys, path, csv, "--error", "EC0C", "--axis", "C", "-o", tmp_path / "p.yaml")
     assert code == 0, err
     params = load_params(str(tmp_path / "p.yaml"), machine)
     table = params["EC0C"]

@@ -19,7 +19,7 @@ def test_laser_to_params_a_file_name_cannot_write_a_value(tmp_path):
     base.write_text("machine: five_axis_ac\nvalues:\n  EYX: 1 um\n", encoding="utf-8")
     for merge in (["--merge", str(base)], []):
         out = tmp_path / f"o{len(merge)}.yaml"
-        res = run_in_process("laser-to-params", str(name), "--machine", MACHINE, "--error", "EXX", "-o", str(out), *merge)
+        res = run_in_process("laser-to-params", MACHINE, str(name), "--error", "EXX", "-o", str(out), *merge)
         assert res.returncode == 0, res.stderr
         values = yaml.safe_load(out.read_text(encoding="utf-8"))["values"]
         assert sorted(values) == (["EXX", "EYX"] if merge else ["EXX"]), values
@@ -31,7 +31,7 @@ def test_laser_to_params_merges_into_a_file_ending_with_a_document_end_marker(tm
     base = tmp_path / "p.yaml"
     base.write_text("---\nmachine: five_axis_ac\nvalues:\n  EYX: 1 um\n...\n", encoding="utf-8")
     out = tmp_path / "o.yaml"
-    res = run_in_process("laser-to-params", RUNS, "--machine", MACHINE, "--error", "EXX", "-o", str(out), "--merge", str(base))
+    res = run_in_process("laser-to-params", MACHINE, RUNS, "--error", "EXX", "-o", str(out), "--merge", str(base))
     assert res.returncode == 0, res.stderr
     text = out.read_text(encoding="utf-8")
     assert text.startswith("---\nmachine: five_axis_ac\nvalues:\n  EYX: 1 um\n") and text.endswith("\n...\n")
@@ -43,7 +43,7 @@ def test_laser_to_params_merge_keeps_crlf_line_ends(tmp_path):
     base = tmp_path / "p.yaml"
     base.write_bytes(b"# from the shop PC\r\nmachine: five_axis_ac\r\nvalues:\r\n  EYX: 1 um\r\n")
     out = tmp_path / "o.yaml"
-    res = run_in_process("laser-to-params", RUNS, "--machine", MACHINE, "--error", "EXX", "-o", str(out), "--merge", str(base))
+    res = run_in_process("laser-to-params", MACHINE, RUNS, "--error", "EXX", "-o", str(out), "--merge", str(base))
     assert res.returncode == 0, res.stderr
     data = out.read_bytes()
     assert data.startswith(base.read_bytes()) and b"\n" not in data.replace(b"\r\n", b"")
@@ -57,11 +57,11 @@ def test_laser_to_params_targets_equal_as_written_are_refused_in_the_csv(tmp_pat
     p.write_text(text, encoding="utf-8")
     line = 1 + text.splitlines().index(next(t for t in text.splitlines() if t.startswith("-399.99999999999,")))
     out = tmp_path / "o.yaml"
-    res = run_in_process("laser-to-params", str(p), "--machine", MACHINE, "--error", "EXX", "-o", str(out))
+    res = run_in_process("laser-to-params", MACHINE, str(p), "--error", "EXX", "-o", str(out))
     one_error_line(res, "laser-to-params", f"close.csv:{line}: target", "-400")
     assert not out.exists()
 
 
 def test_laser_to_params_error_that_is_an_axis_reads_right():
-    one_error_line(run_in_process("laser-to-params", RUNS, "--machine", MACHINE, "--error", "X", "-o", "/tmp/never.yaml"),
+    one_error_line(run_in_process("laser-to-params", MACHINE, RUNS, "--error", "X", "-o", "/tmp/never.yaml"),
                    "laser-to-params", "--error: 'X' is an axis of five_axis_ac, not an error")

@@ -126,7 +126,7 @@ def test_compensation_of_an_arm_holds_point_and_direction_or_reports_the_residua
     log, out = tmp_path / "arm.lcmlog", tmp_path / "replay.csv"
     code, _, err = run("simulate-log", path, "-o", log, "--seconds", "0.2")
     assert code == 0, err
-    code, _, err = run("replay", log, "--machine", path, "--params", params, "--config", E2E_CONFIG,
+    code, _, err = run("replay", path, log, "--params", params, "--config", E2E_CONFIG,
                        "--csv", out)
     assert code == 0, err
     with open(out) as f:
@@ -168,7 +168,7 @@ def test_replay_of_an_arm_with_a_tool_frame_corrects_point_and_orientation(arm, 
     log, out = tmp_path / "arm.lcmlog", tmp_path / "replay.csv"
     code, _, err = run("simulate-log", path, "-o", log, "--seconds", "0.2")
     assert code == 0, err
-    code, _, err = run("replay", log, "--machine", path, "--params", params, "--config", E2E_CONFIG, "--csv", out)
+    code, _, err = run("replay", path, log, "--params", params, "--config", E2E_CONFIG, "--csv", out)
     assert code == 0, err
     with open(out) as f:
         rows = list(csv.DictReader(f))

@@ -230,8 +230,8 @@ def test_a_decimal_comma_in_the_runs_is_refused_and_nothing_written(tmp_path, ve
     runs = tmp_path / "runs.csv"
     runs.write_text("\n".join(lines), encoding="utf-8")
     out = tmp_path / "out.yaml"
-    args = ["--machine", machine_path("five_axis_ac"), "--error", "EXX", "-o", str(out)] if verb == "laser-to-params" \
-        else ["--format", "json"]
-    one_error_line(run_in_process(verb, str(runs), *args), verb,
+    first, args = ([machine_path("five_axis_ac")], ["--error", "EXX", "-o", str(out)]) if verb == "laser-to-params" \
+        else ([], ["--format", "json"])
+    one_error_line(run_in_process(verb, *first, str(runs), *args), verb,
                    f"{runs}:{k + 1}: 5 cells, the header has 4 (a decimal comma? write decimals with a point)")
     assert not out.exists()

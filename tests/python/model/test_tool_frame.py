@@ -290,7 +290,7 @@ def test_a_five_axis_machine_with_a_frame_compensates_as_without(tmp_path):
     rows = []
     for m in (plain, framed):
         out = tmp_path / f"{len(rows)}.csv"
-        code, _, err = run_verb("replay", log, "--machine", m, "--params", params, "--config", config, "--csv", out)
+        code, _, err = run_verb("replay", m, log, "--params", params, "--config", config, "--csv", out)
         assert code == 0, err
         with open(out) as f:
             rows.append(list(csv.DictReader(f)))

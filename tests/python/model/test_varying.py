@@ -436,7 +436,7 @@ def test_compensation_with_tables_puts_the_tool_point_on_the_nominal_one(tmp_pat
     params.write_text(open(LASER).read().replace("interpolation: monotone_cubic", f"interpolation: {interpolation}"))
     log, table = tmp_path / "axes.lcmlog", tmp_path / "replay.csv"
     run_cli("simulate-log", FIVE, "-o", str(log), "--seconds", "1")
-    proc = run_cli("replay", str(log), "--machine", FIVE, "--params", str(params), "--config", E2E_CONFIG,
+    proc = run_cli("replay", FIVE, str(log), "--params", str(params), "--config", E2E_CONFIG,
                    "--csv", str(table))
     assert "1000 corrected, 0 rejected" in proc.stderr
     assert "18 errors vary along an axis: 18 tables (1818 points)" in proc.stderr

@@ -68,8 +68,8 @@ def _replay(tmp_path, log, *extra):
     machine.write_text(MACHINE)
     params = tmp_path / "p.yaml"
     params.write_text(PARAMS)
-    return subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "replay", str(log), "--machine",
-                           str(machine), "--params", str(params), *extra], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "chaincomp.cli.main", "replay", str(machine),
+                           str(log), "--params", str(params), *extra], capture_output=True, text=True,
                           timeout=300, cwd=tmp_path)
 
 

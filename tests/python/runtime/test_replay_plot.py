@@ -37,7 +37,7 @@ def _exact_errors(rows):
 def test_replay_matches_the_exact_model_on_every_record(tmp_path):
     log, out, table = tmp_path / "axes.lcmlog", tmp_path / "corrected.lcmlog", tmp_path / "replay.csv"
     run_cli("simulate-log", FIVE, "-o", str(log), "--seconds", "2")
-    proc = run_cli("replay", str(log), "--machine", FIVE, "--params", FIVE_PARAMS, "--config", E2E_CONFIG,
+    proc = run_cli("replay", FIVE, str(log), "--params", FIVE_PARAMS, "--config", E2E_CONFIG,
                    "-o", str(out), "--csv", str(table))
     assert "2000 commands on CHAINCOMP_COMMAND, 2000 corrected, 0 rejected" in proc.stderr
     rows = _read_csv(table)
@@ -75,7 +75,7 @@ def test_replay_reports_exactly_the_corrupted_records(tmp_path):
                 data = data[:8] + struct.pack(">q", 0)[:3]  # truncated
         out.write_event(e.timestamp, e.channel, data)
     out.close()
-    proc = run_cli("replay", str(bad), "--machine", FIVE, "--params", FIVE_PARAMS, "--config", E2E_CONFIG,
+    proc = run_cli("replay", FIVE, str(bad), "--params", FIVE_PARAMS, "--config", E2E_CONFIG,
                    "--csv", str(table))
     rows = _read_csv(table)
     rejected = {int(r["event"]): r["result"] for r in rows if r["result"] != "ok"}
@@ -102,7 +102,7 @@ def test_replay_skips_and_reports_damaged_stretches_of_a_log(tmp_path):
     damaged = (raw[:starts[10]] + garbage + raw[starts[10]:starts[40]] + bytes(broken)
                + raw[starts[41]:starts[99]] + raw[starts[99]:starts[99] + size // 2])
     bad.write_bytes(damaged)
-    proc = run_cli("replay", str(bad), "--machine", FIVE, "--params", FIVE_PARAMS, "--config", E2E_CONFIG)
+    proc = run_cli("replay", FIVE, str(bad), "--params", FIVE_PARAMS, "--config", E2E_CONFIG)
     g = starts[10]
     assert f"bytes {g}-{g + len(garbage) - 1} of the log skipped: no sync word" in proc.stderr
     b = starts[40] + len(garbage)
@@ -127,7 +127,7 @@ def test_replay_reports_one_damaged_stretch_once(tmp_path):
     tail = b"zz" + sync + b"\x00" * 4 + sync + b"\x01"
     damaged = raw[:starts[5]] + b"junk" + bytes(broken) + raw[starts[6]:] + tail
     bad.write_bytes(damaged)
-    proc = run_cli("replay", str(bad), "--machine", FIVE, "--params", FIVE_PARAMS, "--config", E2E_CONFIG)
+    proc = run_cli("replay", FIVE, str(bad), "--params", FIVE_PARAMS, "--config", E2E_CONFIG)
     a, b = starts[5], starts[6] + 4 - 1
     assert f"bytes {a}-{b} of the log skipped: no sync word" in proc.stderr
     t = len(raw) + 4
@@ -143,7 +143,7 @@ def test_replay_refuses_to_write_over_its_input(tmp_path):
     before = log.read_bytes()
     os.symlink(log, tmp_path / "link.lcmlog")
     for flag, target in (("-o", log), ("--csv", tmp_path / "link.lcmlog")):
-        proc = run_cli("replay", str(log), "--machine", FIVE, "--params", FIVE_PARAMS, flag, str(target), check=False)
+        proc = run_cli("replay", FIVE, str(log), "--params", FIVE_PARAMS, flag, str(target), check=False)
         assert proc.returncode == 2 and f"{flag} {target}: is also an input ({log})" in proc.stderr, proc.stderr
         # the binary itself refuses too (called directly, as a controller integration may)
         proc = subprocess.run([os.path.join(ROOT, "build", "bin", "chaincomp_replay"), "--machine", FIVE,
@@ -155,12 +155,12 @@ def test_replay_refuses_to_write_over_its_input(tmp_path):
 
 @pytest.mark.slow
 def test_replay_bad_input(tmp_path):
-    proc = run_cli("replay", str(tmp_path / "none.lcmlog"), "--machine", FIVE, "--params", FIVE_PARAMS,
+    proc = run_cli("replay", FIVE, str(tmp_path / "none.lcmlog"), "--params", FIVE_PARAMS,
                    check=False)
     assert proc.returncode == 2 and "none.lcmlog: no such log file" in proc.stderr
     notlog = tmp_path / "x.lcmlog"
     notlog.write_bytes(b"not a log")
-    proc = run_cli("replay", str(notlog), "--machine", FIVE, "--params", str(tmp_path / "p.yaml"), check=False)
+    proc = run_cli("replay", FIVE, str(notlog), "--params", str(tmp_path / "p.yaml"), check=False)
     assert proc.returncode == 2 and "p.yaml: cannot read file" in proc.stderr
 
 
