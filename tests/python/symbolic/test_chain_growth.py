@@ -15,7 +15,7 @@ its own monomial.
 from __future__ import annotations
 
 import os
-import resource
+import signal
 import subprocess
 import sys
 import threading
@@ -64,24 +64,40 @@ def nominal_crossing(n: int, start: int) -> int | None:
     return None
 
 
+# Runs the command from a small interpreter and reports its peak RSS: a child forked straight from
+# pytest (preexec_fn forces a fork) carries pytest's own resident size into its ru_maxrss (Linux
+# folds the forked copy's high-water mark in at exec): 500 MB late in a full run, whatever it did.
+_MEASURE = """
+import os, resource, subprocess, sys
+limit, rss_file = int(sys.argv[1]), sys.argv[2]
+resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+proc = subprocess.Popen(sys.argv[3:])
+_, status, usage = os.wait4(proc.pid, 0)
+with open(rss_file, "w") as f:
+    f.write(str(usage.ru_maxrss * 1024))
+code = os.waitstatus_to_exitcode(status)
+sys.exit(code if code >= 0 else 128 - code)
+"""
+
+
 def run_limited(tmp_path, *args):
     """chaincomp ARGS in a process of its own, its address space limited: (result, seconds, its
-    peak RSS in bytes, from wait4)."""
-    def limit():
-        resource.setrlimit(resource.RLIMIT_AS, (ADDRESS_SPACE, ADDRESS_SPACE))
+    peak RSS in bytes, from wait4 in a small parent)."""
     start = time.monotonic()
+    rss = tmp_path / "rss"
     with open(tmp_path / "stdout", "w+") as out, open(tmp_path / "stderr", "w+") as err:
-        proc = subprocess.Popen([sys.executable, "-m", "chaincomp.cli.main", *map(str, args)], cwd=ROOT,
-                                stdout=out, stderr=err, preexec_fn=limit)
-        timer = threading.Timer(120, proc.kill)
+        proc = subprocess.Popen([sys.executable, "-c", _MEASURE, str(ADDRESS_SPACE), str(rss),
+                                 sys.executable, "-m", "chaincomp.cli.main", *map(str, args)], cwd=ROOT,
+                                stdout=out, stderr=err, start_new_session=True)
+        timer = threading.Timer(120, lambda: os.killpg(proc.pid, signal.SIGKILL))
         timer.start()
-        _, status, usage = os.wait4(proc.pid, 0)
+        code = proc.wait()
         timer.cancel()
         seconds = time.monotonic() - start
         out.seek(0)
         err.seek(0)
-        result = subprocess.CompletedProcess(args, os.waitstatus_to_exitcode(status), out.read(), err.read())
-    return result, seconds, usage.ru_maxrss * 1024
+        result = subprocess.CompletedProcess(args, code, out.read(), err.read())
+    return result, seconds, int(rss.read_text()) if rss.exists() else 0
 
 
 # (id, rotations, their angle, the translation, the order)
