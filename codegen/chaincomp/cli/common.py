@@ -141,6 +141,13 @@ def add_assume_zero_argument(p, what: str = "errors held at zero") -> None:
                    help=f"{what}: names separated by commas (repeatable)")
 
 
+def add_hold_argument(p) -> None:
+    """--hold, the same in every fitting verb (identify, probe plan, probe fit)."""
+    p.add_argument("--hold", metavar="P.yaml",
+                   help="hold the errors this params file gives at its values, tables along an axis included "
+                        "(e.g. the linear axes' from a laser calibration): not fitted, and written as given with -o")
+
+
 # The model of the error: its order in the errors, or the exact chain. plot's older spelling
 # (--model first|second|exact) maps onto these.
 MODEL_NAMES = {"first": "1", "second": "2", "exact": "exact"}

@@ -18,8 +18,8 @@ from ..model.params import parse_value
 from ..model.units import UNITS
 from ..model.varying import MAX_POLYNOMIAL_COEFFICIENTS, MAX_TABLE_KNOTS
 from .calibration_report import calibration_of, check_report
-from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, check_output, load,
-                     names, number, number_list, refuse_empty, to_json as json_text)
+from .common import (add_assume_zero_argument, add_format_argument, add_hold_argument, add_machine_argument,
+                     check_output, load, names, number, number_list, refuse_empty, to_json as json_text)
 
 
 MIN_SIGMA = 1e-30   # internal units (mm, rad), as the smallest number a machine file may hold
@@ -159,9 +159,7 @@ def add_parser(sub) -> None:
     add_machine_argument(p)
     p.add_argument("measurements", metavar="MEAS.csv", help="measured tool-tip coordinates")
     add_assume_zero_argument(p, "errors held at zero (not fitted)")
-    p.add_argument("--hold", metavar="P.yaml",
-                   help="hold the errors this params file gives at its values, tables along an axis included (e.g. "
-                        "the linear axes' from a laser calibration): not fitted, and written as given with -o")
+    add_hold_argument(p)
     p.add_argument("--sigma", metavar="SIGMA",
                    help="standard uncertainty of the measured coordinates, positive: a length for x, y, z "
                         "(e.g. 20um; a bare number is in the machine's length unit), an angle for the "

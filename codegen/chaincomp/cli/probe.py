@@ -17,15 +17,9 @@ from ..model.params import parse_value
 from ..model.units import UNITS
 from ..output import write_files
 from .calibration_report import calibration_of_probe, check_report
-from .common import (add_assume_zero_argument, add_format_argument, add_machine_argument, add_seed_argument,
-                     check_output, length, load, names, number, to_json)
+from .common import (add_assume_zero_argument, add_format_argument, add_hold_argument, add_machine_argument,
+                     add_seed_argument, check_output, length, load, names, number, to_json)
 from .probe_simulate import add_sphere_arguments, run_simulate, sphere_of
-
-
-def _hold_argument(p) -> None:
-    p.add_argument("--hold", metavar="P.yaml",
-                   help="hold the errors this params file gives at its values, tables along an axis included "
-                        "(e.g. the linear axes' from a laser calibration): not fitted, and written as given with -o")
 
 
 def add_parser(sub) -> None:
@@ -59,7 +53,7 @@ def add_parser(sub) -> None:
                     help="the file PROBEOPEN opens (beside LinuxCNC's INI file; default probe-log.txt)")
     pl.add_argument("--gcode", metavar="OUT.ngc", help="write the LinuxCNC program")
     pl.add_argument("--csv", metavar="OUT.csv", help="write the plan: every touch, for any controller")
-    _hold_argument(pl)
+    add_hold_argument(pl)
     add_assume_zero_argument(pl)
     add_format_argument(pl)
     pl.set_defaults(run=run_plan)
@@ -81,7 +75,7 @@ def add_parser(sub) -> None:
     f.add_argument("--radius-tolerance", default=str(P.DEFAULT_RADIUS_TOLERANCE), metavar="LENGTH",
                    help=f"refuse a probed sphere radius further than this from --radius (default "
                         f"{P.DEFAULT_RADIUS_TOLERANCE:g})")
-    _hold_argument(f)
+    add_hold_argument(f)
     add_assume_zero_argument(f)
     f.add_argument("-o", "--output", metavar="params.yaml",
                    help="write the identified errors as a params file of the machine (the sphere left out), for "
