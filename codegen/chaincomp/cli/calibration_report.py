@@ -11,8 +11,10 @@ import numpy as np
 
 from ..analysis.calibration_report import Calibration, Dispersion, Residual, Value
 from ..errors import ChaincompError
-from ..measure.identify import COMPONENTS, OBSERVED, Fit, Table, _shown
+from ..measure.identify import Fit
+from ..measure.identify_report import _shown
 from ..measure.probe import NUISANCE, ProbeFit
+from ..measure.table import COMPONENTS, OBSERVED, Table
 from ..model.display import display_unit
 from .common import check_output
 

@@ -9,8 +9,10 @@ import sys
 from ..analysis.calibration_report import write_report
 from ..errors import ChaincompError, NoAnswer, OutsideLimit
 from ..measure.calibration import _write_loadable, slide_axis
-from ..measure.identify import (COMPONENTS, DIRECTIONS, HUBER_K, MAX_SMOOTH, ROTATION, HeldModel, Vary, held_values,
-                        identify, outside_limits, params_yaml, read_table, to_json, to_text)
+from ..measure.identify import MAX_SMOOTH, HeldModel, Vary, held_values, identify
+from ..measure.identify_report import params_yaml, to_json, to_text
+from ..measure.lsq import HUBER_K
+from ..measure.table import COMPONENTS, DIRECTIONS, ROTATION, outside_limits, read_table
 from ..measure.protocol import check_errors
 from ..model.display import add_units_argument
 from ..model.machine import Symbol

@@ -10,7 +10,8 @@ from ..analysis.calibration_report import write_report
 from ..errors import ChaincompError
 from ..measure import probe as P
 from ..measure.calibration import _write_loadable
-from ..measure.identify import held_values, params_yaml
+from ..measure.identify import held_values
+from ..measure.identify_report import params_yaml
 from ..measure.protocol import check_errors
 from ..model.machine import Symbol
 from ..model.params import parse_value

@@ -10,8 +10,9 @@ import sys
 import numpy as np
 
 from ..errors import ChaincompError
-from ..measure.identify import (COMPONENTS, MAX_ROWS, QUATERNION, coordinate_named_axes, outside_limits, read_table,
-                        simulate, simulate_orientations, write_table)
+from ..measure.identify import simulate, simulate_orientations
+from ..measure.table import (COMPONENTS, MAX_ROWS, QUATERNION, coordinate_named_axes, outside_limits, read_table,
+                             write_table)
 from ..measure.protocol import check_measure
 from ..measure.protocol_linear import auto_levels
 from ..model.expressions import MAX_LITERAL

@@ -33,7 +33,8 @@ from ..model.machine import Machine
 from ..output import write_file
 from ..symbolic.derive import COMPONENTS
 from ..symbolic.numeric import ExactModel
-from .identify import numeric_rank, pose_points, step_derivatives
+from .identify import pose_points
+from .lsq import numeric_rank, step_derivatives
 
 MAX_POSES = 20_000
 DEFAULT_POSES = 50

@@ -33,7 +33,8 @@ from ..model.numbers import parse_number
 from ..model.units import UNITS
 from ..model.yamlsource import read_text
 from ..symbolic.numeric import ExactModel
-from .identify import Fit, HeldModel, Table, identify, pose_frames, pose_points
+from .identify import Fit, HeldModel, identify, pose_frames, pose_points
+from .table import Table
 
 NUISANCE = ("SPHERE_DX", "SPHERE_DY", "SPHERE_DZ")   # the sphere's offset from its nominal place
 LETTERS = "XYZABCUVW"            # LinuxCNC's axes, in the order of its probe log's nine numbers

@@ -37,7 +37,8 @@ from ..model.machine import Machine
 from ..symbolic.derive import COMPONENTS
 from ..symbolic.numeric import ExactModel
 from .calibration import varying_axis
-from .identify import numeric_rank, pose_points
+from .identify import pose_points
+from .lsq import numeric_rank
 from .pose_design import point_jacobian
 from .protocol import check_errors, check_measure
 

@@ -239,7 +239,7 @@ def sanitise(name: str) -> str:
     return out + "_" if out in RESERVED else out
 
 
-# The measured coordinates' column names (chaincomp.identify.COLUMNS): an axis of one of these
+# The measured coordinates' column names (chaincomp.measure.table.COLUMNS): an axis of one of these
 # names would make a measurements file's column mean both, which identify refuses.
 MEASURED_NAMES = ("x", "y", "z", "kx", "ky", "kz", "qw", "qx", "qy", "qz")
 

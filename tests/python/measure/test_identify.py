@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from chaincomp import load_machine, load_params
-from chaincomp.measure.identify import Table, identify, simulate
+from chaincomp.measure.identify import identify, simulate
+from chaincomp.measure.table import Table
 from chaincomp.symbolic.numeric import ExactModel
 
 from helpers import machine_path, run_cli

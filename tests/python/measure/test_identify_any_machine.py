@@ -19,7 +19,7 @@ import pytest
 
 from chaincomp import load_machine, load_params
 from chaincomp.cli.main import main
-from chaincomp.measure.identify import chi2_quantile
+from chaincomp.measure.lsq import chi2_quantile
 
 from arm_models import block, rx, ry, rz, tr
 from helpers import machine_path

@@ -37,7 +37,8 @@ def test_identify_at_the_smoothing_bound_still_fits_a_straight_table(tmp_path):
     """EXX a tent 0, 3, 0 um over X's knots -400, 0, 400 mm, every other error zero and held so:
     without smoothing the fit finds the tent (within 4 standard uncertainties); at the bound,
     1e12, the second difference is nil (a straight table) and every number finite."""
-    from chaincomp.measure.identify import Vary, identify, read_table
+    from chaincomp.measure.identify import Vary, identify
+    from chaincomp.measure.table import read_table
     from chaincomp.model.machine import load_machine
     p, meas = tmp_path / "p.yaml", tmp_path / "meas.csv"
     p.write_text("machine: vmc_xyz\nvalues:\n  EXX:\n    axis: X\n    units: [mm, um]\n    interpolation: linear\n"
@@ -58,7 +59,8 @@ def test_identify_at_the_smoothing_bound_still_fits_a_straight_table(tmp_path):
 
 def test_identify_api_refuses_a_smoothing_weight_beyond_1e12(measurements):
     from chaincomp.errors import ChaincompError
-    from chaincomp.measure.identify import identify, read_table
+    from chaincomp.measure.identify import identify
+    from chaincomp.measure.table import read_table
     from chaincomp.model.machine import load_machine
     m = load_machine(VMC)
     with pytest.raises(ChaincompError, match="--smooth: must be at least 0 and at most 1e"):
@@ -120,7 +122,7 @@ def test_identify_reads_a_semicolon_or_tab_export_as_the_comma_one(tmp_path, sep
     """One CSV reader for every verb (model/csvtable.py): the header's separator is the file's, as
     iso230-2 and thermal read it; the cells are the comma file's, so are the set-ups and points
     (by hand in m4_nominal_rows). Before, identify alone refused such a file."""
-    from chaincomp.measure.identify import read_table
+    from chaincomp.measure.table import read_table
     from chaincomp.model.machine import load_machine
     machine = load_machine(write_file(tmp_path, "m.yaml", M4))
     rows = m4_nominal_rows()

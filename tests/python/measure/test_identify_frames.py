@@ -18,7 +18,8 @@ import pytest
 
 from chaincomp import load_machine, load_params
 from chaincomp.cli.main import main
-from chaincomp.measure.identify import read_table, residuals
+from chaincomp.measure.identify import residuals
+from chaincomp.measure.table import read_table
 
 from helpers import ROOT
 

@@ -15,7 +15,8 @@ import pytest
 
 from chaincomp import load_machine, load_params
 from chaincomp.cli.main import main
-from chaincomp.measure.identify import Table, Vary, identify
+from chaincomp.measure.identify import Vary, identify
+from chaincomp.measure.table import Table
 from chaincomp.symbolic.numeric import ExactModel
 
 UM, ARCSEC = 1e-3, math.pi / 648000

@@ -21,7 +21,7 @@ import yaml
 
 from chaincomp.cli.plot import _read_replay_csv
 from chaincomp.errors import ChaincompError
-from chaincomp.measure import ballbar, identify, iso230_2, thermal
+from chaincomp.measure import ballbar, iso230_2, table, thermal
 from chaincomp.model import csvtable
 from chaincomp.model.machine import load_machine
 from helpers import ROOT, VMC
@@ -96,7 +96,7 @@ def _trace_format(machine):
 def _setups_format(machine):
     rows = [[str(x), "10", "-100", str(x + 0.5), "10.25", "449.5"] for x in (-300, 0, 300, 100)]
     return Format([], ["X", "Y", "Z", "x", "y", "z"], rows, 0,
-                  lambda p: (lambda t: np.concatenate([t.axes["X"], t.coords.ravel()]))(identify.read_table(p, machine)))
+                  lambda p: (lambda t: np.concatenate([t.axes["X"], t.coords.ravel()]))(table.read_table(p, machine)))
 
 
 def _log_format(machine):

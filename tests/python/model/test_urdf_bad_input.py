@@ -36,10 +36,10 @@ def test_import_urdf_renames_joints_named_like_a_measured_coordinate(capsys, tmp
     (a column x would be both the axis and the measured coordinate)."""
     import json
 
-    from chaincomp.measure import identify
+    from chaincomp.measure import table
 
     from chaincomp.model import urdf
-    assert set(urdf.MEASURED_NAMES) == set(identify.COLUMNS)
+    assert set(urdf.MEASURED_NAMES) == set(table.COLUMNS)
     src, m = tmp_path / "gantry.urdf", tmp_path / "gantry.yaml"
     src.write_text(GANTRY)
     code, _, err = run_main(capsys, "import-urdf", src, "--base", "base", "--tip", "tool", "--errors", "joint-offsets",
