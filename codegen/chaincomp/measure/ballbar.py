@@ -49,6 +49,7 @@ from ..model.varying import Varying
 from ..output import write_file
 from ..symbolic.jets import JetModel
 from ..symbolic.numeric import ExactModel
+from . import lsq
 from .calibration import find_slides
 
 # plane -> (first in-plane coordinate, second, normal): the angle turns from the first towards the second
@@ -263,16 +264,16 @@ def lsq_circle(angle: np.ndarray, dev: np.ndarray, radius: float) -> tuple[np.nd
     pts = (radius + dev)[:, None] * np.stack([np.cos(angle), np.sin(angle)], axis=1)
     a = np.stack([np.ones_like(angle), np.cos(angle), np.sin(angle)], axis=1)
     r0, cx, cy = np.linalg.lstsq(a, dev, rcond=None)[0]
-    c, rho = np.array([cx, cy]), radius + r0
-    for _ in range(20):
-        v = pts - c
+
+    def linearise(x):          # x: centre x, y and radius; the residual is the distance minus the radius
+        v = pts - x[:2]
         dist = np.linalg.norm(v, axis=1)
-        jac = np.column_stack([-v / dist[:, None], -np.ones_like(dist)])
-        step = np.linalg.lstsq(jac, -(dist - rho), rcond=None)[0]
-        c, rho = c + step[:2], rho + step[2]
-        if np.abs(step).max() < 1e-15 * radius:
-            break
-    return c, float(rho), np.linalg.norm(pts - c, axis=1)
+        return -(dist - x[2]), np.column_stack([-v / dist[:, None], -np.ones_like(dist)])
+
+    x, _, _ = lsq.gauss_newton(linearise, np.array([cx, cy, radius + r0]), 20,
+                               lambda step, x, j: np.abs(step).max() < 1e-15 * radius)
+    c = x[:2]
+    return c, float(x[2]), np.linalg.norm(pts - c, axis=1)
 
 
 def evaluate(trace: Trace) -> dict:
@@ -622,38 +623,28 @@ def fit(machine: Machine, trace: Trace, values: dict, axes: dict, start: np.ndar
     first = [t for e in prefer for t in rest if t.error == e]
     candidates = centre + first + [t for t in rest if t not in first]
     norms = np.array([np.linalg.norm(t.column) for t in candidates])
-    big = norms.max()
-    unseen = [t.name for t, nm in zip(candidates, norms) if t.error and t.power == 0 and nm <= 1e-12 * big]
+    moves = lsq.seen(norms)
+    unseen = [t.name for t, v in zip(candidates, moves) if t.error and t.power == 0 and not v]
     # the first term, in the order above, that adds a direction of its own is fitted; the others
     # are combinations of fitted ones (centre first: it is always there)
-    picked: list[int] = []
-    q = np.zeros((m, 0))
-    for k, (t, nm) in enumerate(zip(candidates, norms)):
-        if nm <= 1e-12 * big:
-            continue
-        u = t.column / nm
-        rest = u - q @ (q.T @ u)
-        if np.linalg.norm(rest) > 1e-6:
-            picked.append(k)
-            q = np.column_stack([q, rest / np.linalg.norm(rest)])
+    shown = np.flatnonzero(moves)
+    units = np.column_stack([candidates[k].column / norms[k] for k in shown])
+    picked = [int(shown[i]) for i in lsq.spanning(units, first=range(len(shown)))]
     terms = [candidates[k] for k in picked]
     jac = np.column_stack([t.column for t in terms])
     if m <= len(terms):
         raise ChaincompError(f"{m} trace points for {len(terms)} unknowns: nothing left to estimate the "
                              "uncertainty from; record more points", trace.file)
     y = trace.deviation - start
-    est, *_ = np.linalg.lstsq(jac, y, rcond=None)
-    res = y - jac @ est
-    dof = m - len(terms)
-    var = float(res @ res) / dof
-    cov = var * np.linalg.inv(jac.T @ jac)
+    f = lsq.linear_fit(jac, y)
     combos: dict[str, list[tuple[Term, float]]] = {t.name: [] for t in terms}
-    for k, t in enumerate(candidates):
-        if k in picked or norms[k] <= 1e-12 * big:
+    for k in shown:
+        if k in picked:
             continue
-        a = np.linalg.lstsq(jac, t.column, rcond=None)[0]
-        for f, tf in zip(a, terms):
-            if abs(f) * np.linalg.norm(tf.column) > 1e-6 * norms[k]:
-                combos[tf.name].append((t, float(f)))
-    return Fit(terms, est, np.sqrt(np.diag(cov)), combos, unseen, list(assume_zero), not_fitted,
-               math.sqrt(float(res @ res) / m), math.sqrt(float(y @ y) / m), m, dof, res, cov)
+        t = candidates[k]
+        for c, tf in zip(lsq.carried(jac, t.column), terms):
+            if abs(c) * np.linalg.norm(tf.column) > 1e-6 * norms[k]:
+                combos[tf.name].append((t, float(c)))
+    return Fit(terms, f.estimates, np.sqrt(np.diag(f.covariance)), combos, unseen, list(assume_zero), not_fitted,
+               math.sqrt(float(f.residual @ f.residual) / m), math.sqrt(float(y @ y) / m), m, f.dof, f.residual,
+               f.covariance)

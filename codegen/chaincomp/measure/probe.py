@@ -33,6 +33,7 @@ from ..model.numbers import parse_number
 from ..model.units import UNITS
 from ..model.yamlsource import read_text
 from ..symbolic.numeric import ExactModel
+from . import lsq
 from .identify import Fit, HeldModel, identify, pose_frames, pose_points
 from .table import Table
 
@@ -664,17 +665,18 @@ def fit_sphere(points: np.ndarray, radius: float | None = None) -> tuple[np.ndar
     Gauss-Newton on the distances."""
     a = np.hstack([2 * points, np.ones((len(points), 1))])
     sol = np.linalg.lstsq(a, (points ** 2).sum(axis=1), rcond=None)[0]
+    free = radius is None                   # the radius fitted too: x is the centre and the radius
     c = sol[:3]
-    rho = math.sqrt(max(sol[3] + c @ c, 0.0)) if radius is None else radius
-    for _ in range(20):
-        d = points - c
+    start = np.append(c, math.sqrt(max(sol[3] + c @ c, 0.0))) if free else c
+
+    def linearise(x):       # the residual is each point's distance from the centre minus the radius
+        d = points - x[:3]
         dist = np.linalg.norm(d, axis=1)
-        j = np.hstack([-d / dist[:, None], -np.ones((len(points), 1))])[:, :3 if radius is not None else 4]
-        step = np.linalg.lstsq(j, -(dist - rho), rcond=None)[0]
-        c = c + step[:3]
-        rho = rho + (step[3] if radius is None else 0.0)
-        if np.linalg.norm(step) < 1e-12:
-            break
+        return -(dist - (x[3] if free else radius)), \
+            np.hstack([-d / dist[:, None], -np.ones((len(points), 1))])[:, :4 if free else 3]
+
+    x, _, _ = lsq.gauss_newton(linearise, start, 20, lambda step, x, j: np.linalg.norm(step) < 1e-12)
+    c, rho = x[:3], (x[3] if free else radius)
     return c, rho, np.linalg.norm(points - c, axis=1) - rho
 
 
@@ -818,12 +820,11 @@ def _backlash(machine: Machine, axes: Axes, held: dict, centres: list[Centre], v
         rows.append(np.stack([(f(cp.centre, {**rot, n: rot[n] + h}) - f(cp.centre, {**rot, n: rot[n] - h})) / (2 * h)
                               for n in rot], axis=-1))
     j, y = np.vstack(rows), np.concatenate(rhs)
-    b, *_ = np.linalg.lstsq(j, y, rcond=None)
-    dof = len(y) - len(b)
-    if dof <= 0:
+    if len(y) <= j.shape[1]:
         return {}
-    var = float(np.sum((y - j @ b) ** 2)) / dof
-    cov = var * np.linalg.pinv(j.T @ j)
+    b = np.linalg.lstsq(j, y, rcond=None)[0]
+    # pinv, not inv: pairs that leave a rotary axis still (a singular JᵀJ) give the others theirs
+    cov = lsq.residual_variance(y - j @ b, len(y) - len(b)) * np.linalg.pinv(j.T @ j)
     names = list(pairs[0][0].group.rotary)
     return {n: (float(b[i]), float(math.sqrt(max(cov[i, i], 0.0)))) for i, n in enumerate(names)}
 

@@ -34,6 +34,7 @@ from ..model.expressions import MAX_LITERAL
 from ..model.machine import Machine
 from ..model.numbers import DECIMAL as _DECIMAL
 from ..model.yamlsource import LineDict, LineList, describe, line_of, load_yaml, yaml11_number
+from . import lsq
 
 REFERENCE_TEMPERATURE = 20.0   # degC: ISO 1, the reference temperature of geometrical specifications
 MAX_ERRORS = 64                # errors of one thermal model
@@ -438,41 +439,34 @@ def _refine(t, temps, d, chosen, taus, reference, lo, hi, iterations: int = 40, 
 
     free = [i for i, tau in enumerate(taus) if tau > 0]
     taus = list(taus)
-    _, rss = _solve(design(taus), d)
+
+    def rss(ts):
+        return _solve(design(ts), d)[1]
+
     if not free:
-        return taus, rss
-    mu = 1e-3
+        return taus, rss(taus)
     h = 1e-5
-    for _ in range(iterations):
-        a = design(taus)
-        coef, rss = _solve(a, d)
+
+    def linearise(ts):   # the residual (gains solved), its derivatives in log tau by forward differences
+        a = design(ts)
+        coef, value = _solve(a, d)
         r = d - np.einsum("ij,j->i", a, coef)
         jac = np.empty((len(d), len(free)))
         for j, i in enumerate(free):
-            up = list(taus)
-            up[i] = taus[i] * math.exp(h)
+            up = list(ts)
+            up[i] = ts[i] * math.exp(h)
             a_up = design(up)
             c_up, _ = _solve(a_up, d)
             jac[:, j] = ((d - np.einsum("ij,j->i", a_up, c_up)) - r) / h
-        g = np.einsum("ij,i->j", jac, r)
-        jtj = np.einsum("ij,ik->jk", jac, jac)
-        improved = False
-        for _ in range(12):
-            step = np.linalg.solve(jtj + mu * np.diag(np.diag(jtj) + 1e-12), -g)
-            trial = list(taus)
-            for j, i in enumerate(free):
-                trial[i] = float(np.clip(taus[i] * math.exp(float(np.clip(step[j], -2, 2))), lo, hi))
-            _, rss_trial = _solve(design(trial), d)
-            if rss_trial < rss:
-                taus, mu, improved = trial, max(mu / 3, 1e-9), True
-                if rss - rss_trial <= 1e-10 * rss:
-                    return taus, rss_trial
-                break
-            mu *= 4
-        if not improved:
-            break
-    _, rss = _solve(design(taus), d)
-    return taus, rss
+        return r, jac, value
+
+    def update(ts, step):  # a step in log tau, at most a factor e^2, within [lo, hi]
+        trial = list(ts)
+        for j, i in enumerate(free):
+            trial[i] = float(np.clip(ts[i] * math.exp(float(np.clip(step[j], -2, 2))), lo, hi))
+        return trial
+
+    return lsq.levenberg_marquardt(linearise, rss, update, taus, iterations)
 
 
 def _held_out(t, temps, d, chosen, taus, reference, lo, hi, folds: int = FOLDS) -> np.ndarray:
@@ -566,10 +560,9 @@ def _uncertainties(t, temps, d, chosen, taus, coef, reference, draws: int = NOIS
             cols.append(coef[1 + i] * (lag(t, temps[s], tau + dtau, temps.start[s]) -
                                        lag(t, temps[s], tau - dtau, temps.start[s])) / (2 * dtau))
     jac = np.stack(cols, axis=1)
-    dof = max(len(d) - jac.shape[1], 1)
-    s2 = float(r @ r) / dof
+    s2 = lsq.residual_variance(r, max(len(d) - jac.shape[1], 1))
     try:
-        inverse = np.linalg.inv(jac.T @ jac)
+        inverse = lsq.normal_inverse(jac)
     except np.linalg.LinAlgError:
         return np.full(jac.shape[1], math.inf)
     cov = s2 * inverse
