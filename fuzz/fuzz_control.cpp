@@ -18,12 +18,7 @@
 
 namespace {
 
-void drain(lcm_t* lcm) {
-  while (lcm_handle_timeout(lcm, 0) > 0) {
-  }
-}
-
-void publish_command(lcm_t* lcm, std::int64_t seq) {
+void publish_command(lcm_t* lcm, chaincomp::LcmNode& node, std::int64_t seq) {
   chaincomp_lcm::lcmt_axis_command c{};
   c.utime = seq;   // any int64: the daemon takes differences without overflow
   c.seq = seq;
@@ -34,7 +29,7 @@ void publish_command(lcm_t* lcm, std::int64_t seq) {
   std::vector<unsigned char> b(c.getEncodedSize());
   c.encode(b.data(), 0, static_cast<int>(b.size()));
   lcm_publish(lcm, "CHAINCOMP_COMMAND", b.data(), static_cast<unsigned>(b.size()));
-  drain(lcm);
+  node.handle_until_idle();
 }
 
 }  // namespace
@@ -60,16 +55,16 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   }
   if (size == 0) return 0;
   lcm_publish(lcm, kChannels[data[0] % 4], data + 1, static_cast<unsigned>(size - 1));
-  drain(lcm);
+  node->handle_until_idle();
   // a command stream restarting at a seq of the input's (a reset's next command is taken at once)
   std::int64_t base = 0;
   std::memcpy(&base, data + 1, std::min<std::size_t>(size - 1, sizeof base));
   const std::int64_t published = node->counters().published;
   for (int k = 0; k < chaincomp::kRestartRun && node->counters().published == published; ++k) {
-    publish_command(lcm, base < INT64_MAX - 8 ? base + k : base - 8 + k);
+    publish_command(lcm, *node, base < INT64_MAX - 8 ? base + k : base - 8 + k);
   }
   if (node->counters().published == published) std::abort();
   node->publish_status(false);
-  drain(lcm);
+  node->handle_until_idle();
   return 0;
 }

@@ -1,9 +1,11 @@
 // chaincompd: takes commanded axis positions over LCM and publishes corrected targets.
-// Single-threaded; poll() on the LCM file descriptor; no heap allocation after start-up.
+// A receive thread copies each message into its stream's ring (LcmNode); the main thread waits
+// on the node's wake fd and handles them; no heap allocation after start-up.
 #include <lcm/lcm.h>
 #include <poll.h>
 #include <sched.h>
 #include <sys/mman.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -134,6 +136,7 @@ int run_daemon(int argc, char** argv) {
     std::fprintf(stderr, "chaincompd: warning: socket receive buffer %lld bytes, not the %d asked "
                  "(recv_buf_size; raise net.core.rmem_max); continuing\n", got / 2, config.recv_buf_size);
   }
+  node->start_receiving();   // after every subscription, before 'ready' (a thread's niceness is its creator's)
   const std::string tables = chaincomp::describe_varying(loaded.varying);
   std::fprintf(stderr, "chaincompd: %s with %s%s on %s: %s -> %s; instance %016llx; ready\n", entry->info->name,
                params_path.c_str(), tables.empty() ? "" : (" (" + tables + ")").c_str(), config.lcm_url.c_str(),
@@ -141,7 +144,7 @@ int run_daemon(int argc, char** argv) {
                static_cast<unsigned long long>(node->instance_id()));
 
   using Clock = std::chrono::steady_clock;
-  const int fd = lcm_get_fileno(lcm);
+  const int fd = node->wake_fd();
   const auto period = std::chrono::nanoseconds(static_cast<std::int64_t>(config.status_period_s * 1e9));
   auto next_status = Clock::now() + period;
   while (!g_stop) {
@@ -151,7 +154,13 @@ int run_daemon(int argc, char** argv) {
     const timespec wait{static_cast<time_t>(left.count() / 1000000000), static_cast<long>(left.count() % 1000000000)};
     pollfd pfd{fd, POLLIN, 0};
     const int r = ppoll(&pfd, 1, &wait, nullptr);
-    if (r > 0 && (pfd.revents & POLLIN)) lcm_handle(lcm);
+    if (r > 0 && (pfd.revents & POLLIN)) {
+      std::uint64_t woken = 0;
+      if (read(fd, &woken, sizeof woken) < 0) {
+        // EAGAIN: already read; the rings are looked at anyway
+      }
+      node->handle_queued();
+    }
     const auto now = Clock::now();
     if (now >= next_status) {
       node->publish_status(false);
@@ -159,10 +168,10 @@ int run_daemon(int argc, char** argv) {
       if (next_status <= now) next_status = now + period;  // after a stall: no burst to catch up
     }
   }
-  // What LCM holds when asked to stop is handled before the final status: no command received
-  // goes uncounted (bounded: a flood does not hold the exit up for ever).
-  for (int i = 0; i < 4 * chaincomp::LcmNode::kQueueCapacity && lcm_handle_timeout(lcm, 0) > 0; ++i) {
-  }
+  // What the rings and LCM hold when asked to stop is handled before the final status: no
+  // command received goes uncounted (bounded: a flood does not hold the exit up for ever).
+  node->stop_receiving();
+  node->handle_until_idle(4 * chaincomp::LcmNode::kQueueCapacity);
   node->publish_status(true);
   long long refused = 0;
   for (const auto n : updater.refused()) refused += n;
@@ -178,10 +187,12 @@ int run_daemon(int argc, char** argv) {
                static_cast<long long>(k.seq_missing), static_cast<long long>(k.stream_restarts),
                static_cast<long long>(k.resets), static_cast<long long>(node->kernel_drops()));
   const auto& s = node->last_status();
-  std::fprintf(stderr, "chaincompd: accounted: unpublished %lld, queue dropped %lld (its queue found full %lld times); "
-               "latency: compute p50 %lld ns p99 %lld ns, receipt to publish p50 %lld ns p99 %lld ns (last %d)\n",
+  std::fprintf(stderr, "chaincompd: accounted: unpublished %lld, queue dropped %lld (control %lld), LCM's queues "
+               "found full %lld times; latency: compute p50 %lld ns p99 %lld ns, receipt to publish p50 %lld ns p99 "
+               "%lld ns (last %d)\n",
                static_cast<long long>(s.unpublished), static_cast<long long>(s.queue_dropped),
-               static_cast<long long>(s.queue_full), static_cast<long long>(s.latency_p50_ns),
+               static_cast<long long>(s.control_queue_dropped), static_cast<long long>(s.lcm_queue_full),
+               static_cast<long long>(s.latency_p50_ns),
                static_cast<long long>(s.latency_p99_ns), static_cast<long long>(s.receipt_p50_ns),
                static_cast<long long>(s.receipt_p99_ns), s.window);
   node.reset();

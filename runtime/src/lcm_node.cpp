@@ -9,7 +9,10 @@
 #include <dlfcn.h>
 #include <linux/sock_diag.h>
 #include <netinet/in.h>
+#include <signal.h>
+#include <sys/eventfd.h>
 #include <sys/socket.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cctype>
@@ -54,6 +57,21 @@ bool machine_name_fits(const void* data, std::size_t size, std::size_t kAt) {
   const std::int64_t len = static_cast<std::int32_t>((std::uint32_t(b[0]) << 24) | (std::uint32_t(b[1]) << 16) |
                                                      (std::uint32_t(b[2]) << 8) | std::uint32_t(b[3]));
   return len >= 1 && len <= LcmNode::kMaxMachineName + 1 && len <= static_cast<std::int64_t>(size - kAt - 4);
+}
+
+// The encoded size of `m` with every string at its longest (255 bytes: lcm_wire.hpp's bound,
+// kMaxMachineName) and every array at its longest: a stream's largest valid message.
+template <class M>
+std::size_t largest(M m) {
+  m.machine.assign(LcmNode::kMaxMachineName, 'x');
+  return static_cast<std::size_t>(m.getEncodedSize());
+}
+template <class M>
+std::size_t largest_with_names(M m) {
+  m.num_values = M::MAX_VALUES;
+  m.names.assign(M::MAX_VALUES, std::string(255, 'x'));
+  m.values.assign(M::MAX_VALUES, 0.0);
+  return largest(m);
 }
 
 std::int64_t big_endian64(const unsigned char* b) {
@@ -145,12 +163,15 @@ LcmNode::LcmNode(lcm_t* lcm, const ModelEntry& entry, const void* model, const D
   s.cpu_pinned_ok = rt.cpu_pinned;
   s.queue_capacity = kQueueCapacity;
   s.control_queue_capacity = kControlQueueCapacity;
+  s.lcm_queue_capacity = kLcmQueueCapacity;
   status_buf_.resize(s.getEncodedSize() + 64);
   sent_.assign(kSentRing, 0);
-  command_sub_ = subscribe(config_.command_channel, &LcmNode::on_command, kQueueCapacity);
-  control_sub_ = subscribe(config_.control_channel, &LcmNode::on_control, kControlQueueCapacity);
+  wake_fd_ = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+  subscribe(kCommands, config_.command_channel, kQueueCapacity, largest(chaincomp_lcm::lcmt_axis_command{}));
+  subscribe(kControl, config_.control_channel, kControlQueueCapacity,
+            static_cast<std::size_t>(control_msg_.getEncodedSize()));
   // Targets on the bus: its own heard back, and another daemon's for this machine.
-  target_sub_ = subscribe(config_.corrected_channel, &LcmNode::on_target, kQueueCapacity);
+  subscribe(kTargets, config_.corrected_channel, kQueueCapacity, largest(chaincomp_lcm::lcmt_corrected_target{}));
   find_sockets();
   // An LD_PRELOAD allocation counter, when present, measures the steady state.
   alloc_count_ = reinterpret_cast<long long (*)()>(dlsym(RTLD_DEFAULT, "chaincomp_alloc_count"));
@@ -159,17 +180,90 @@ LcmNode::LcmNode(lcm_t* lcm, const ModelEntry& entry, const void* model, const D
   publish_status(false);
 }
 
-lcm_subscription_t* LcmNode::subscribe(const std::string& channel, lcm_msg_handler_t handler, int capacity) {
-  lcm_subscription_t* sub = lcm_subscribe(lcm_, channel_regex(channel).c_str(), handler, this);
-  lcm_subscription_set_queue_capacity(sub, capacity);
-  return sub;
+void LcmNode::subscribe(Stream stream, const std::string& channel, int capacity, std::size_t max_size) {
+  Inlet& in = inlets_[stream];
+  in.node = this;
+  in.stream = stream;
+  in.ring = std::make_unique<MessageRing>(static_cast<std::size_t>(capacity), max_size);
+  in.sub = lcm_subscribe(lcm_, channel_regex(channel).c_str(), &LcmNode::on_message, &in);
+  lcm_subscription_set_queue_capacity(in.sub, kLcmQueueCapacity);
 }
 
-bool LcmNode::queue_was_full(lcm_subscription_t* sub, int capacity) {
-  // LCM counts the message being handled out of the queue before calling its handler: capacity - 1
-  // left (or more: arrived since) means it was full (or one short of it) at some moment since the
-  // last message was taken, and nothing but taking one empties it.
-  return lcm_subscription_get_queue_size(sub) >= capacity - 1;
+void LcmNode::on_message(const lcm_recv_buf_t* rbuf, const char*, void* user) {
+  Inlet& in = *static_cast<Inlet*>(user);
+  LcmNode& self = *in.node;
+  // LCM takes the message out of its queue before calling: capacity - 1 left (or more) means
+  // the queue was full at some moment since the last one was taken, and may have discarded one.
+  if (lcm_subscription_get_queue_size(in.sub) >= kLcmQueueCapacity - 1)
+    self.lcm_queue_full_.store(self.lcm_queue_full_.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
+  const std::int64_t arrival = self.arrived_.load(std::memory_order_relaxed);
+  // an oversized message is queued empty: undecodable where its stream counts refusals
+  if (in.ring->push(rbuf->data, rbuf->data_size, arrival, rbuf->recv_utime) == MessageRing::Push::kFull) return;
+  self.arrived_.store(arrival + 1, std::memory_order_release);   // the ring's push before the number
+  const std::uint64_t one = 1;
+  if (write(self.wake_fd_, &one, sizeof one) < 0) {
+    // EAGAIN only at a counter of 2^64 - 2: the main thread is awake anyway
+  }
+}
+
+void LcmNode::start_receiving() {
+  // the thread takes no signals: SIGTERM reaches the main thread's wait
+  sigset_t all, before;
+  sigfillset(&all);
+  pthread_sigmask(SIG_SETMASK, &all, &before);
+  stop_receiving_ = false;
+  receiver_ = std::thread([this] { receive_loop(); });
+  pthread_sigmask(SIG_SETMASK, &before, nullptr);
+}
+
+void LcmNode::receive_loop() {
+  // a timeout, so that it sees stop_receiving_; an error (none expected) does not spin
+  while (!stop_receiving_.load(std::memory_order_relaxed)) {
+    if (lcm_handle_timeout(lcm_, 100) < 0) usleep(10000);
+  }
+}
+
+void LcmNode::stop_receiving() {
+  if (!receiver_.joinable()) return;
+  stop_receiving_ = true;
+  receiver_.join();
+}
+
+int LcmNode::handle_queued() {
+  // Every number below arrived_ is in a ring, and each ring holds its messages in arrival order:
+  // the next one is at the front of one of them.
+  const std::int64_t arrived = arrived_.load(std::memory_order_acquire);
+  const std::int64_t first = next_;
+  for (; next_ < arrived; ++next_) {
+    for (Inlet& in : inlets_) {
+      const MessageRing::Message* m = in.ring ? in.ring->front() : nullptr;
+      if (m != nullptr && m->arrival == next_) {
+        handle(in.stream, *m);
+        in.ring->pop();
+        break;
+      }
+    }
+  }
+  return static_cast<int>(next_ - first);
+}
+
+void LcmNode::handle_until_idle(int max_messages) {
+  // one of LCM's messages, then what the rings hold, in turn: as the two threads would
+  for (int i = 0; i < max_messages; ++i) {
+    const bool got = lcm_handle_timeout(lcm_, 0) > 0;
+    if (handle_queued() == 0 && !got) return;
+  }
+}
+
+void LcmNode::handle(Stream stream, const MessageRing::Message& m) {
+  switch (stream) {
+    case kCommands: return handle_command(m);
+    case kControl: return handle_control(m);
+    case kParams: return handle_params(m);
+    case kReadings: return handle_readings(m);
+    case kTargets: return handle_target(m);
+    case kNumStreams: return;
+  }
 }
 
 CommandTime LcmNode::command_time() const {
@@ -181,41 +275,41 @@ CommandTime LcmNode::command_time() const {
 }
 
 LcmNode::~LcmNode() {
-  lcm_unsubscribe(lcm_, command_sub_);
-  lcm_unsubscribe(lcm_, control_sub_);
-  lcm_unsubscribe(lcm_, target_sub_);
-  if (params_sub_) lcm_unsubscribe(lcm_, params_sub_);
-  if (readings_sub_) lcm_unsubscribe(lcm_, readings_sub_);
+  stop_receiving();
+  for (Inlet& in : inlets_) {
+    if (in.sub) lcm_unsubscribe(lcm_, in.sub);
+  }
+  if (wake_fd_ >= 0) close(wake_fd_);
 }
 
 void LcmNode::accept_temperatures(ThermalState& thermal) {
   thermal_ = &thermal;
-  readings_sub_ = subscribe(config_.temperatures_channel, &LcmNode::on_readings, kQueueCapacity);
+  subscribe(kReadings, config_.temperatures_channel, kUpdateQueueCapacity,
+            largest_with_names(chaincomp_lcm::lcmt_temperatures{}));
 }
 
-void LcmNode::on_readings(const lcm_recv_buf_t* rbuf, const char*, void* user) {
-  auto* self = static_cast<LcmNode*>(user);
-  if (!decode_readings(rbuf->data, rbuf->data_size, chaincomp_lcm::lcmt_temperatures::getHash(), self->readings_)) {
-    self->thermal_->count_undecodable();
+void LcmNode::handle_readings(const MessageRing::Message& m) {
+  if (!decode_readings(m.data, m.size, chaincomp_lcm::lcmt_temperatures::getHash(), readings_)) {
+    thermal_->count_undecodable();
     return;
   }
-  if (self->thermal_->take(self->readings_, self->machine_, self->thermal_update_) && self->updater_)
-    self->updater_->apply_values(self->thermal_update_, self->command_time());
+  if (thermal_->take(readings_, machine_, thermal_update_) && updater_)
+    updater_->apply_values(thermal_update_, command_time());
 }
 
 void LcmNode::accept_params_updates(ParamsUpdater& updater) {
   updater_ = &updater;
-  // a flood is refused one by one (min_interval), never dropped unseen by a short queue
-  params_sub_ = subscribe(config_.params_channel, &LcmNode::on_params, kQueueCapacity);
+  // a flood is refused one by one (min_interval); beyond the ring, dropped and counted
+  subscribe(kParams, config_.params_channel, kUpdateQueueCapacity,
+            largest_with_names(chaincomp_lcm::lcmt_params_update{}));
 }
 
-void LcmNode::on_params(const lcm_recv_buf_t* rbuf, const char*, void* user) {
-  auto* self = static_cast<LcmNode*>(user);
-  if (!decode_params_update(rbuf->data, rbuf->data_size, chaincomp_lcm::lcmt_params_update::getHash(), self->update_)) {
-    self->updater_->count_undecodable();
+void LcmNode::handle_params(const MessageRing::Message& m) {
+  if (!decode_params_update(m.data, m.size, chaincomp_lcm::lcmt_params_update::getHash(), update_)) {
+    updater_->count_undecodable();
     return;
   }
-  self->updater_->apply(self->update_, self->instance_id_, self->command_time());
+  updater_->apply(update_, instance_id_, command_time());
 }
 
 // LCM's udpm provider receives on a socket of its own thread; lcm_get_fileno gives a
@@ -258,19 +352,15 @@ std::int64_t LcmNode::kernel_drops() const {
   return drops;
 }
 
-void LcmNode::on_target(const lcm_recv_buf_t* rbuf, const char*, void* user) {
-  static_cast<LcmNode*>(user)->handle_target(rbuf);
-}
-
-void LcmNode::handle_target(const lcm_recv_buf_t* rbuf) {
+void LcmNode::handle_target(const MessageRing::Message& m) {
   // Its own targets come back once each, in the order published: told by fingerprint and
   // instance without decoding, then found among those published and not yet heard (those
   // before it were lost). Anyone may forge the instance: a payload it never published, or
   // one already heard, counts nothing.
-  const auto* b = static_cast<const unsigned char*>(rbuf->data);
-  if (rbuf->data_size >= kTargetMachineAt && big_endian64(b) == heard_msg_.getHash() &&
+  const unsigned char* b = m.data;
+  if (m.size >= kTargetMachineAt && big_endian64(b) == heard_msg_.getHash() &&
       big_endian64(b + kTargetMachineAt - 8) == instance_id_) {
-    const std::uint64_t h = fnv1a64(b, rbuf->data_size);
+    const std::uint64_t h = fnv1a64(b, m.size);
     for (std::uint64_t i = sent_tail_; i < sent_head_; ++i) {
       if (sent_[i & (kSentRing - 1)] == h) {
         ++own_heard_;
@@ -281,8 +371,7 @@ void LcmNode::handle_target(const lcm_recv_buf_t* rbuf) {
     return;
   }
   auto& t = heard_msg_;
-  if (!machine_name_fits(rbuf->data, rbuf->data_size, kTargetMachineAt) ||
-      t.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) < 0) {
+  if (!machine_name_fits(m.data, m.size, kTargetMachineAt) || t.decode(m.data, 0, static_cast<int>(m.size)) < 0) {
     return;  // not a target of this version: nobody this node could be confused with
   }
   if (t.instance_id == instance_id_ || t.machine != machine_) return;  // exact: length and bytes
@@ -297,39 +386,22 @@ void LcmNode::handle_target(const lcm_recv_buf_t* rbuf) {
                config_.corrected_channel.c_str(), static_cast<unsigned long long>(instance_id_));
 }
 
-void LcmNode::on_command(const lcm_recv_buf_t* rbuf, const char*, void* user) {
-  static_cast<LcmNode*>(user)->handle_command(rbuf);
-}
-
-void LcmNode::on_control(const lcm_recv_buf_t* rbuf, const char*, void* user) {
-  auto* self = static_cast<LcmNode*>(user);
-  ++self->control_received_;
-  if (queue_was_full(self->control_sub_, kControlQueueCapacity)) ++self->control_queue_full_;
-  if (!decode_control(rbuf->data, rbuf->data_size, self->control_msg_)) {
-    ++self->control_refused_;
+void LcmNode::handle_control(const MessageRing::Message& m) {
+  ++control_received_;
+  if (!decode_control(m.data, m.size, control_msg_)) {
+    ++control_refused_;
     return;
   }
-  apply_control(self->control_msg_, self->comp_, self->updater_, self->thermal_);
+  apply_control(control_msg_, comp_, updater_, thermal_);
 }
 
-void LcmNode::handle_command(const lcm_recv_buf_t* rbuf) {
+void LcmNode::handle_command(const MessageRing::Message& m) {
   const auto t0 = Clock::now();
-  // Commands LCM discarded at a full queue show as a gap before the first one it kept after
-  // them; the moment it was full is seen by a command at most kQueueCapacity - 1 ahead of that
-  // gap (the queue held it and those before it), so a gap that near a full queue is the queue's.
-  if (queue_was_full(command_sub_, kQueueCapacity)) {
-    ++queue_full_;
-    full_at_ = handled_;
-  }
-  const bool near_full = full_at_ >= 0 && handled_ - full_at_ <= kQueueCapacity;
-  ++handled_;
-  if (!decode_command(rbuf->data, rbuf->data_size, cmd_msg_, command_)) {
+  if (!decode_command(m.data, m.size, cmd_msg_, command_)) {
     comp_.count_undecodable();
     return;
   }
-  const std::int64_t missing_before = comp_.counters().seq_missing;
   const bool answered = comp_.process(command_, target_);
-  if (near_full) queue_dropped_ += comp_.counters().seq_missing - missing_before;
   if (answered) {
     auto& o = out_msg_;
     to_message(target_, o);
@@ -339,7 +411,7 @@ void LcmNode::handle_command(const lcm_recv_buf_t* rbuf) {
       comp_.count_published();
       sent_[sent_head_++ & (kSentRing - 1)] = fnv1a64(out_buf_.data(), static_cast<std::size_t>(n));
       if (sent_head_ - sent_tail_ > kSentRing) sent_tail_ = sent_head_ - kSentRing;  // the oldest: lost
-      receipt_.record(wall_ns() - rbuf->recv_utime * 1000);
+      receipt_.record(wall_ns() - m.recv_utime * 1000);
     } else {
       ++unpublished_;
     }
@@ -403,9 +475,15 @@ void LcmNode::publish_status(bool final) {
   s.control_received = control_received_;
   s.control_refused = control_refused_;
   s.unpublished = unpublished_;
-  s.queue_full = queue_full_;
-  s.queue_dropped = queue_dropped_;
-  s.control_queue_full = control_queue_full_;
+  s.queue_dropped = dropped(kCommands);
+  s.control_queue_dropped = dropped(kControl);
+  s.params_queue_dropped = dropped(kParams);
+  s.readings_queue_dropped = dropped(kReadings);
+  s.targets_queue_dropped = dropped(kTargets);
+  std::int64_t oversized = 0;
+  for (const Inlet& in : inlets_) oversized += in.ring ? in.ring->oversized() : 0;
+  s.oversized = oversized;
+  s.lcm_queue_full = lcm_queue_full_.load(std::memory_order_relaxed);
   const auto waited = receipt_.summary();
   s.receipt_p50_ns = waited.p50;
   s.receipt_p99_ns = waited.p99;

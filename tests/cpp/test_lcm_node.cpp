@@ -32,10 +32,8 @@ void on_status(const lcm_recv_buf_t* rbuf, const char*, void* user) {
   static_cast<Inbox*>(user)->status.push_back(s);
 }
 
-void drain(lcm_t* lcm) {
-  while (lcm_handle_timeout(lcm, 0) > 0) {
-  }
-}
+// LCM's handlers (the node's copy into its rings) and the node's in turn, as its two threads would.
+void drain(chaincomp::LcmNode& node) { node.handle_until_idle(); }
 
 std::vector<unsigned char> encode(const chaincomp_lcm::lcmt_axis_command& c) {
   std::vector<unsigned char> buf(c.getEncodedSize());
@@ -74,7 +72,7 @@ TEST_CASE("commands over memq:// come back corrected, bad payloads are counted",
     std::memcpy(c.axes, axes, sizeof axes);
     auto good = encode(c);
     lcm_publish(lcm, "CHAINCOMP_COMMAND", good.data(), static_cast<unsigned>(good.size()));
-    drain(lcm);
+    drain(node);
     REQUIRE(inbox.targets.size() == 1);
     const auto& t = inbox.targets[0];
     CHECK(t.seq == 1);
@@ -98,9 +96,9 @@ TEST_CASE("commands over memq:// come back corrected, bad payloads are counted",
       bad.push_back(b);
     }
     for (const auto& b : bad) lcm_publish(lcm, "CHAINCOMP_COMMAND", b.data(), static_cast<unsigned>(b.size()));
-    drain(lcm);
+    drain(node);
     node.publish_status(true);
-    drain(lcm);
+    drain(node);
     REQUIRE(!inbox.status.empty());
     const auto& s = inbox.status.back();
     CHECK(s.received == 6);
@@ -143,7 +141,7 @@ TEST_CASE("targets and status carry the instance; another instance's targets for
       auto b = encode(m);
       if (nul_at) b[24 + 4 + nul_at] = 0;  // after fingerprint, utime, seq, the length
       lcm_publish(lcm, "CHAINCOMP_COMMAND", b.data(), static_cast<unsigned>(b.size()));
-      drain(lcm);
+      drain(node);
     };
     publish(c);
     REQUIRE(inbox.targets.size() == 1);
@@ -164,7 +162,7 @@ TEST_CASE("targets and status carry the instance; another instance's targets for
       REQUIRE(t.encode(b.data(), 0, static_cast<int>(b.size())) > 0);
       if (nul_at) b[196 + 4 + nul_at] = 0;
       lcm_publish(lcm, "CHAINCOMP_CORRECTED", b.data(), static_cast<unsigned>(b.size() - cut));
-      drain(lcm);
+      drain(node);
     };
     publish_target(other);
     publish_target(other);
@@ -184,10 +182,10 @@ TEST_CASE("targets and status carry the instance; another instance's targets for
     std::vector<unsigned char> b(ctl.getEncodedSize());
     ctl.encode(b.data(), 0, static_cast<int>(b.size()));
     lcm_publish(lcm, "CHAINCOMP_CONTROL", b.data(), static_cast<unsigned>(b.size()));
-    drain(lcm);
+    drain(node);
     publish(c);
     node.publish_status(true);
-    drain(lcm);
+    drain(node);
     const auto& s = inbox.status.back();
     CHECK(s.instance_id == node.instance_id());
     CHECK(s.own_targets_heard == 2);  // memq delivers its own targets back, as udpm does
@@ -231,18 +229,18 @@ TEST_CASE("the status message carries the corrections held back, as the compensa
       std::copy(cmd.axes.begin(), cmd.axes.end(), c.axes);
       const auto b = encode(c);
       lcm_publish(lcm, "CHAINCOMP_COMMAND", b.data(), static_cast<unsigned>(b.size()));
-      drain(lcm);
+      drain(node);
       if (k == 1000) {  // before the first command that is held back: none on the status either
         REQUIRE(alone.counters().held_back == 0);
         node.publish_status(false);
-        drain(lcm);
+        drain(node);
         REQUIRE(!inbox.status.empty());
         CHECK(inbox.status.back().held_back == 0);
         CHECK(inbox.status.back().clamped == node.counters().clamped);
       }
     }
     node.publish_status(true);
-    drain(lcm);
+    drain(node);
     const auto& s = inbox.status.back();
     CHECK(s.final);
     CHECK(s.published == held_back_case::kCommands);
@@ -289,10 +287,10 @@ TEST_CASE("status carries only what the node put there: nodes built over memory 
       std::memcpy(c.axes, axes, sizeof axes);
       const auto b = encode(c);
       lcm_publish(lcm, "CHAINCOMP_COMMAND", b.data(), static_cast<unsigned>(b.size()));
-      drain(lcm);
+      drain(*node);
     }
     node->publish_status(true);
-    drain(lcm);
+    drain(*node);
     node->~LcmNode();
     lcm_destroy(lcm);
     // what differs from run to run by design: the clock, the instance, the measured latency

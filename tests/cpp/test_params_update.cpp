@@ -258,11 +258,9 @@ TEST_CASE("params updates over memq:// are applied, refused and counted on statu
     publish(encode(with_instance(message(2000, {"EXX"}, {1e-3}), node.instance_id() + 1)));
     const unsigned char junk[5] = {1, 2, 3, 4, 5};
     lcm_publish(lcm, "CHAINCOMP_PARAMS", junk, sizeof junk);
-    while (lcm_handle_timeout(lcm, 0) > 0) {
-    }
+    node.handle_until_idle();
     node.publish_status(false);
-    while (lcm_handle_timeout(lcm, 0) > 0) {
-    }
+    node.handle_until_idle();
     REQUIRE(!status.empty());
     const auto& s = status.back();
     CHECK(s.params_received == 1002);

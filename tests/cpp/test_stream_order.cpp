@@ -334,12 +334,11 @@ chaincomp_lcm::lcmt_chaincomp_status decode_status(const std::vector<unsigned ch
 }
 
 template <class M>
-void publish(lcm_t* lcm, const char* channel, const M& m, int extra = 0) {
+void publish(chaincomp::LcmNode& node, lcm_t* lcm, const char* channel, const M& m, int extra = 0) {
   std::vector<unsigned char> b(m.getEncodedSize() + extra, 0);
   REQUIRE(m.encode(b.data(), 0, static_cast<int>(m.getEncodedSize())) > 0);
   lcm_publish(lcm, channel, b.data(), static_cast<unsigned>(b.size()));
-  while (lcm_handle_timeout(lcm, 0) > 0) {
-  }
+  node.handle_until_idle();
 }
 
 chaincomp_lcm::lcmt_axis_command wire_command(std::int64_t seq, std::int64_t utime) {
@@ -398,30 +397,29 @@ TEST_CASE("control over memq://: a reset clears every stream; trailing bytes are
     node.accept_temperatures(thermal);
     // each stream far ahead: 2^62 (commands, updates), the year 2^62 µs (readings)
     const std::int64_t far = std::int64_t(1) << 62;
-    publish(lcm, "CHAINCOMP_COMMAND", wire_command(far, far));
-    publish(lcm, "CHAINCOMP_TEMPERATURES", wire_readings(far));
-    publish(lcm, "CHAINCOMP_COMMAND", wire_command(far + 1, far + 20000));   // 20 ms later
-    publish(lcm, "CHAINCOMP_PARAMS", wire_update(far));
+    publish(node, lcm, "CHAINCOMP_COMMAND", wire_command(far, far));
+    publish(node, lcm, "CHAINCOMP_TEMPERATURES", wire_readings(far));
+    publish(node, lcm, "CHAINCOMP_COMMAND", wire_command(far + 1, far + 20000));   // 20 ms later
+    publish(node, lcm, "CHAINCOMP_PARAMS", wire_update(far));
     REQUIRE(node.counters().published == 2);
     REQUIRE(up.version() == 2);   // the thermal model's values, then the update
     // one reset, and every stream takes seq 1 / time 1 at once
-    publish(lcm, "CHAINCOMP_CONTROL", wire_control(true));
-    publish(lcm, "CHAINCOMP_COMMAND", wire_command(1, 1000));
-    publish(lcm, "CHAINCOMP_PARAMS", wire_update(1));
-    publish(lcm, "CHAINCOMP_TEMPERATURES", wire_readings(1));
+    publish(node, lcm, "CHAINCOMP_CONTROL", wire_control(true));
+    publish(node, lcm, "CHAINCOMP_COMMAND", wire_command(1, 1000));
+    publish(node, lcm, "CHAINCOMP_PARAMS", wire_update(1));
+    publish(node, lcm, "CHAINCOMP_TEMPERATURES", wire_readings(1));
     CHECK(node.counters().published == 3);
     CHECK(up.last_seq() == 1);
     CHECK(thermal.refused()[static_cast<int>(chaincomp::ReadingRefuse::kTimeNotIncreasing)] == 0);
     // one byte more on each stream: refused whole, counted as undecodable, nothing applied
-    publish(lcm, "CHAINCOMP_COMMAND", wire_command(2, 2000), 1);
-    publish(lcm, "CHAINCOMP_PARAMS", wire_update(2), 1);
-    publish(lcm, "CHAINCOMP_TEMPERATURES", wire_readings(2), 1);
-    publish(lcm, "CHAINCOMP_CONTROL", wire_control(true), 1);
+    publish(node, lcm, "CHAINCOMP_COMMAND", wire_command(2, 2000), 1);
+    publish(node, lcm, "CHAINCOMP_PARAMS", wire_update(2), 1);
+    publish(node, lcm, "CHAINCOMP_TEMPERATURES", wire_readings(2), 1);
+    publish(node, lcm, "CHAINCOMP_CONTROL", wire_control(true), 1);
     CHECK(node.counters().published == 3);
     CHECK(node.counters().resets == 1);
     node.publish_status(true);
-    while (lcm_handle_timeout(lcm, 0) > 0) {
-    }
+    node.handle_until_idle();
     REQUIRE(!inbox.status.empty());
     const auto s = decode_status(inbox.status.back());
     CHECK(s.rejected[static_cast<int>(chaincomp::Reject::kUndecodable)] == 1);
@@ -443,9 +441,9 @@ TEST_CASE("channel names reach LCM's subscribe as exact names, not as regular ex
   REQUIRE(lcm != nullptr);
   {
     chaincomp::LcmNode node(lcm, f.entry, f.model, f.config, "p.yaml", "0", {});
-    publish(lcm, "CMDX", wire_command(1, 1000));       // the regex CMD.* would take it: the name does not
+    publish(node, lcm, "CMDX", wire_command(1, 1000));       // the regex CMD.* would take it: the name does not
     CHECK(node.counters().received == 0);
-    publish(lcm, "CMD.*", wire_command(1, 1000));
+    publish(node, lcm, "CMD.*", wire_command(1, 1000));
     CHECK(node.counters().received == 1);
     CHECK(node.counters().published == 1);
   }

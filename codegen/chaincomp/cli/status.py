@@ -192,9 +192,13 @@ def describe(status, heard_at: float, period: float | None, target, axes, now: f
                        "p999": s.latency_p999_ns, "max": s.latency_max_ns},
         # from LCM's receive stamp to the target published: the waiting in the queues too
         "receipt_latency_ns": {"p50": s.receipt_p50_ns, "p99": s.receipt_p99_ns, "max": s.receipt_max_ns},
-        # LCM's user-space queues: their capacity, and how often a message found its queue full
-        "queues": {"commands": {"capacity": s.queue_capacity, "found_full": s.queue_full},
-                   "control": {"capacity": s.control_queue_capacity, "found_full": s.control_queue_full}},
+        # the daemon's queues, one per stream: their capacity and the messages dropped there full;
+        # LCM's own queues behind them, and how often one was found full (the drops then inexact)
+        "queues": {"commands": {"capacity": s.queue_capacity, "dropped": s.queue_dropped},
+                   "control": {"capacity": s.control_queue_capacity, "dropped": s.control_queue_dropped},
+                   "params": {"dropped": s.params_queue_dropped}, "readings": {"dropped": s.readings_queue_dropped},
+                   "targets": {"dropped": s.targets_queue_dropped}, "oversized": s.oversized,
+                   "lcm": {"capacity": s.lcm_queue_capacity, "found_full": s.lcm_queue_full}},
         "recv_buf_bytes": s.recv_buf_bytes, "foreign_instance": f"{s.foreign_instance & 0xFFFFFFFFFFFFFFFF:016x}",
         "model_hash": s.model_hash, "params_file": s.params_file, "params_hash": s.params_hash,
         "config_file": s.config_file, "allocations": s.allocations,
@@ -240,7 +244,7 @@ def render_text(doc: dict) -> str:
         return f"no chaincompd heard on {doc['url']}\n"
     lines = [f"{len(doc['daemons'])} chaincompd on {doc['url']}"]
     for d in doc["daemons"]:
-        c, state = d["counters"], d["state"]
+        c, state, q = d["counters"], d["state"], d["queues"]
         if state == "ramping":
             state += f" {100 * d['ramp']:.0f}%"
         rejected = sum(d["rejected"].values())
@@ -256,9 +260,13 @@ def render_text(doc: dict) -> str:
             + f"  clamped {c['clamped']} (held back {c['held_back']})  clamped input {c['clamped_input']}",
             f"  stream    seq gaps {c['seq_gaps']} ({c['seq_missing']} missing)  restarts {c['stream_restarts']}  "
             f"resets {c['resets']}  kernel drops {c['kernel_drops']}  queue dropped {c['queue_dropped']} "
-            f"(full {d['queues']['commands']['found_full']} times, {d['queues']['commands']['capacity']} deep)"
+            f"({q['commands']['capacity']} deep)"
             + (f"  control messages {d['control']['received']} (refused {d['control']['refused']})"
                if d["control"]["received"] else ""),
+            f"  queues    dropped: control {q['control']['dropped']}  params {q['params']['dropped']}  "
+            f"readings {q['readings']['dropped']}  targets {q['targets']['dropped']}  oversized {q['oversized']}  "
+            f"LCM's found full {q['lcm']['found_full']} times"
+            + ("  (drops not exact)" if q["lcm"]["found_full"] else ""),
             f"  params    version {d['params_updates']['version']} (last seq {d['params_updates']['last_seq']})  "
             f"updates received {d['params_updates']['received']}  refused "
             f"{sum(d['params_updates']['refused'].values())}"

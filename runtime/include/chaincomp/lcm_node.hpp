@@ -1,17 +1,23 @@
 // chaincompd's LCM side: subscribes to commands and control, publishes corrected targets and
 // status. Start-up allocates; handling messages does not. Built for one lcm_t per node.
+// Receiving and handling are apart: LCM's handlers (the receive thread's lcm_handle) only copy
+// each message into its stream's ring; the main thread handles the rings' messages in the order
+// they arrived (handle_queued). A ring that is full drops the message there and counts it.
 #pragma once
 
 #include <lcm/lcm.h>
 
+#include <atomic>
 #include <chrono>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "chaincomp/compensator.hpp"
 #include "chaincomp/daemon_config.hpp"
 #include "chaincomp/latency.hpp"
+#include "chaincomp/message_ring.hpp"
 #include "chaincomp_lcm/lcmt_axis_command.hpp"
 #include "chaincomp_lcm/lcmt_chaincomp_control.hpp"
 #include "chaincomp_lcm/lcmt_chaincomp_status.hpp"
@@ -59,6 +65,17 @@ class LcmNode {
   // Take lcmt_temperatures on the temperatures channel into `thermal` and apply the error
   // values it gives through the updater (accept_params_updates first); it outlives the node.
   void accept_temperatures(ThermalState& thermal);
+  // Receiving on a thread of the node's own (lcm_handle, nothing else): after every subscription
+  // (accept_*), before the main loop; stopped by stop_receiving or the destructor.
+  void start_receiving();
+  void stop_receiving();
+  // Readable (an eventfd) when messages wait in the rings; the main loop polls it, reads it
+  // empty, then calls handle_queued: the messages queued, every stream's in arrival order.
+  int wake_fd() const { return wake_fd_; }
+  int handle_queued();
+  // Without the receive thread (tests, fuzzers, the daemon's exit): LCM's handlers and this
+  // node's in turn until neither has anything left, or `max_messages` were handled.
+  void handle_until_idle(int max_messages = 1 << 30);
   const Counters& counters() const { return comp_.counters(); }
   std::int64_t instance_id() const { return instance_id_; }
   // Datagrams the kernel dropped at the process's UDP sockets (-1: none), and the receive
@@ -68,26 +85,40 @@ class LcmNode {
 
   // The longest machine name a command may carry (lcm-gen's decoder trusts the length).
   static constexpr int kMaxMachineName = 255;
-  // LCM's user-space queue of each subscription (messages; LCM's default is 30): what may wait
-  // while the loop is busy, one second of commands at 10 kHz. LCM discards what arrives at a
-  // full queue without counting it: a queue found full is counted (docs/guide/daemon.md).
-  static constexpr int kQueueCapacity = 10000;         // commands, params updates, readings, targets
+  // The rings (messages): what may wait while the main thread is busy, one second of commands at
+  // 10 kHz; what arrives at a full ring is dropped and counted (docs/guide/daemon.md).
+  static constexpr int kQueueCapacity = 10000;         // commands, targets heard back
   static constexpr int kControlQueueCapacity = 1000;   // control messages
+  static constexpr int kUpdateQueueCapacity = 256;     // params updates, readings (17 KB slots)
+  // LCM's own queue of each subscription, drained by a thread that only copies: never full in
+  // practice. LCM discards what arrives at a full queue without counting it, so a queue found
+  // full is counted (lcm_queue_full): the one case where the drops are not known exactly.
+  static constexpr int kLcmQueueCapacity = 100000;
 
  private:
-  static void on_command(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
-  static void on_control(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
-  static void on_target(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
-  static void on_params(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
-  static void on_readings(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
-  lcm_subscription_t* subscribe(const std::string& channel, lcm_msg_handler_t handler, int capacity);
-  // Whether the subscription's queue held `capacity` messages before this one was taken from it.
-  static bool queue_was_full(lcm_subscription_t* sub, int capacity);
-  void handle_command(const lcm_recv_buf_t* rbuf);
+  enum Stream { kCommands, kControl, kParams, kReadings, kTargets, kNumStreams };
+  // One subscription and its ring; LCM's handler gets the inlet.
+  struct Inlet {
+    LcmNode* node = nullptr;
+    Stream stream = kCommands;
+    lcm_subscription_t* sub = nullptr;
+    std::unique_ptr<MessageRing> ring;
+  };
+  // The receive side: copies the message into its inlet's ring (or counts it dropped).
+  static void on_message(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
+  void subscribe(Stream stream, const std::string& channel, int capacity, std::size_t max_size);
+  void receive_loop();
+  // The main thread's side, one message of a ring each.
+  void handle(Stream stream, const MessageRing::Message& m);
+  void handle_command(const MessageRing::Message& m);
+  void handle_control(const MessageRing::Message& m);
+  void handle_params(const MessageRing::Message& m);
+  void handle_readings(const MessageRing::Message& m);
+  void handle_target(const MessageRing::Message& m);
   // The command stream's time for params updates (now: this node's clock).
   CommandTime command_time() const;
-  void handle_target(const lcm_recv_buf_t* rbuf);
   void find_sockets();
+  std::int64_t dropped(Stream stream) const { return inlets_[stream].ring ? inlets_[stream].ring->dropped() : 0; }
 
   lcm_t* lcm_;
   DaemonConfig config_;
@@ -108,17 +139,18 @@ class LcmNode {
   bool steady_ = false;  // the first command has been handled
   bool command_accepted_ = false;                 // the last accepted command's receipt
   std::chrono::steady_clock::time_point command_at_;
-  std::int64_t control_received_ = 0, control_refused_ = 0, control_queue_full_ = 0;
-  // Commands: answered but not sent; handled with the queue full; missing while it was.
-  std::int64_t unpublished_ = 0, queue_full_ = 0, queue_dropped_ = 0;
-  std::int64_t handled_ = 0, full_at_ = -1;  // commands handled; the last found with the queue full
-  lcm_subscription_t* command_sub_ = nullptr;
-  lcm_subscription_t* control_sub_ = nullptr;
-  lcm_subscription_t* target_sub_ = nullptr;
-  lcm_subscription_t* params_sub_ = nullptr;
+  std::int64_t control_received_ = 0, control_refused_ = 0;
+  std::int64_t unpublished_ = 0;  // commands answered, their target not sent
+  Inlet inlets_[kNumStreams];
+  // Written by the receiving thread only: messages pushed to a ring (their arrival numbers
+  // 0 .. arrived_-1), LCM's queues found full. The main thread handles arrival next_ next.
+  std::atomic<std::int64_t> arrived_{0}, lcm_queue_full_{0};
+  std::int64_t next_ = 0;
+  int wake_fd_ = -1;
+  std::thread receiver_;
+  std::atomic<bool> stop_receiving_{false};
   ParamsUpdater* updater_ = nullptr;
   ParamsUpdate update_, thermal_update_;
-  lcm_subscription_t* readings_sub_ = nullptr;
   ThermalState* thermal_ = nullptr;
   Readings readings_;
   std::int64_t instance_id_ = 0;

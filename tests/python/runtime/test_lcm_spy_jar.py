@@ -103,6 +103,8 @@ def test_jar_decodes_a_corrected_target_and_a_status(decoder, tmp_path):
     s = T.lcmt_chaincomp_status()
     s.received, s.rejected, s.final, s.machine = 1000, [0, 1, 2, 3, 4, 5, 6, 7, 8], True, "vmc_xyz"
     s.targets_partial, s.objective_before, s.direction_weight = 7, 2.5e-5, 100.0
+    s.queue_dropped, s.control_queue_dropped, s.targets_queue_dropped, s.oversized = 40, 5, 3, 4
+    s.lcm_queue_capacity, s.lcm_queue_full = 100000, 2
     (tmp_path / "t.bin").write_bytes(t.encode())
     (tmp_path / "s.bin").write_bytes(s.encode())
     got_t, got_s = decoder(tmp_path / "t.bin", tmp_path / "s.bin")
@@ -122,6 +124,8 @@ def test_jar_decodes_a_corrected_target_and_a_status(decoder, tmp_path):
     assert got_s["rejected"] == "[0, 1, 2, 3, 4, 5, 6, 7, 8]" and got_s["machine"] == "vmc_xyz"
     assert int(got_s["targets_partial"]) == 7 and float(got_s["objective_before"]) == 2.5e-5
     assert float(got_s["direction_weight"]) == 100.0
+    assert [int(got_s[k]) for k in ("queue_dropped", "control_queue_dropped", "targets_queue_dropped", "oversized",
+                                    "lcm_queue_capacity", "lcm_queue_full")] == [40, 5, 3, 4, 100000, 2]
     assert got_s["same_bytes"] == "true"
 
 

@@ -230,26 +230,34 @@ def test_bus_text_reaches_the_terminal_escaped():
 
 def test_control_messages_are_counted():
     text = status.render_text(_doc(_status(control_received=7, control_refused=2), None))
-    assert "(full 0 times, 0 deep)  control messages 7 (refused 2)\n" in text
+    assert "(0 deep)  control messages 7 (refused 2)\n" in text
     assert "control messages" not in status.render_text(_doc(_status(), None))
 
 
 def test_every_command_accounted_for_and_the_waiting():
-    # 100 received: 96 published, 1 unpublished, 3 rejected; 42 missing by seq, 40 of them while
-    # the queue was full; the receipt-to-publish latency beside the compute time
-    s = _status(published=96, unpublished=1, seq_gaps=2, seq_missing=42, queue_dropped=40, queue_full=3,
-                queue_capacity=10000, control_queue_capacity=1000, receipt_p50_ns=1_500_000,
-                receipt_p99_ns=250_000_000, receipt_max_ns=300_000_000)
+    # 100 received: 96 published, 1 unpublished, 3 rejected; 42 missing by seq, 40 of them dropped
+    # at the daemon's full queue (the other 2 in the kernel); the receipt-to-publish latency beside
+    # the compute time
+    s = _status(published=96, unpublished=1, seq_gaps=2, seq_missing=42, queue_dropped=40, control_queue_dropped=5,
+                params_queue_dropped=1, readings_queue_dropped=2, targets_queue_dropped=3, oversized=4,
+                queue_capacity=10000, control_queue_capacity=1000, lcm_queue_capacity=100000,
+                receipt_p50_ns=1_500_000, receipt_p99_ns=250_000_000, receipt_max_ns=300_000_000)
     d = _doc(s, None)["daemons"][0]
     c = d["counters"]
     assert c["received"] == c["published"] + c["unpublished"] + sum(d["rejected"].values())
-    assert d["queues"] == {"commands": {"capacity": 10000, "found_full": 3},
-                           "control": {"capacity": 1000, "found_full": 0}}
+    assert d["queues"] == {"commands": {"capacity": 10000, "dropped": 40}, "control": {"capacity": 1000, "dropped": 5},
+                           "params": {"dropped": 1}, "readings": {"dropped": 2}, "targets": {"dropped": 3},
+                           "oversized": 4, "lcm": {"capacity": 100000, "found_full": 0}}
     assert d["receipt_latency_ns"] == {"p50": 1_500_000, "p99": 250_000_000, "max": 300_000_000}
     text = status.render_text(_doc(s, None))
     assert "rejected 3 (out of limits 2, step too large 1)  unpublished 1  clamped" in text
-    assert "seq gaps 2 (42 missing)" in text and "queue dropped 40 (full 3 times, 10000 deep)" in text
+    assert "seq gaps 2 (42 missing)" in text and "queue dropped 40 (10000 deep)" in text
+    assert ("queues    dropped: control 5  params 1  readings 2  targets 3  oversized 4  LCM's found full 0 times\n"
+            in text)
     assert "p50 12.3 µs  p99 45.0 µs" in text and "receipt to publish p50 1.50 ms  p99 250.00 ms" in text
+    # LCM's queue found full: LCM may have discarded messages uncounted, and the view says so
+    text = status.render_text(_doc(_status(lcm_queue_full=2), None))
+    assert "LCM's found full 2 times  (drops not exact)\n" in text
 
 
 def test_the_targets_and_the_objective_before_and_after():

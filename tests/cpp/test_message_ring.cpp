@@ -1,0 +1,196 @@
+// The daemon's per-stream rings (issue 39 item 3): what a full ring drops is counted one by one,
+// messages come out whole and in order, one larger than a slot is refused (queued empty, marked:
+// its stream counts it undecodable, in its place in the order); and the node handles
+// the rings' messages in the order they arrived across streams.
+#include <catch2/catch.hpp>
+
+#include <lcm/lcm.h>
+
+#include <cstdint>
+#include <cstring>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "chaincomp/lcm_node.hpp"
+
+namespace {
+
+using chaincomp::MessageRing;
+
+std::vector<unsigned char> bytes_of(std::int64_t k, std::size_t size) {
+  std::vector<unsigned char> b(size);
+  for (std::size_t i = 0; i < size; ++i) b[i] = static_cast<unsigned char>((k * 31 + i) & 0xFF);
+  return b;
+}
+
+template <class M>
+std::vector<unsigned char> encode(const M& m) {
+  std::vector<unsigned char> b(m.getEncodedSize());
+  REQUIRE(m.encode(b.data(), 0, static_cast<int>(b.size())) > 0);
+  return b;
+}
+
+}  // namespace
+
+TEST_CASE("a full ring drops and counts, keeps the order, refuses a message larger than a slot", "[ring]") {
+  MessageRing ring(4, 16);
+  for (std::int64_t k = 0; k < 6; ++k) {
+    const auto b = bytes_of(k, 1 + k);
+    CHECK(ring.push(b.data(), b.size(), k, 1000 + k) == (k < 4 ? MessageRing::Push::kOk : MessageRing::Push::kFull));
+  }
+  CHECK(ring.dropped() == 2);   // the fifth and sixth: none of those kept overwritten
+  const auto big = bytes_of(9, 17);
+  CHECK(ring.push(big.data(), big.size(), 9, 0) == MessageRing::Push::kFull);   // full first
+  CHECK(ring.oversized() == 0);
+  CHECK(ring.dropped() == 3);
+  for (std::int64_t k = 0; k < 4; ++k) {
+    const MessageRing::Message* m = ring.front();
+    REQUIRE(m != nullptr);
+    CHECK(m->arrival == k);
+    CHECK(m->recv_utime == 1000 + k);
+    CHECK(!m->oversized);
+    CHECK(std::vector<unsigned char>(m->data, m->data + m->size) == bytes_of(k, 1 + k));
+    ring.pop();
+  }
+  CHECK(ring.front() == nullptr);
+  // with room: refused, not truncated: in the order, empty and marked
+  CHECK(ring.push(big.data(), big.size(), 10, 0) == MessageRing::Push::kOversized);
+  CHECK(ring.oversized() == 1);
+  REQUIRE(ring.front() != nullptr);
+  CHECK(ring.front()->oversized);
+  CHECK(ring.front()->size == 0);
+  CHECK(ring.front()->arrival == 10);
+  ring.pop();
+  // room again, at the largest size exactly
+  const auto full = bytes_of(7, 16);
+  CHECK(ring.push(full.data(), full.size(), 7, 0) == MessageRing::Push::kOk);
+  REQUIRE(ring.front() != nullptr);
+  CHECK(ring.front()->size == 16);
+}
+
+TEST_CASE("between two threads: every message out whole and in order, or counted dropped", "[ring]") {
+  constexpr std::int64_t kMessages = 200000;
+  MessageRing ring(64, 32);
+  std::thread producer([&] {
+    for (std::int64_t k = 0; k < kMessages; ++k) {
+      const auto b = bytes_of(k, 8 + k % 24);
+      ring.push(b.data(), b.size(), k, 0);
+    }
+  });
+  std::int64_t taken = 0, last = -1;
+  bool whole = true, ordered = true;
+  const auto done = [&] { return taken + ring.dropped() == kMessages; };
+  while (!done() || ring.front() != nullptr) {
+    const MessageRing::Message* m = ring.front();
+    if (m == nullptr) continue;
+    ordered = ordered && m->arrival > last;
+    last = m->arrival;
+    whole = whole && std::vector<unsigned char>(m->data, m->data + m->size) == bytes_of(m->arrival, 8 + m->arrival % 24);
+    ring.pop();
+    ++taken;
+  }
+  producer.join();
+  CHECK(ordered);
+  CHECK(whole);
+  CHECK(taken + ring.dropped() == kMessages);
+  CHECK(taken > 0);
+}
+
+TEST_CASE("the node handles its rings in arrival order across streams and counts what they drop", "[ring][lcm]") {
+  const chaincomp::ModelEntry& entry = *chaincomp::find_model("five_axis_ac");
+  alignas(64) static unsigned char model[1 << 14];
+  std::vector<double> params(entry.info->num_params);
+  for (int i = 0; i < entry.info->num_params; ++i) {
+    params[i] = entry.info->params[i].role == chaincomp::ParamRole::kError ? 2e-5 : entry.info->params[i].nominal;
+  }
+  entry.prepare(params.data(), model);
+  chaincomp::DaemonConfig config;
+  std::string error;
+  REQUIRE(chaincomp::load_daemon_config(*entry.info, "", config, error));
+  for (auto& a : config.compensator.axes) a.max_correction_step = 1.0;
+  config.compensator.ramp_time_s = 0.0;   // on and off at once: the flag tells which control came first
+
+  lcm_t* lcm = lcm_create("memq://");
+  REQUIRE(lcm != nullptr);
+  std::vector<chaincomp_lcm::lcmt_corrected_target> targets;
+  std::vector<chaincomp_lcm::lcmt_chaincomp_status> status;
+  lcm_subscribe(lcm, "CHAINCOMP_CORRECTED", [](const lcm_recv_buf_t* rbuf, const char*, void* user) {
+    chaincomp_lcm::lcmt_corrected_target t;
+    if (t.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) >= 0)
+      static_cast<std::vector<chaincomp_lcm::lcmt_corrected_target>*>(user)->push_back(t);
+  }, &targets);
+  lcm_subscribe(lcm, "CHAINCOMP_STATUS", [](const lcm_recv_buf_t* rbuf, const char*, void* user) {
+    chaincomp_lcm::lcmt_chaincomp_status s;
+    REQUIRE(s.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) >= 0);
+    static_cast<std::vector<chaincomp_lcm::lcmt_chaincomp_status>*>(user)->push_back(s);
+  }, &status);
+  {
+    chaincomp::LcmNode node(lcm, entry, model, config, "p.yaml", "0", {});
+    node.handle_until_idle();   // its first status
+    chaincomp_lcm::lcmt_axis_command c{};
+    c.machine = "five_axis_ac";
+    c.num_axes = 5;
+    const double axes[8] = {10, -20, -100, 30, -45, 0, 0, 0};
+    std::memcpy(c.axes, axes, sizeof axes);
+    const auto publish_command = [&](std::int64_t seq) {
+      c.seq = seq;
+      c.utime = 1000 * seq;
+      const auto b = encode(c);
+      lcm_publish(lcm, "CHAINCOMP_COMMAND", b.data(), static_cast<unsigned>(b.size()));
+    };
+    const auto publish_control = [&](bool enable) {
+      chaincomp_lcm::lcmt_chaincomp_control k{};
+      k.enable = enable;
+      const auto b = encode(k);
+      lcm_publish(lcm, "CHAINCOMP_CONTROL", b.data(), static_cast<unsigned>(b.size()));
+    };
+    // queued on two streams, not yet handled: off, command 1, on, command 2, off, command 3
+    publish_control(false);
+    publish_command(1);
+    publish_control(true);
+    publish_command(2);
+    publish_control(false);
+    publish_command(3);
+    for (int i = 0; i < 6; ++i) REQUIRE(lcm_handle_timeout(lcm, 0) > 0);   // the receive side only
+    CHECK(node.counters().received == 0);
+    CHECK(node.handle_queued() == 6);
+    node.handle_until_idle();
+    REQUIRE(targets.size() == 3);
+    const int on = chaincomp_lcm::lcmt_corrected_target::FLAG_COMPENSATING;
+    CHECK((targets[0].flags & on) == 0);
+    CHECK((targets[1].flags & on) == on);
+    CHECK((targets[2].flags & on) == 0);
+
+    // a full control ring: the messages beyond it dropped and counted, those kept applied
+    for (int i = 0; i < chaincomp::LcmNode::kControlQueueCapacity + 7; ++i) {
+      publish_control(true);
+      REQUIRE(lcm_handle_timeout(lcm, 0) > 0);
+    }
+    // a command larger than the largest valid one (a 255-byte machine name) is refused whole
+    c.machine.assign(chaincomp::LcmNode::kMaxMachineName, 'x');
+    const auto largest = encode(c);
+    std::vector<unsigned char> over(largest);
+    over.push_back(0);
+    lcm_publish(lcm, "CHAINCOMP_COMMAND", largest.data(), static_cast<unsigned>(largest.size()));
+    lcm_publish(lcm, "CHAINCOMP_COMMAND", over.data(), static_cast<unsigned>(over.size()));
+    node.handle_until_idle();
+    node.publish_status(true);
+    node.handle_until_idle();
+    REQUIRE(!status.empty());
+    const auto& s = status.back();
+    CHECK(s.control_received == 3 + chaincomp::LcmNode::kControlQueueCapacity);
+    CHECK(s.control_queue_dropped == 7);
+    CHECK(s.control_queue_capacity == chaincomp::LcmNode::kControlQueueCapacity);
+    CHECK(s.oversized == 1);
+    // both received: the largest valid size whole (another machine), the larger one as nothing
+    CHECK(s.received == 5);
+    CHECK(s.rejected[static_cast<int>(chaincomp::Reject::kWrongMachine)] == 1);
+    CHECK(s.rejected[static_cast<int>(chaincomp::Reject::kUndecodable)] == 1);
+    CHECK(s.queue_dropped == 0);
+    CHECK(s.lcm_queue_full == 0);
+    CHECK(s.lcm_queue_capacity == chaincomp::LcmNode::kLcmQueueCapacity);
+    CHECK(s.compensating);
+  }
+  lcm_destroy(lcm);
+}
