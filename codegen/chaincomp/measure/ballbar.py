@@ -263,7 +263,7 @@ def lsq_circle(angle: np.ndarray, dev: np.ndarray, radius: float) -> tuple[np.nd
     radius, by Gauss-Newton from the linearised fit; and each point's distance from that centre."""
     pts = (radius + dev)[:, None] * np.stack([np.cos(angle), np.sin(angle)], axis=1)
     a = np.stack([np.ones_like(angle), np.cos(angle), np.sin(angle)], axis=1)
-    r0, cx, cy = np.linalg.lstsq(a, dev, rcond=None)[0]
+    r0, cx, cy = lsq.solve(a, dev)
 
     def linearise(x):          # x: centre x, y and radius; the residual is the distance minus the radius
         v = pts - x[:2]
@@ -642,7 +642,7 @@ def fit(machine: Machine, trace: Trace, values: dict, axes: dict, start: np.ndar
         if k in picked:
             continue
         t = candidates[k]
-        for c, tf in zip(lsq.carried(jac, t.column), terms):
+        for c, tf in zip(lsq.solve(jac, t.column), terms):
             if abs(c) * np.linalg.norm(tf.column) > 1e-6 * norms[k]:
                 combos[tf.name].append((t, float(c)))
     return Fit(terms, f.estimates, np.sqrt(np.diag(f.covariance)), combos, unseen, list(assume_zero), not_fitted,

@@ -586,7 +586,7 @@ def _analyse(j0: np.ndarray, params: list[Param], measured: list[str], prefer, m
     if minimal:
         others = [int(j) for j in cols if j not in kept]
         if others:
-            c = lsq.carried(j0[:, kept], j0[:, others])      # one solve for all of them
+            c = lsq.solve(j0[:, kept], j0[:, others])      # one solve for all of them
             norms = np.linalg.norm(j0[:, kept], axis=0)
             for col, j in enumerate(others):
                 redundant[names[j]], carried[names[j]] = _carried(params, members, kept, j, c[:, col], norms)

@@ -5,14 +5,16 @@ What is common to them, and only that, lives here as plain functions on arrays:
 
 - derivatives for a Jacobian (``step_derivatives``: the complex step, central differences
   where the model cannot take complex values);
+- the linear least-squares solve (``solve``), for a linear fit, a Gauss-Newton step and the
+  combination of fitted columns that carries a left-out one;
 - the iterations: Gauss-Newton (``gauss_newton``: each step the linear least-squares solution
   of the linearised problem) and Levenberg-Marquardt with Marquardt's scaling
   (``levenberg_marquardt``: for a cost that is not a plain sum of model residuals, e.g. one with
   the linear parameters solved inside it);
 - the rank and gauge analysis of a Jacobian: its numeric rank with the columns scaled to unit
   norm (``scaled_columns``, ``numeric_rank``), a spanning set of columns (``spanning``: the
-  parameters to fit, preferred ones first, the rest by pivoting), and how a left-out column is
-  carried by the spanning ones (``carried``);
+  parameters to fit, preferred ones first, the rest by pivoting) and the null space's projector
+  (which parameters the data cannot tell apart: ``ScaledColumns.null_projector``);
 - uncertainties: a linear fit's estimates, residual and covariance (``linear_fit``),
   sigma^2 (J^T J)^-1 with sigma^2 from the residual (``residual_variance``, ``normal_inverse``,
   ``svd_inverse`` when the singular values are wanted too), the correlations among the
@@ -57,17 +59,27 @@ def step_derivatives(f, p: np.ndarray, steps: np.ndarray) -> np.ndarray:
         return (both[:len(steps)] - both[len(steps):]) / (2 * STEP)
 
 
+# ----------------------------------------------------------------------------- the linear solve
+
+def solve(j: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The least-squares solution x of j·x = y (y a vector, or a matrix of right-hand sides); where
+    j is rank-deficient the one of least norm (lstsq: SVD-based, no normal equations). With ``j``
+    the kept columns of a Jacobian and ``y`` a left-out one: the combination of the kept ones
+    that moves the data as it does (to first order), i.e. what carries it."""
+    return np.linalg.lstsq(j, y, rcond=None)[0]
+
+
 # ----------------------------------------------------------------------------- iterations
 
 def gauss_newton(linearise, x: np.ndarray, max_iterations: int, small, progress=None):
     """Gauss-Newton from ``x``: ``linearise(x)`` gives the residual r (data minus model) and the
-    model's Jacobian J there; the step is the least-squares solution of J·step = r (lstsq: a
-    rank-deficient J takes the minimum-norm step rather than failing). Stops after the first
+    model's Jacobian J there; the step is the least-squares solution of J·step = r (``solve``:
+    a rank-deficient J takes the minimum-norm step rather than failing). Stops after the first
     step for which ``small(step, x, J)`` holds (x the new point). ``progress(iteration, r)`` is
     called after each step. Returns (x, iterations, converged)."""
     for iteration in range(1, max_iterations + 1):
         r, j = linearise(x)
-        step = np.linalg.lstsq(j, r, rcond=None)[0]
+        step = solve(j, r)
         x = x + step
         if progress is not None:
             progress(iteration, r)
@@ -179,12 +191,6 @@ def spanning(a: np.ndarray, rank: int | None = None, first=()) -> list[int]:
     return picked
 
 
-def carried(kept: np.ndarray, others: np.ndarray) -> np.ndarray:
-    """The combination of the ``kept`` columns that moves the data as each of ``others`` (a
-    column or columns) does, to first order: the coefficients, (kept, ...) as ``others``."""
-    return np.linalg.lstsq(kept, others, rcond=None)[0]
-
-
 # ----------------------------------------------------------------------------- uncertainties
 
 def residual_variance(r: np.ndarray, dof: float) -> float:
@@ -217,7 +223,7 @@ class LinearFit:
 def linear_fit(j: np.ndarray, y: np.ndarray) -> LinearFit:
     """The least-squares solution of j·x = y with its covariance sigma^2 (JᵀJ)^-1, sigma^2 from
     the residual. The caller makes sure there are more rows than columns."""
-    x = np.linalg.lstsq(j, y, rcond=None)[0]
+    x = solve(j, y)
     r = y - j @ x
     dof = len(y) - j.shape[1]
     var = residual_variance(r, dof)

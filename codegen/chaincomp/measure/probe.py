@@ -664,7 +664,7 @@ def fit_sphere(points: np.ndarray, radius: float | None = None) -> tuple[np.ndar
     ``points`` (k >= 4, not coplanar), or of the given ``radius``: the algebraic fit, then
     Gauss-Newton on the distances."""
     a = np.hstack([2 * points, np.ones((len(points), 1))])
-    sol = np.linalg.lstsq(a, (points ** 2).sum(axis=1), rcond=None)[0]
+    sol = lsq.solve(a, (points ** 2).sum(axis=1))
     free = radius is None                   # the radius fitted too: x is the centre and the radius
     c = sol[:3]
     start = np.append(c, math.sqrt(max(sol[3] + c @ c, 0.0))) if free else c
@@ -822,7 +822,7 @@ def _backlash(machine: Machine, axes: Axes, held: dict, centres: list[Centre], v
     j, y = np.vstack(rows), np.concatenate(rhs)
     if len(y) <= j.shape[1]:
         return {}
-    b = np.linalg.lstsq(j, y, rcond=None)[0]
+    b = lsq.solve(j, y)
     # pinv, not inv: pairs that leave a rotary axis still (a singular JᵀJ) give the others theirs
     cov = lsq.residual_variance(y - j @ b, len(y) - len(b)) * np.linalg.pinv(j.T @ j)
     names = list(pairs[0][0].group.rotary)

@@ -421,7 +421,7 @@ def _design(t, temps, chosen, taus, reference) -> np.ndarray:
 
 
 def _solve(a: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, float]:
-    coef, *_ = np.linalg.lstsq(a, d, rcond=None)
+    coef = lsq.solve(a, d)
     # einsum, not BLAS: a multithreaded BLAS on a busy machine makes these products 100 times slower
     r = d - np.einsum("ij,j->i", a, coef)
     return coef, float(np.einsum("i,i->", r, r))
@@ -499,7 +499,7 @@ def _collinearity(a: np.ndarray, j: int) -> float:
     others = np.delete(a, j, axis=1)
     if others.shape[1] < 2 or not np.any(x):
         return 0.0
-    coef, *_ = np.linalg.lstsq(others, a[:, j], rcond=None)
+    coef = lsq.solve(others, a[:, j])
     r = a[:, j] - others @ coef
     return float(math.sqrt(max(0.0, 1.0 - (r @ r) / (x @ x))))
 

@@ -144,7 +144,7 @@ def test_spanning_set_takes_the_preferred_column_and_carries_the_other():
     preferred = [int(g.cols[k]) for k in lsq.spanning(unit, g.rank, first=[2])]
     assert preferred[0] == 2 and sorted(preferred) == [1, 2, 3]
     # parameter 0 left out: the fitted ones move the data as it does with 0.5 of parameter 2
-    c = lsq.carried(j[:, preferred], j[:, 0])
+    c = lsq.solve(j[:, preferred], j[:, 0])
     assert c == pytest.approx([0.5, 0.0, 0.0], abs=1e-12)
     # in order, without a rank: each column that adds a direction
     assert lsq.spanning(unit, first=range(4)) == [0, 1, 3]
