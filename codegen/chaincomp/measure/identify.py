@@ -1,6 +1,6 @@
 """Error values from measured tool-tip coordinates: nonlinear least squares on the exact model.
 
-Measurements are a CSV file (see ``read_table``): one row per set-up, one column per axis
+Measurements are a CSV file (see ``table.read_table``): one row per set-up, one column per axis
 and per measured coordinate (tool point x, y, z; tool direction kx, ky, kz; with a tool frame
 its orientation as a unit quaternion qw, qx, qy, qz). The fit is Gauss-Newton on the exact
 chain, each coordinate weighted by its standard uncertainty; a measured orientation enters as
@@ -8,7 +8,7 @@ the rotation vector ω = log(R_measured·R_modelᵀ) (chaincomp.orientation: abo
 frame's axes), the rows wx, wy, wz. Its Jacobian is taken by the complex step (the derivative
 is the imaginary part of the chain evaluated at an imaginary error, free of the cancellation
 that makes a difference quotient of 500 mm coordinates lose eight digits and blur the rank),
-for all rows and all parameters in one broadcast call (``step_derivatives``).
+for all rows and all parameters in one broadcast call (``lsq.step_derivatives``).
 
 The parameters are the errors' values, or, for an error fitted as varying along an axis
 (``Vary``), its values at given knots (piecewise linear between them) or its polynomial
