@@ -153,6 +153,8 @@ class ScaledColumns:
 
 
 def scaled_columns(j: np.ndarray) -> ScaledColumns:
+    """The rank analysis of the Jacobian ``j``: which columns move the data, and the SVD and
+    numeric rank of those scaled to unit norm."""
     n = j.shape[1]
     norms = np.linalg.norm(j, axis=0)
     cols = np.flatnonzero(seen(norms))
