@@ -180,11 +180,12 @@ LcmNode::LcmNode(lcm_t* lcm, const ModelEntry& entry, const void* model, const D
   publish_status(false);
 }
 
-void LcmNode::subscribe(Stream stream, const std::string& channel, int capacity, std::size_t max_size) {
+void LcmNode::subscribe(Stream stream, const std::string& channel, int capacity, std::size_t max_size,
+                        std::size_t bytes) {
   Inlet& in = inlets_[stream];
   in.node = this;
   in.stream = stream;
-  in.ring = std::make_unique<MessageRing>(static_cast<std::size_t>(capacity), max_size);
+  in.ring = std::make_unique<MessageRing>(static_cast<std::size_t>(capacity), max_size, bytes);
   in.sub = lcm_subscribe(lcm_, channel_regex(channel).c_str(), &LcmNode::on_message, &in);
   lcm_subscription_set_queue_capacity(in.sub, kLcmQueueCapacity);
 }
@@ -285,7 +286,7 @@ LcmNode::~LcmNode() {
 void LcmNode::accept_temperatures(ThermalState& thermal) {
   thermal_ = &thermal;
   subscribe(kReadings, config_.temperatures_channel, kUpdateQueueCapacity,
-            largest_with_names(chaincomp_lcm::lcmt_temperatures{}));
+            largest_with_names(chaincomp_lcm::lcmt_temperatures{}), kUpdateQueueBytes);
 }
 
 void LcmNode::handle_readings(const MessageRing::Message& m) {
@@ -301,7 +302,7 @@ void LcmNode::accept_params_updates(ParamsUpdater& updater) {
   updater_ = &updater;
   // a flood is refused one by one (min_interval); beyond the ring, dropped and counted
   subscribe(kParams, config_.params_channel, kUpdateQueueCapacity,
-            largest_with_names(chaincomp_lcm::lcmt_params_update{}));
+            largest_with_names(chaincomp_lcm::lcmt_params_update{}), kUpdateQueueBytes);
 }
 
 void LcmNode::handle_params(const MessageRing::Message& m) {

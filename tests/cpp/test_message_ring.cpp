@@ -33,7 +33,7 @@ std::vector<unsigned char> encode(const M& m) {
 
 }  // namespace
 
-TEST_CASE("a full ring drops and counts, keeps the order, refuses a message larger than a slot", "[ring]") {
+TEST_CASE("a full ring drops and counts, keeps the order, refuses a message larger than the largest", "[ring]") {
   MessageRing ring(4, 16);
   for (std::int64_t k = 0; k < 6; ++k) {
     const auto b = bytes_of(k, 1 + k);
@@ -62,11 +62,43 @@ TEST_CASE("a full ring drops and counts, keeps the order, refuses a message larg
   CHECK(ring.front()->size == 0);
   CHECK(ring.front()->arrival == 10);
   ring.pop();
-  // room again, at the largest size exactly
-  const auto full = bytes_of(7, 16);
-  CHECK(ring.push(full.data(), full.size(), 7, 0) == MessageRing::Push::kOk);
-  REQUIRE(ring.front() != nullptr);
-  CHECK(ring.front()->size == 16);
+  // the largest size exactly, around the end of the buffer many times
+  for (std::int64_t k = 0; k < 50; ++k) {
+    const auto full = bytes_of(k, 16);
+    REQUIRE(ring.push(full.data(), full.size(), k, 0) == MessageRing::Push::kOk);
+    REQUIRE(ring.front() != nullptr);
+    CHECK(std::vector<unsigned char>(ring.front()->data, ring.front()->data + 16) == full);
+    ring.pop();
+  }
+}
+
+TEST_CASE("a ring smaller than its count of the largest: the bytes bound it too, whatever the sizes", "[ring]") {
+  // 100 messages within 512 bytes (records of 32-byte headers and the bytes, in 32-byte steps):
+  // small ones up to the count, the largest (200 bytes: 256 a record) two at least
+  MessageRing ring(100, 200, 512);
+  CHECK(ring.capacity() == 100);
+  CHECK(ring.buffer_bytes() == 512);
+  const auto small = bytes_of(1, 0);
+  for (int k = 0; k < 16; ++k) CHECK(ring.push(small.data(), 0, k, 0) == MessageRing::Push::kOk);
+  CHECK(ring.push(small.data(), 0, 16, 0) == MessageRing::Push::kFull);   // 16 records of 32 bytes: full
+  for (int k = 0; k < 16; ++k) ring.front(), ring.pop();
+  CHECK(ring.front() == nullptr);
+  std::int64_t kept = 0;
+  for (std::int64_t k = 0; k < 300; ++k) {
+    const auto b = bytes_of(k, static_cast<std::size_t>(k * 37 % 201));
+    if (ring.push(b.data(), b.size(), k, 0) == MessageRing::Push::kOk) ++kept;
+    if (k % 3 == 2) {   // the consumer behind: out in order, whole
+      while (const MessageRing::Message* m = ring.front()) {
+        CHECK(std::vector<unsigned char>(m->data, m->data + m->size) == bytes_of(m->arrival, m->arrival * 37 % 201));
+        ring.pop();
+      }
+    }
+  }
+  CHECK(kept + ring.dropped() == 300 + 1);   // and the one above
+  CHECK(ring.dropped() > 1);
+  MessageRing counted(3, 8);
+  for (int k = 0; k < 5; ++k) counted.push(small.data(), 0, k, 0);
+  CHECK(counted.dropped() == 2);   // the count bounds it where the bytes would not
 }
 
 TEST_CASE("between two threads: every message out whole and in order, or counted dropped", "[ring]") {

@@ -89,7 +89,9 @@ class LcmNode {
   // 10 kHz; what arrives at a full ring is dropped and counted (docs/guide/daemon.md).
   static constexpr int kQueueCapacity = 10000;         // commands, targets heard back
   static constexpr int kControlQueueCapacity = 1000;   // control messages
-  static constexpr int kUpdateQueueCapacity = 256;     // params updates, readings (17 KB slots)
+  // params updates, readings: 10000 within 4 MiB (the largest valid one is 17 KB: 240 of those)
+  static constexpr int kUpdateQueueCapacity = 10000;
+  static constexpr std::size_t kUpdateQueueBytes = std::size_t(4) << 20;
   // LCM's own queue of each subscription, drained by a thread that only copies: never full in
   // practice. LCM discards what arrives at a full queue without counting it, so a queue found
   // full is counted (lcm_queue_full): the one case where the drops are not known exactly.
@@ -106,7 +108,8 @@ class LcmNode {
   };
   // The receive side: copies the message into its inlet's ring (or counts it dropped).
   static void on_message(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
-  void subscribe(Stream stream, const std::string& channel, int capacity, std::size_t max_size);
+  void subscribe(Stream stream, const std::string& channel, int capacity, std::size_t max_size,
+                 std::size_t bytes = 0);
   void receive_loop();
   // The main thread's side, one message of a ring each.
   void handle(Stream stream, const MessageRing::Message& m);
