@@ -6,12 +6,16 @@ each command the test sent, exactly: received (answered or rejected by reason), 
 daemon's full queue (counted one by one: queue_dropped), or lost in the kernel (the rest of those
 missing by seq, within the kernel's own drop counter); LCM's own queues never full.
 
-    netns.sh python e2e_starved.py N RATE [NICE]
+With RECV_BUF (bytes, the config's recv_buf_size) small, the kernel drops datagrams too: the
+split must then hold with both queues losing.
+
+    netns.sh python e2e_starved.py N RATE [NICE [RECV_BUF]]
 """
 
 import os
 import subprocess
 import sys
+import tempfile
 import time
 
 import lcm_harness as h
@@ -21,12 +25,19 @@ CORE = 0
 BURST = 100
 
 
-def main(n: int, rate: float, niceness: int) -> int:
+def main(n: int, rate: float, niceness: int, recv_buf: int) -> int:
     h.require_namespace()
+    config = f"{HERE}/config_test.yaml"
+    if recv_buf:
+        with open(config) as f:
+            text = f.read()
+        config = os.path.join(tempfile.mkdtemp(), "small_buffer.yaml")
+        with open(config, "w") as f:
+            f.write(text + f"recv_buf_size: {recv_buf}\n")
     if len(os.sched_getaffinity(0)) > 1:
         os.sched_setaffinity(0, os.sched_getaffinity(0) - {CORE})  # the test beside, not on, the core
     hog = subprocess.Popen(["taskset", "-c", str(CORE), "sh", "-c", "while :; do :; done"])
-    daemon = h.start_daemon(MACHINE, PARAMS, f"{HERE}/config_test.yaml", wrapper=("taskset", "-c", str(CORE)))
+    daemon = h.start_daemon(MACHINE, PARAMS, config, wrapper=("taskset", "-c", str(CORE)))
     # niceness is a thread's on Linux: the main thread's (its id is the process's), not that of
     # the daemon's receive thread or LCM's, both started before 'ready'
     try:
@@ -103,4 +114,4 @@ def starve(daemon, hog, n: int, rate: float, niceness: int) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main(int(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3]) if len(sys.argv) > 3 else 0))
+    sys.exit(main(int(sys.argv[1]), float(sys.argv[2]), *(int(a) for a in (sys.argv[3:] + ["0", "0"])[:2])))
