@@ -1,5 +1,5 @@
 // The daemon's per-stream rings (issue 39 item 3): what a full ring drops is counted one by one,
-// messages come out whole and in order, one larger than a slot is refused (queued empty, marked:
+// messages come out whole and in order, one larger than the largest valid is refused (queued empty, marked:
 // its stream counts it undecodable, in its place in the order); and the node handles
 // the rings' messages in the order they arrived across streams.
 #include <catch2/catch.hpp>
