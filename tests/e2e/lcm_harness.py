@@ -12,6 +12,8 @@ import time
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 BUILD = os.path.join(ROOT, "build")
+# CHAINCOMP_E2E_DAEMON runs the scenarios with another build's daemon (ThreadSanitizer's: tools/test)
+DAEMON = os.environ.get("CHAINCOMP_E2E_DAEMON") or os.path.join(BUILD, "bin", "chaincompd")
 sys.path.insert(0, os.path.join(BUILD, "lcmtypes"))
 
 import lcm  # noqa: E402
@@ -38,7 +40,7 @@ def start_daemon(machine: str, params: str, config: str, preload: bool = False,
     env = dict(os.environ)
     if preload:
         env["LD_PRELOAD"] = os.path.join(BUILD, "runtime", "libchaincomp_alloc_counter.so")
-    cmd = [os.path.join(BUILD, "bin", "chaincompd"), "--machine", machine, "--params", params, "--config", config]
+    cmd = [DAEMON, "--machine", machine, "--params", params, "--config", config]
     proc = subprocess.Popen(list(wrapper) + cmd + (["--model", model] if model else []) + list(extra),
                             stderr=subprocess.PIPE,
                             text=True, env=env)
