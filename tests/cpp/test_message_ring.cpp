@@ -7,15 +7,18 @@
 
 #include <lcm/lcm.h>
 #include <poll.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cstdint>
 #include <cstring>
 #include <functional>
 #include <string>
+#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -334,5 +337,39 @@ TEST_CASE("with its receive thread: a publisher thread's commands and controls e
   CHECK(static_cast<std::int64_t>(seqs.size()) == published);
   CHECK(static_cast<std::int64_t>(seqs.size()) + queue_dropped == kCommands);
   CHECK(std::adjacent_find(seqs.begin(), seqs.end(), std::greater_equal<std::int64_t>()) == seqs.end());
+  lcm_destroy(lcm);
+}
+
+TEST_CASE("a node that cannot have its wake-up eventfd refuses to start (it would wake only at each status)",
+          "[ring][lcm]") {
+  const chaincomp::ModelEntry& entry = *chaincomp::find_model("five_axis_ac");
+  alignas(64) static unsigned char model[1 << 14];
+  std::vector<double> params(entry.info->num_params);
+  for (int i = 0; i < entry.info->num_params; ++i) params[i] = entry.info->params[i].nominal;
+  entry.prepare(params.data(), model);
+  chaincomp::DaemonConfig config;
+  std::string error;
+  REQUIRE(chaincomp::load_daemon_config(*entry.info, "", config, error));
+  lcm_t* lcm = lcm_create("memq://");
+  REQUIRE(lcm != nullptr);
+  // every descriptor below a low limit taken: the next one the process opens fails with EMFILE
+  rlimit before{};
+  REQUIRE(getrlimit(RLIMIT_NOFILE, &before) == 0);
+  rlimit low = before;
+  low.rlim_cur = 64;
+  REQUIRE(setrlimit(RLIMIT_NOFILE, &low) == 0);
+  std::vector<int> taken;
+  for (int fd; (fd = dup(lcm_get_fileno(lcm))) >= 0;) taken.push_back(fd);
+  const int why = errno;
+  bool refused = false;
+  try {
+    chaincomp::LcmNode node(lcm, entry, model, config, "p.yaml", "0", {});
+  } catch (const std::system_error& e) {
+    refused = e.code().value() == EMFILE;
+  }
+  for (const int fd : taken) close(fd);
+  REQUIRE(setrlimit(RLIMIT_NOFILE, &before) == 0);
+  CHECK(why == EMFILE);
+  CHECK(refused);
   lcm_destroy(lcm);
 }
