@@ -3,6 +3,7 @@
 // on the node's wake fd and handles them; no heap allocation after start-up.
 #include <lcm/lcm.h>
 #include <poll.h>
+#include <pthread.h>
 #include <sched.h>
 #include <sys/mman.h>
 #include <unistd.h>
@@ -130,6 +131,15 @@ int run_daemon(int argc, char** argv) {
   sa.sa_handler = on_signal;
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
+  // Both are taken only inside ppoll (blocked elsewhere): one arriving just after the loop looked
+  // at g_stop would otherwise wait for the next status (status_period) before the daemon stops.
+  sigset_t stop_signals, waiting;
+  sigemptyset(&stop_signals);
+  sigaddset(&stop_signals, SIGINT);
+  sigaddset(&stop_signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &stop_signals, &waiting);
+  sigdelset(&waiting, SIGINT);
+  sigdelset(&waiting, SIGTERM);
   // The kernel reports twice the size asked (its bookkeeping); less means net.core.rmem_max capped it.
   const long long got = node->recv_buf_bytes();
   if (config.lcm_url.rfind("udpm://", 0) == 0 && got >= 0 && got < 2LL * config.recv_buf_size) {
@@ -153,7 +163,7 @@ int run_daemon(int argc, char** argv) {
     const auto left = std::max(std::chrono::nanoseconds(0), next_status - Clock::now());
     const timespec wait{static_cast<time_t>(left.count() / 1000000000), static_cast<long>(left.count() % 1000000000)};
     pollfd pfd{fd, POLLIN, 0};
-    const int r = ppoll(&pfd, 1, &wait, nullptr);
+    const int r = ppoll(&pfd, 1, &wait, &waiting);
     if (r > 0 && (pfd.revents & POLLIN)) {
       std::uint64_t woken = 0;
       if (read(fd, &woken, sizeof woken) < 0) {
