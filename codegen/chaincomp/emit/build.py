@@ -257,8 +257,10 @@ def prelude(tc: Toolchain, root: str, who: str) -> str | None:
 
 def prelude_flags(header: str | None) -> list[str]:
     """The flags a model's compile takes for ``prelude()``'s header: -include it (GCC then loads
-    the .gch beside it; -Winvalid-pch says why, should it not)."""
-    return [] if header is None else ["-include", header, "-Winvalid-pch"]
+    the .gch beside it; -Winvalid-pch says why, should it not). GCC keeps no `#pragma GCC
+    diagnostic` in a precompiled header, so Eigen's own silencing of -Wignored-attributes
+    (DisableStupidWarnings.h) is said again here."""
+    return [] if header is None else ["-include", header, "-Winvalid-pch", "-Wno-ignored-attributes"]
 
 
 def _solver_object(machine, tc: Toolchain, root: str) -> str:
