@@ -2,7 +2,7 @@
 pi/2. Each serial arm that example-robot-data ships, imported with every error (--errors all),
 derives (chaincomp derive, formulas printed) and generates its C++ (chaincomp generate) each in
 at most 1.5x the CPU time of its exact-pi twin, and its derived nominal tool point and the
-generated code's exact pose (emit.cpp.exact_pose, what pose_exact computes) equal Pinocchio's
+generated code's exact pose (emit.cpp.exact_pose, what pose_exact and pose_nominal compute) equal Pinocchio's
 forward kinematics (which reads the URDF with its own parser) at random poses.
 
 The twin is the same imported file with every angle within 1e-9 of a multiple of pi/12
@@ -134,10 +134,10 @@ def test_decimal_angles_derive_as_fast_as_exact_pi_and_equal_pinocchio(arm, tmp_
     m = load_machine(str(path))
     d = derive(m, 1)
     axes = [a.sym for a in m.axes]
-    zero = {e.sym: 0 for e in m.errors}
     point = sp.lambdify(axes, [d.nominal(s) for s in d.point], "numpy")
-    # cse: the nested pose shares its subtrees (TIAGo's, walked as a tree: ten minutes)
-    pose_exact = sp.lambdify(axes, [c.xreplace(zero) for c in exact_pose(m)[:3]], "numpy", cse=True)
+    # the errors at zero where the chain is built, and cse: the nested pose shares its subtrees
+    # (TIAGo's, walked as a tree by xreplace or lambdify: minutes)
+    pose_exact = sp.lambdify(axes, exact_pose(m, with_errors=False)[:3], "numpy", cse=True)
     model = pin.buildModelFromUrdf(urdf)
     data = model.createData()
     base_id, tip_id = (model.getFrameId(link, pin.FrameType.BODY) for link in (base, tip))
