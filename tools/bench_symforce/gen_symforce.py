@@ -48,12 +48,18 @@ def parse(text: str, names: dict):
     return eval(text, env | names)  # noqa: S307  (the export of our own machine files)
 
 
+def number(text: str):
+    v = float(text)
+    return int(v) if v in (0.0, 1.0, -1.0) else v
+
+
 def elementary(el, names, model):
     if el[0] == "R":
         angle = parse(el[2], names)
         if model == "pose3":
             return sf.Pose3(R=sf.Rot3.from_angle_axis(angle, sf.V3(*AXIS[el[1]])), t=sf.V3())
-        c, s = sf.cos(angle), sf.sin(angle)
+        # a constant angle comes with the sine and cosine chaincomp's derivation takes (0, 1 exact)
+        s, c = (number(el[3]), number(el[4])) if len(el) > 3 else (sf.sin(angle), sf.cos(angle))
         i, j = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}[el[1]]
         m = sf.Matrix44.eye()
         m[i, i], m[i, j], m[j, i], m[j, j] = c, -s, s, c
