@@ -20,8 +20,9 @@
 #include <climits>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <random>
-#include <system_error>
+#include <stdexcept>
 
 namespace chaincomp {
 
@@ -169,8 +170,12 @@ LcmNode::LcmNode(lcm_t* lcm, const ModelEntry& entry, const void* model, const D
   status_buf_.resize(s.getEncodedSize() + 64);
   sent_.assign(kSentRing, 0);
   wake_fd_ = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
-  // without it the main loop would only wake at each status: refused at start, not slow in silence
-  if (wake_fd_ < 0) throw std::system_error(errno, std::generic_category(), "eventfd (the receive thread's wake-up)");
+  // without it the main loop would only wake at each status: refused at start, not slow in silence.
+  // (A runtime_error of strerror's text: std::system_error's constructor asks its category
+  // virtually, which UBSan checks through a pipe it cannot open when descriptors ran out.)
+  if (wake_fd_ < 0) {
+    throw std::runtime_error(std::string("eventfd (the receive thread's wake-up): ") + std::strerror(errno));
+  }
   subscribe(kCommands, config_.command_channel, kQueueCapacity, largest(chaincomp_lcm::lcmt_axis_command{}));
   subscribe(kControl, config_.control_channel, kControlQueueCapacity,
             static_cast<std::size_t>(control_msg_.getEncodedSize()));

@@ -51,7 +51,7 @@ struct RealtimeObtained {
 class LcmNode {
  public:
   // `model` filled by entry.prepare(); `lcm`, `entry` and `model` outlive the node. Throws
-  // std::system_error when it cannot make its wake-up eventfd (descriptors exhausted).
+  // std::runtime_error when it cannot make its wake-up eventfd (descriptors exhausted).
   LcmNode(lcm_t* lcm, const ModelEntry& entry, const void* model, const DaemonConfig& config,
           const std::string& params_file, const std::string& params_hash, RealtimeObtained rt);
   ~LcmNode();
