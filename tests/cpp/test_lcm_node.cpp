@@ -12,6 +12,7 @@
 #include "chaincomp/compensate.hpp"
 #include "chaincomp/lcm_node.hpp"
 #include "held_back_case.hpp"
+#include "node_model.hpp"
 
 namespace {
 
@@ -46,14 +47,8 @@ std::vector<unsigned char> encode(const chaincomp_lcm::lcmt_axis_command& c) {
 TEST_CASE("commands over memq:// come back corrected, bad payloads are counted", "[lcm]") {
   const chaincomp::ModelEntry& entry = *chaincomp::find_model("five_axis_ac");
   alignas(64) static unsigned char model[1 << 14];
-  std::vector<double> params(entry.info->num_params);
-  for (int i = 0; i < entry.info->num_params; ++i) {
-    params[i] = entry.info->params[i].role == chaincomp::ParamRole::kError ? 2e-5 : entry.info->params[i].nominal;
-  }
-  entry.prepare(params.data(), model);
   chaincomp::DaemonConfig config;
-  std::string error;
-  REQUIRE(chaincomp::load_daemon_config(*entry.info, "", config, error));
+  prepare_node_model(entry, model, config, 2e-5);
   for (auto& a : config.compensator.axes) a.max_correction_step = 1.0;
 
   lcm_t* lcm = lcm_create("memq://");
@@ -115,12 +110,8 @@ TEST_CASE("targets and status carry the instance; another instance's targets for
           "counted; a reset starts a new stream", "[lcm]") {
   const chaincomp::ModelEntry& entry = *chaincomp::find_model("five_axis_ac");
   alignas(64) static unsigned char model[1 << 14];
-  std::vector<double> params(entry.info->num_params);
-  for (int i = 0; i < entry.info->num_params; ++i) params[i] = entry.info->params[i].nominal;
-  entry.prepare(params.data(), model);
   chaincomp::DaemonConfig config;
-  std::string error;
-  REQUIRE(chaincomp::load_daemon_config(*entry.info, "", config, error));
+  prepare_node_model(entry, model, config);
   lcm_t* lcm = lcm_create("memq://");
   REQUIRE(lcm != nullptr);
   Inbox inbox;
@@ -256,12 +247,8 @@ TEST_CASE("status carries only what the node put there: nodes built over memory 
           "publish the same status for the same commands", "[lcm][status]") {
   const chaincomp::ModelEntry& entry = *chaincomp::find_model("five_axis_ac");
   alignas(64) static unsigned char model[1 << 14];
-  std::vector<double> params(entry.info->num_params);
-  for (int i = 0; i < entry.info->num_params; ++i) params[i] = entry.info->params[i].nominal;
-  entry.prepare(params.data(), model);
   chaincomp::DaemonConfig config;
-  std::string error;
-  REQUIRE(chaincomp::load_daemon_config(*entry.info, "", config, error));
+  prepare_node_model(entry, model, config);
   struct Bytes {
     std::vector<std::vector<unsigned char>> status;
   };

@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "chaincomp/lcm_node.hpp"
+#include "node_model.hpp"
 
 namespace {
 
@@ -151,14 +152,8 @@ TEST_CASE("between two threads: every message out whole and in order, or counted
 TEST_CASE("the node handles its rings in arrival order across streams and counts what they drop", "[ring][lcm]") {
   const chaincomp::ModelEntry& entry = *chaincomp::find_model("five_axis_ac");
   alignas(64) static unsigned char model[1 << 14];
-  std::vector<double> params(entry.info->num_params);
-  for (int i = 0; i < entry.info->num_params; ++i) {
-    params[i] = entry.info->params[i].role == chaincomp::ParamRole::kError ? 2e-5 : entry.info->params[i].nominal;
-  }
-  entry.prepare(params.data(), model);
   chaincomp::DaemonConfig config;
-  std::string error;
-  REQUIRE(chaincomp::load_daemon_config(*entry.info, "", config, error));
+  prepare_node_model(entry, model, config, 2e-5);
   for (auto& a : config.compensator.axes) a.max_correction_step = 1.0;
   config.compensator.ramp_time_s = 0.0;   // on and off at once: the flag tells which control came first
 
@@ -253,12 +248,8 @@ TEST_CASE("with its receive thread: a publisher thread's commands and controls e
   // -fsanitize=thread this is the race check of the receive side (docs/guide/daemon.md).
   const chaincomp::ModelEntry& entry = *chaincomp::find_model("five_axis_ac");
   alignas(64) static unsigned char model[1 << 14];
-  std::vector<double> params(entry.info->num_params);
-  for (int i = 0; i < entry.info->num_params; ++i) params[i] = entry.info->params[i].nominal;
-  entry.prepare(params.data(), model);
   chaincomp::DaemonConfig config;
-  std::string error;
-  REQUIRE(chaincomp::load_daemon_config(*entry.info, "", config, error));
+  prepare_node_model(entry, model, config);
   lcm_t* lcm = lcm_create("memq://");
   REQUIRE(lcm != nullptr);
   std::vector<std::int64_t> seqs;   // the targets' seq, appended by the receive thread, read after its join
@@ -345,12 +336,8 @@ TEST_CASE("a node that cannot have its wake-up eventfd refuses to start (it woul
           "[ring][lcm]") {
   const chaincomp::ModelEntry& entry = *chaincomp::find_model("five_axis_ac");
   alignas(64) static unsigned char model[1 << 14];
-  std::vector<double> params(entry.info->num_params);
-  for (int i = 0; i < entry.info->num_params; ++i) params[i] = entry.info->params[i].nominal;
-  entry.prepare(params.data(), model);
   chaincomp::DaemonConfig config;
-  std::string error;
-  REQUIRE(chaincomp::load_daemon_config(*entry.info, "", config, error));
+  prepare_node_model(entry, model, config);
   lcm_t* lcm = lcm_create("memq://");
   REQUIRE(lcm != nullptr);
   // every descriptor below a low limit taken: the next one the process opens fails with EMFILE
